@@ -1,0 +1,1 @@
+"""The numerical core of hairport: pure functions over numpy arrays (no web, no queue)."""

@@ -1,0 +1,34 @@
+"""Errors raised on bad input.
+
+Every reader and validator raises :class:`InputError` naming the file (or argument) and
+the problem, so that the CLI can print one line and the service can answer 422.
+"""
+
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Input that hairport refuses, with the source it came from and the problem.
+
+    Parameters
+    ----------
+    problem : str
+        What is wrong, in words a user can act on.
+    source : str, optional
+        The file name or argument the input came from.
+    code : str
+        A stable machine-readable code (``"truncated"``, ``"non_finite"``, ...).
+    """
+
+    def __init__(self, problem: str, source: str | None = None, code: str = "invalid_input"):
+        self.problem = problem
+        self.source = source
+        self.code = code
+        super().__init__(f"{source}: {problem}" if source else problem)
+
+
+class TopologyMismatch(InputError):
+    """Source and target characters do not share one mesh topology."""
+
+    def __init__(self, problem: str, source: str | None = None):
+        super().__init__(problem, source, code="topology_mismatch")
