@@ -95,11 +95,10 @@ class MeshQuery:
         offset = points - closest
         length = np.linalg.norm(offset, axis=1)
         on_surface = length < ON_SURFACE_DISTANCE
-        normal = np.where(
-            on_surface[:, None],
-            pseudonormal / np.linalg.norm(pseudonormal, axis=1, keepdims=True),
-            offset * (np.sign(distance) / np.where(on_surface, 1.0, length))[:, None],
-        )
+        normal = offset * (np.sign(distance) / np.where(on_surface, 1.0, length))[:, None]
+        if on_surface.any():
+            surface_normal = pseudonormal[on_surface]
+            normal[on_surface] = surface_normal / np.linalg.norm(surface_normal, axis=1, keepdims=True)
         return SignedDistance(distance, closest, normal, faces.astype(np.int64))
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:

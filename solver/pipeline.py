@@ -1,0 +1,275 @@
+"""The one entry point the CLI, the worker and the benchmarks call.
+
+``preprocess(source, hair)`` computes everything that depends on the source only (the
+"adaptable hairstyle"); ``retarget(adaptable, target)`` adapts it to one target: initial
+transfer (Eq. 2-6), then shape adaptation (Eq. 1) or a baseline, then metrics.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .baselines import BASELINE_METHODS, parse_method, retarget_baseline
+from .character import Character, check_same_topology
+from .energies import EnergyWeights, Neighbours, ShapeModel, knn_other_strands, laplacian_operator
+from .errors import InputError
+from .geometry import MeshQuery, interpolate_barycentric
+from .hair import Hair
+from .metrics import hairstyle_metrics
+from .qp import SolveOptions, SolveReport, solve_shape_adaptation
+from .skeleton_transfer import ensure_skeleton
+from .transfer import ANCHOR_SIGMA, SMOOTHING_EPS, Anchors, compute_anchors, place_anchors, smooth_strands, strand_laplacian
+
+#: the shape-adaptation solvers (multi-scale arrives with its own module)
+SOLVER_METHODS = ("global",)
+METHODS = SOLVER_METHODS + BASELINE_METHODS
+
+ProgressFn = Callable[[str, float, str], None]
+
+
+@dataclass(frozen=True)
+class PreprocessOptions:
+    """Source-side parameters (Table 1, meters)."""
+
+    k: int = 5
+    sigma: float = ANCHOR_SIGMA
+
+
+@dataclass(frozen=True)
+class RetargetOptions:
+    """Target-side parameters (Table 1, meters) and the method.
+
+    ``method`` is ``global`` (Eq. 1 over all strands) or a baseline name, optionally with the
+    ``+pushout`` suffix.
+    """
+
+    method: str = "global"
+    alpha: float = 3e3
+    beta: float = 1e3
+    eps_c: float = 5e-4
+    eps_s: float = SMOOTHING_EPS
+    max_iterations: int = 30
+    step_tolerance: float = 1e-5
+
+    def validate(self) -> None:
+        if self.method not in SOLVER_METHODS:
+            try:
+                parse_method(self.method)
+            except InputError:
+                raise InputError(
+                    f"unknown method {self.method!r}; expected one of {', '.join(METHODS)} "
+                    "(a baseline may carry the suffix +pushout)",
+                    code="unknown_method",
+                ) from None
+        for name in ("alpha", "beta", "eps_c", "eps_s", "step_tolerance"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise InputError(f"option {name} must be a finite non-negative number, got {value}", code="bad_option")
+        if self.max_iterations < 1:
+            raise InputError("option max_iterations must be >= 1", code="bad_option")
+
+
+@dataclass(frozen=True, eq=False)
+class AdaptableHairstyle:
+    """Everything retargeting needs that depends on the source only."""
+
+    source: Character
+    hair: Hair
+    anchors: Anchors
+    neighbours: Neighbours
+    options: PreprocessOptions
+    bone_names: tuple[str, ...]
+    timings: dict = field(default_factory=dict)
+
+    def shape_model(self) -> ShapeModel:
+        """Eq. 7/10 operators of the whole hairstyle."""
+        n = self.hair.n_particles
+        K = laplacian_operator(self.neighbours, np.arange(n), n)
+        return ShapeModel.build(self.hair.points, self.hair.segments, K)
+
+
+@dataclass(eq=False)
+class RetargetResult:
+    """A retargeted hairstyle with what was measured on the way."""
+
+    hair: Hair
+    initial: Hair
+    metrics: dict
+    timings: dict
+    solve: SolveReport | None = None
+
+    def report(self) -> dict:
+        """JSON-ready report: metrics, per-stage timings (s), solver trace."""
+        out = {"metrics": self.metrics, "timings_s": self.timings}
+        if self.solve is not None:
+            out["solver"] = asdict(self.solve)
+        return out
+
+
+def _noop(stage: str, fraction: float, message: str) -> None:
+    return None
+
+
+def preprocess(
+    source: Character,
+    hair: Hair,
+    options: PreprocessOptions = PreprocessOptions(),
+    progress: ProgressFn | None = None,
+) -> AdaptableHairstyle:
+    """Compute the adaptable hairstyle: anchors (Eq. 2) and kNN sets/weights (Eq. 8-9).
+
+    Parameters
+    ----------
+    source : Character
+        Rigged source character (skeleton and skin weights required).
+    hair : Hair
+        The hairstyle made for ``source``.
+    """
+    progress = progress or _noop
+    if source.skeleton is None or source.weights is None:
+        raise InputError("the source character needs a skeleton with skin weights", source.name, "no_skeleton")
+    timings = {}
+    began = time.perf_counter()
+    progress("anchors", 0.0, "anchoring particles to bones")
+    query = MeshQuery(source.vertices, source.faces)
+    anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma)
+    timings["anchors"] = time.perf_counter() - began
+    began = time.perf_counter()
+    progress("neighbours", 0.5, "finding inter-strand neighbours")
+    neighbours = knn_other_strands(hair.points, hair.strand_of, options.k)
+    timings["neighbours"] = time.perf_counter() - began
+    progress("preprocess", 1.0, "done")
+    return AdaptableHairstyle(source, hair, anchors, neighbours, options, source.skeleton.names, timings)
+
+
+def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Character:
+    """Check topology, give the target a skeleton if it has none, and check its bones."""
+    check_same_topology(adaptable.source, target)
+    target = ensure_skeleton(adaptable.source, target)
+    if target.skeleton.names != adaptable.bone_names:
+        missing = sorted(set(adaptable.bone_names) - set(target.skeleton.names))
+        if missing:
+            raise InputError(f"target skeleton lacks bones {missing[:5]}", target.name, "bad_skeleton")
+        order = [target.skeleton.names.index(name) for name in adaptable.bone_names]
+        from .character import Skeleton
+
+        parents = np.array([
+            adaptable.bone_names.index(target.skeleton.names[p]) if p >= 0 else -1 for p in target.skeleton.parents[order]
+        ])
+        skeleton = Skeleton(adaptable.bone_names, parents, target.skeleton.heads[order], target.skeleton.tails[order])
+        weights = target.weights[:, order] if target.weights is not None else None
+        target = Character(target.vertices, target.faces, skeleton, weights, target.name)
+    return target
+
+
+def initial_transfer(adaptable: AdaptableHairstyle, target: Character, eps_s: float = SMOOTHING_EPS) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 3 then Eq. 4-6.
+
+    Returns
+    -------
+    initial : (N, 3) float64
+        ``p-hat``.
+    unsmooth : (N,) bool
+        Particles that were smoothed.
+    """
+    hair = adaptable.hair
+    anchored = place_anchors(adaptable.anchors, target)
+    laplacian = strand_laplacian(hair.points, hair.offsets)
+    return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=laplacian)
+
+
+def root_targets(adaptable: AdaptableHairstyle, target: Character) -> np.ndarray:
+    """Where each root belongs on the target: its anchor face and barycentrics, ``(S, 3)``."""
+    roots = adaptable.hair.roots
+    return interpolate_barycentric(
+        target.vertices, target.faces, adaptable.anchors.face[roots], adaptable.anchors.barycentric[roots]
+    )
+
+
+def retarget(
+    adaptable: AdaptableHairstyle,
+    target: Character,
+    options: RetargetOptions = RetargetOptions(),
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> RetargetResult:
+    """Adapt the hairstyle to ``target``.
+
+    Parameters
+    ----------
+    adaptable : AdaptableHairstyle
+        From :func:`preprocess`.
+    target : Character
+        Same topology as the source; a skeleton is transferred when it has none.
+    options : RetargetOptions
+    progress : callable(stage, fraction, message), optional
+    should_stop : callable() -> bool, optional
+        Polled between solver iterations (cancellation).
+    """
+    options.validate()
+    progress = progress or _noop
+    hair = adaptable.hair
+    timings: dict[str, float] = {}
+
+    began = time.perf_counter()
+    progress("prepare", 0.0, "checking the target")
+    target = prepare_target(adaptable, target)
+    target_query = MeshQuery(target.vertices, target.faces)
+    timings["prepare"] = time.perf_counter() - began
+
+    began = time.perf_counter()
+    progress("initial_transfer", 0.05, "initial transfer")
+    initial, unsmooth = initial_transfer(adaptable, target, options.eps_s)
+    timings["initial_transfer"] = time.perf_counter() - began
+
+    model = adaptable.shape_model()
+    weights = EnergyWeights(options.alpha, options.beta)
+    solve_report = None
+    began = time.perf_counter()
+    if options.method == "global":
+        progress("solve", 0.1, "shape adaptation (global)")
+        solve_options = SolveOptions(
+            eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance
+        )
+
+        def solver_progress(fraction: float, message: str) -> None:
+            progress("solve", 0.1 + 0.85 * fraction, message)
+
+        points, solve_report = solve_shape_adaptation(
+            model, initial, hair.is_root, target_query, weights, solve_options,
+            progress=solver_progress, should_stop=should_stop,
+        )
+        timings["solve"] = time.perf_counter() - began
+    else:
+        progress("baseline", 0.1, f"baseline {options.method}")
+        base, pushout = parse_method(options.method)
+        points = retarget_baseline(
+            base, adaptable.source, target, hair, pushout=pushout, clearance=options.eps_c, target_query=target_query
+        ).points
+        timings["baseline"] = time.perf_counter() - began
+
+    began = time.perf_counter()
+    progress("metrics", 0.95, "measuring")
+    metrics = hairstyle_metrics(
+        points, hair.points, initial, hair.is_root, root_targets(adaptable, target), model, target_query,
+        options.eps_c, weights,
+    )
+    metrics["method"] = options.method
+    metrics["smoothed_particles"] = int(unsmooth.sum())
+    metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
+    timings["metrics"] = time.perf_counter() - began
+    progress("done", 1.0, "done")
+    return RetargetResult(hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report)
+
+
+def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:
+    """(N,) bool: non-root particles inside the target body."""
+    query = query or MeshQuery(target.vertices, target.faces)
+    mask = np.zeros(hair.n_particles, dtype=bool)
+    free = ~hair.is_root
+    mask[free] = query.signed_distance(hair.points[free]).distance < 0.0
+    return mask

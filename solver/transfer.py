@@ -1,0 +1,326 @@
+"""Initial transfer (paper Sec. 4.1): bone anchoring (Eq. 2-3) and adaptive smoothing (Eq. 4-6).
+
+Convention: hair particles ``(N, 3) float64`` in meters in the CSR layout of
+:mod:`hairport.solver.hair`; characters as in :mod:`hairport.solver.character`.
+
+Anchoring depends on the source only (:func:`compute_anchors`, part of preprocessing);
+placing the anchors on a target (:func:`place_anchors`) and smoothing
+(:func:`smooth_strands`) run per target.
+
+Deviations from the paper's text, on purpose:
+
+* Roots are anchored to their own closest point on the source surface (face and
+  barycentric coordinates), so that they land exactly on the target surface; a bone ray
+  can hit another part of the body (an ear) before the root.
+* The anchor length ``eta`` is signed along the ray, so a particle lying before the hit
+  point is reproduced exactly too (reflexive retargeting is exact).
+* A particle whose rays all miss or leave every valid region keeps its offset to its
+  closest surface point in that face's tangent frame (``fallback``); counted in reports.
+* Eq. 4 restores the *source* Laplacian on the unsmooth set (DESIGN.md section 3); the
+  tip gets a one-sided Laplacian so a staircase at the tip is smoothed too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .character import Character
+from .errors import InputError
+from .geometry import MeshQuery, barycentric_coordinates, closest_points_on_segments, interpolate_barycentric
+
+#: bones hair can rest on, in the MakeHuman game-engine rig's names
+HAIR_BONES = ("head", "neck_01", "spine_03", "spine_02", "clavicle_l", "clavicle_r", "upperarm_l", "upperarm_r")
+#: Eq. 2's sigma: penalty on rays running along their bone (unitless)
+ANCHOR_SIGMA = 100.0
+#: a face belongs to the valid region of a bone where its mean skin weight exceeds this
+VALID_REGION_WEIGHT = 0.05
+#: Eq. 6's epsilon_s: Laplacian discrepancy (unitless, Eq. 5 divides by lengths)
+SMOOTHING_EPS = 0.3
+#: rounds of re-evaluating the unsmooth set on the smoothed strands
+SMOOTHING_ROUNDS = 5
+#: rays shorter than this (m) have no direction
+MIN_RAY_LENGTH = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Anchors:
+    """Per-particle local coordinates relative to the body (Eq. 2-3).
+
+    Attributes
+    ----------
+    bone : (N,) int64
+        Anchor bone (skeleton index); ``-1`` for roots and fallback particles.
+    bone_t : (N,) float64
+        Parameter along the bone of the ray origin ``o_b``.
+    face : (N,) int64
+        Face hit by the ray (roots and fallbacks: face of the closest point).
+    barycentric : (N, 3) float64
+    eta : (N,) float64
+        Signed distance from the hit point to the particle along the ray (m).
+    frame_offset : (N, 3) float64
+        For fallback particles: offset to the closest point in the face frame
+        (normal, edge, binormal); zeros elsewhere.
+    fallback : (N,) bool
+    """
+
+    bone: np.ndarray
+    bone_t: np.ndarray
+    face: np.ndarray
+    barycentric: np.ndarray
+    eta: np.ndarray
+    frame_offset: np.ndarray
+    fallback: np.ndarray
+
+
+def hair_bone_indices(character: Character) -> np.ndarray:
+    """Indices of the bones hair can be anchored to; all bones if none of :data:`HAIR_BONES` exist.
+
+    Returns
+    -------
+    bones : (B',) int64
+    """
+    skeleton = character.skeleton
+    if skeleton is None:
+        raise InputError("character has no skeleton; anchoring needs one", character.name, "no_skeleton")
+    found = [skeleton.names.index(b) for b in HAIR_BONES if b in skeleton.names]
+    return np.array(found if found else range(skeleton.n_bones), dtype=np.int64)
+
+
+def valid_face_mask(character: Character, bones: np.ndarray) -> np.ndarray:
+    """Valid region Lambda_b of each bone from clipped skin weights.
+
+    Returns
+    -------
+    mask : (F, B') bool
+        ``mask[f, j]`` is True where face ``f`` belongs to the region of ``bones[j]``.
+    """
+    if character.weights is None:
+        raise InputError("character has no skin weights; anchoring needs them", character.name, "no_skeleton")
+    weights = character.weights[:, bones].toarray()
+    face_weight = weights[character.faces].mean(axis=1)
+    return face_weight > VALID_REGION_WEIGHT
+
+
+def face_frames(vertices: np.ndarray, faces: np.ndarray, face_ids: np.ndarray) -> np.ndarray:
+    """Orthonormal frame (normal, first edge, binormal) of each given face.
+
+    Returns
+    -------
+    frames : (N, 3, 3) float64
+        Rows are the frame axes.
+    """
+    corners = vertices[faces[face_ids]]
+    edge = corners[:, 1] - corners[:, 0]
+    normal = np.cross(edge, corners[:, 2] - corners[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+    return np.stack([normal, edge, np.cross(normal, edge)], axis=1)
+
+
+def compute_anchors(
+    source: Character,
+    points: np.ndarray,
+    is_root: np.ndarray,
+    query: MeshQuery | None = None,
+    sigma: float = ANCHOR_SIGMA,
+) -> Anchors:
+    """Choose an anchor bone per particle and record its local coordinates (Eq. 2).
+
+    Parameters
+    ----------
+    source : Character
+        Rigged source character.
+    points : (N, 3) float64
+        Source hair particles.
+    is_root : (N,) bool
+    query : MeshQuery, optional
+        Prebuilt query structure of the source mesh.
+    sigma : float
+        Eq. 2's sigma.
+
+    Returns
+    -------
+    anchors : Anchors
+    """
+    query = query or MeshQuery(source.vertices, source.faces)
+    skeleton = source.skeleton
+    bones = hair_bone_indices(source)
+    valid = valid_face_mask(source, bones)
+    n = len(points)
+
+    best_score = np.full(n, np.inf)
+    best = {
+        "bone": np.full(n, -1, np.int64),
+        "bone_t": np.zeros(n),
+        "face": np.full(n, -1, np.int64),
+        "barycentric": np.zeros((n, 3)),
+        "eta": np.zeros(n),
+    }
+    free = np.flatnonzero(~is_root)
+    t_all, o_all = closest_points_on_segments(points[free], skeleton.heads[bones], skeleton.tails[bones])
+    axes = skeleton.tails[bones] - skeleton.heads[bones]
+    axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), MIN_RAY_LENGTH)
+    for j, bone in enumerate(bones):  # a handful of bones; each iteration is vectorised over particles
+        ray = points[free] - o_all[:, j]
+        length = np.linalg.norm(ray, axis=1)
+        usable = length > MIN_RAY_LENGTH
+        hits = query.first_hits(o_all[usable, j], ray[usable])
+        index = free[usable]
+        hit_faces = np.where(hits.hit, hits.faces, 0)
+        ok = hits.hit & valid[hit_faces, j]
+        unit = ray[usable] / length[usable, None]
+        eta = np.einsum("ij,ij->i", points[index] - hits.points, unit)
+        cosine = unit @ axes[j]
+        score = np.where(ok, np.abs(eta) * np.exp(sigma * cosine**2), np.inf)
+        better = score < best_score[index]
+        take = index[better]
+        best_score[take] = score[better]
+        best["bone"][take] = bone
+        best["bone_t"][take] = t_all[usable, j][better]
+        best["face"][take] = hits.faces[better]
+        best["barycentric"][take] = hits.barycentric[better]
+        best["eta"][take] = eta[better]
+
+    fallback = ~is_root & ~np.isfinite(best_score)
+    closest_needed = is_root | fallback
+    frame_offset = np.zeros((n, 3))
+    if closest_needed.any():
+        sd = query.signed_distance(points[closest_needed])
+        idx = np.flatnonzero(closest_needed)
+        best["face"][idx] = sd.faces
+        corners = source.vertices[source.faces[sd.faces]]
+        best["barycentric"][idx] = barycentric_coordinates(sd.closest, corners)
+        best["bone"][idx] = -1
+        frames = face_frames(source.vertices, source.faces, sd.faces)
+        offsets = points[idx] - interpolate_barycentric(
+            source.vertices, source.faces, sd.faces, best["barycentric"][idx]
+        )
+        frame_offset[idx] = np.einsum("nij,nj->ni", frames, offsets)
+        frame_offset[np.flatnonzero(is_root)] = 0.0
+    return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
+
+
+def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
+    """Apply the local coordinates on the target (Eq. 3).
+
+    Parameters
+    ----------
+    anchors : Anchors
+    target : Character
+        Same topology and skeleton layout as the source.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        The anchored particles ``p~``.
+    """
+    skeleton = target.skeleton
+    q = interpolate_barycentric(target.vertices, target.faces, anchors.face, anchors.barycentric)
+    points = q.copy()
+    ray_based = anchors.bone >= 0
+    bone = anchors.bone[ray_based]
+    origin = skeleton.heads[bone] + anchors.bone_t[ray_based, None] * (skeleton.tails[bone] - skeleton.heads[bone])
+    direction = q[ray_based] - origin
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
+    points[ray_based] += anchors.eta[ray_based, None] * direction
+    if anchors.fallback.any():
+        frames = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
+        points[anchors.fallback] += np.einsum("nji,nj->ni", frames, anchors.frame_offset[anchors.fallback])
+    return points
+
+
+def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
+    """Per-strand Laplacian of Eq. 5, weighted by the lengths of ``points``' segments.
+
+    Interior particle ``i``: ``(f[i+1]-f[i])/l[i] - (f[i]-f[i-1])/l[i-1]``; the tip gets the
+    one-sided ``-(f[tip]-f[tip-1])/l[tip-1]``; the root row is empty (always Dirichlet).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        Positions defining the segment lengths (the source ``p-bar``).
+    offsets : (S+1,) int64
+
+    Returns
+    -------
+    L : (N, N) csr_matrix
+    """
+    n = len(points)
+    lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (N-1,), includes fake cross-strand gaps
+    inv = 1.0 / np.maximum(lengths, MIN_RAY_LENGTH)
+    is_root = np.zeros(n, dtype=bool)
+    is_root[offsets[:-1]] = True
+    is_tip = np.zeros(n, dtype=bool)
+    is_tip[offsets[1:] - 1] = True
+    interior = np.flatnonzero(~is_root & ~is_tip)
+    tips = np.flatnonzero(is_tip & ~is_root)
+    rows = np.concatenate([interior, interior, interior, tips, tips])
+    cols = np.concatenate([interior - 1, interior, interior + 1, tips - 1, tips])
+    vals = np.concatenate(
+        [inv[interior - 1], -(inv[interior - 1] + inv[interior]), inv[interior], inv[tips - 1], -inv[tips - 1]]
+    )
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def smooth_strands(
+    anchored: np.ndarray,
+    source_points: np.ndarray,
+    offsets: np.ndarray,
+    eps_s: float = SMOOTHING_EPS,
+    rounds: int = SMOOTHING_ROUNDS,
+    laplacian: sp.csr_matrix | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Adaptive Poisson smoothing (Eq. 4-6, DESIGN.md's reading).
+
+    On the unsmooth set ``I_u`` the source Laplacian is restored, every other particle (and
+    always the root) keeps its anchored position.
+
+    Parameters
+    ----------
+    anchored : (N, 3) float64
+        ``p~`` from :func:`place_anchors`.
+    source_points : (N, 3) float64
+        ``p-bar``.
+    offsets : (S+1,) int64
+    eps_s : float
+    rounds : int
+        Re-evaluations of ``I_u`` on the smoothed result.
+    laplacian : (N, N) csr_matrix, optional
+        Precomputed :func:`strand_laplacian` of ``source_points``.
+
+    Returns
+    -------
+    smoothed : (N, 3) float64
+        ``p^``.
+    unsmooth : (N,) bool
+        The final ``I_u``.
+    """
+    L = laplacian if laplacian is not None else strand_laplacian(source_points, offsets)
+    source_features = L @ source_points
+    has_row = np.diff(L.indptr) > 0
+
+    def discrepancy(p: np.ndarray) -> np.ndarray:
+        return has_row & (np.linalg.norm(L @ p - source_features, axis=1) > eps_s)
+
+    unsmooth = discrepancy(anchored)
+    smoothed = anchored
+    used = np.zeros_like(unsmooth)
+    for _ in range(max(rounds, 1)):
+        if not unsmooth.any():
+            break
+        used = unsmooth
+        u = np.flatnonzero(unsmooth)
+        d = np.flatnonzero(~unsmooth)
+        L_uu = L[u][:, u].tocsc()
+        rhs = source_features[u] - L[u][:, d] @ anchored[d]
+        smoothed = anchored.copy()
+        smoothed[u] = spla.splu(L_uu).solve(np.ascontiguousarray(rhs))
+        grown = unsmooth | discrepancy(smoothed)
+        if (grown == unsmooth).all():
+            break
+        unsmooth = grown
+    return smoothed, used
