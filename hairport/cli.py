@@ -56,23 +56,30 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from .outputs import OutputSet
     from .settings import get_settings
     from .solver import pipeline
-    from .solver.characterio import load_character
+    from .solver.characterio import load_character, resolve_skeleton_path
     from .solver.hairio import ReadLimits, format_for_path, read_hair, write_hair
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
     units = args.units or "m"
-    format_for_path(args.out)  # refuse an unknown output format before any work
+    format_for_path(args.out)  # refuse unknown formats and options before any work
+    format_for_path(args.hair)
     progress("load", 0.0, "reading inputs")
     limits = ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
-    load = dict(units=args.units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
-                max_bytes=settings.max_file_bytes)
-    source = load_character(args.source, skeleton_path=args.source_skeleton, **load)
-    target = load_character(args.target, skeleton_path=args.target_skeleton, **load)
-    hair = read_hair(args.hair, units=units, limits=limits)
     options = pipeline.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
                                        max_iterations=args.max_iterations)
     options.validate()
+    load = dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
+
+    def mesh_units(mesh: str, skeleton: str | None) -> str | None:
+        # a skeleton sidecar states its own units; --units is for meshes without one
+        return None if (skeleton is not None or resolve_skeleton_path(mesh) is not None) else args.units
+
+    source = load_character(args.source, skeleton_path=args.source_skeleton,
+                            units=mesh_units(args.source, args.source_skeleton), **load)
+    target = load_character(args.target, skeleton_path=args.target_skeleton,
+                            units=mesh_units(args.target, args.target_skeleton), **load)
+    hair = read_hair(args.hair, units=units, limits=limits)
     began = time.perf_counter()
     adaptable = pipeline.preprocess(source, hair, progress=progress)
     preprocess_seconds = time.perf_counter() - began
@@ -161,6 +168,9 @@ def main(argv: list[str] | None = None) -> int:
     except FileNotFoundError as error:
         print(f"hairport: error: {error.filename or error}: file not found", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OSError as error:
+        print(f"hairport: error: {error.filename or 'output'}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_FAILURE
     except KeyboardInterrupt:
         print("hairport: interrupted", file=sys.stderr)
         return 130

@@ -6,12 +6,12 @@ operator acts on all three coordinate columns alike); Eq. 7's Gauss-Newton block
 the coordinates of a segment's two particles only.
 
 * Strand shape (Eq. 7): ``sum_s || u_s(p) - d-bar_s ||^2`` with ``u_s`` the unit direction
-  of segment ``s`` and ``d-bar`` the unit source directions. Its exact gradient is used with
-  a Gauss-Newton curvature model (see :func:`shape_blocks`), which reaches the minimiser of
-  Eq. 1 in a few outer iterations (6-9 measured). Freezing the lengths in both gradient and
-  Hessian, as the paper's text suggests, converges linearly at a rate of about
-  ``1 - beta l^2`` (30-60+ iterations measured on 4-6 mm segments) to a slightly different
-  fixed point.
+  of segment ``s`` and ``d-bar`` the unit source directions. Its exact gradient and its
+  exact per-segment Hessian projected to PSD are used (see :func:`shape_blocks`): Newton's
+  method reaches the minimiser of Eq. 1 in a few outer iterations. Freezing the lengths in
+  both gradient and Hessian, as the paper's text suggests, converges linearly at a rate of
+  about ``1 - beta l^2`` (30-60+ iterations measured on 4-6 mm segments) to a slightly
+  different fixed point.
 * Inter-strand (Eq. 10): ``sum_i gamma_i || (K p)_i - L-bar_i ||^2`` with
   ``K = diag(sum_j w_ij) - W`` from inverse-distance kNN weights (Eq. 9) over particles of
   other strands (or of guide strands only, Eq. 14) and ``L-bar = K p-bar``.
@@ -32,9 +32,10 @@ MIN_NEIGHBOUR_DISTANCE = 1e-9
 KNN_EXTRA_CANDIDATES = 16
 #: segments shorter than this (m) are treated as having this length
 MIN_SEGMENT_LENGTH = 1e-9
-#: segments turned further than this (rad) from their source direction get the frozen-length
-#: curvature model instead of Gauss-Newton's (see :func:`shape_blocks`)
-GAUSS_NEWTON_TRUST_ANGLE = 0.3
+#: Eq. 7's negative curvature is kept down to this share of beta (per segment); a particle
+#: belongs to at most two segments, each adding up to twice its block, so a share below 1/4
+#: leaves the Hessian positive definite through Eq. 11's term alone
+NEGATIVE_CURVATURE_SHARE = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,30 +203,58 @@ class EnergyWeights:
     beta: float = 1e3
 
 
-def shape_blocks(model: ShapeModel, points: np.ndarray) -> np.ndarray:
-    """Curvature model of Eq. 7 per segment: ``(I - (1 - mu) u u^T) / l^2``.
+def shape_blocks(
+    model: ShapeModel,
+    points: np.ndarray,
+    radial_damping: float = 0.0,
+    curvature_floor: np.ndarray | float = 0.0,
+) -> np.ndarray:
+    """Half the Hessian of Eq. 7 per segment, projected to positive semi-definite.
 
-    ``u`` is the current unit direction and ``l`` the current length of each segment. With
-    ``mu = 0`` this is the Gauss-Newton block, exact where the direction residual vanishes,
-    with no stiffness along ``u`` (Eq. 7 lets segments change length freely). Far from the
-    source direction that model is poor (a linear step cannot turn a segment far); there
-    ``mu`` grows to 1, the frozen-length block of the paper's text, which moves segments
-    rigidly. ``mu = (1 - cos angle) / (1 - cos GAUSS_NEWTON_TRUST_ANGLE)``, clipped to 1.
-    Only the path depends on ``mu``: the gradient is exact, so the fixed point is Eq. 1's.
+    For ``f(e) = || e/|e| - d ||^2`` with ``u = e/|e|``, ``l = |e|`` and ``c = u . d`` the
+    exact Hessian is ``2/l^2 (d u^T + u d^T + c I - 3 c u u^T)``. Where the direction matches
+    (``u = d``) it is the Gauss-Newton block ``2/l^2 (I - u u^T)``; away from it Gauss-Newton
+    drops a term that is not small (it converged linearly, ~5 % per outer iteration on the
+    MakeHuman pair), so the exact block is used. Its radial eigenvalue is negative
+    (about ``-angle^2 / l^2``): Eq. 7 alone is not convex. Clamping it to 0 (projected
+    Newton) overestimated the curvature along Newton steps 7-fold on the MakeHuman pair
+    and made convergence linear, so eigenvalues are clamped at ``-curvature_floor`` (per
+    segment, in 1/m^2 units) instead, a share of the hair-body stiffness that keeps the
+    whole Hessian positive definite.
+
+    Eq. 7 has (almost) no stiffness along ``u``: a Newton step may shrink or invert a
+    segment, where the energy is singular. ``radial_damping`` adds ``mu u u^T / l^2`` (the
+    frozen-length model's stiffness along ``u`` at ``mu = 1``), a Levenberg-Marquardt term
+    that the solver raises when steps fail and lowers when they succeed.
 
     Returns
     -------
     blocks : (M, 3, 3) float64
     """
     length, unit = unit_rows(model.D @ points)
-    turned = 1.0 - np.einsum("ij,ij->i", unit, model.source_directions)
-    keep_length = np.minimum(1.0, turned / (1.0 - np.cos(GAUSS_NEWTON_TRUST_ANGLE)))
-    projector = np.eye(3)[None] - (1.0 - keep_length)[:, None, None] * unit[:, :, None] * unit[:, None, :]
-    return projector / length[:, None, None] ** 2
+    d = model.source_directions
+    cosine = np.einsum("ij,ij->i", unit, d)
+    outer_ud = unit[:, :, None] * d[:, None, :]
+    exact = (
+        outer_ud
+        + np.transpose(outer_ud, (0, 2, 1))
+        + cosine[:, None, None] * (np.eye(3)[None] - 3.0 * unit[:, :, None] * unit[:, None, :])
+    )
+    values, vectors = np.linalg.eigh(exact)
+    floor = -np.broadcast_to(np.asarray(curvature_floor, dtype=np.float64), length.shape) * length**2
+    projected = np.einsum("mij,mj,mkj->mik", vectors, np.maximum(values, floor[:, None]), vectors)
+    damped = projected + radial_damping * unit[:, :, None] * unit[:, None, :]
+    return damped / length[:, None, None] ** 2
 
 
-def hessian(model: ShapeModel, points: np.ndarray, weights: EnergyWeights, gamma: np.ndarray | None = None) -> sp.csr_matrix:
-    """Gauss-Newton Hessian of Eq. 1 at ``points``, ``(3N, 3N)``, particle-major (x0 y0 z0 x1 ...).
+def hessian(
+    model: ShapeModel,
+    points: np.ndarray,
+    weights: EnergyWeights,
+    gamma: np.ndarray | None = None,
+    radial_damping: float = 0.0,
+) -> sp.csr_matrix:
+    """Projected-Newton Hessian of Eq. 1 at ``points``, ``(3N, 3N)``, particle-major (x0 y0 z0 x1 ...).
 
     ``2 (D^T B D + (alpha K^T diag(gamma) K + beta diag(gamma)) (x) I_3)`` with ``B`` the
     :func:`shape_blocks`.
@@ -233,7 +262,10 @@ def hessian(model: ShapeModel, points: np.ndarray, weights: EnergyWeights, gamma
     n = len(points)
     m = len(model.segments)
     g = np.ones(n) if gamma is None else gamma
-    blocks = sp.bsr_matrix((shape_blocks(model, points), np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m))
+    floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[model.segments[:, 0]], g[model.segments[:, 1]])
+    blocks = sp.bsr_matrix(
+        (shape_blocks(model, points, radial_damping, floor), np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m)
+    )
     D3 = sp.kron(model.D, sp.identity(3), format="csr")
     shape = D3.T @ blocks.tocsr() @ D3
     coupled = weights.alpha * (model.K.T @ sp.diags(g) @ model.K) + weights.beta * sp.diags(g)

@@ -39,6 +39,13 @@ MERIT_PENALTY_FACTOR = 2.0
 MAX_BACKTRACKS = 6
 
 
+#: radial damping of Eq. 7's curvature model (see energies.shape_blocks): start, bounds, factor
+INITIAL_RADIAL_DAMPING = 1.0
+MIN_RADIAL_DAMPING = 1e-4
+MAX_RADIAL_DAMPING = 1.0
+DAMPING_FACTOR = 4.0
+
+
 class Cancelled(RuntimeError):
     """The caller asked the solve to stop."""
 
@@ -95,6 +102,16 @@ def _constraint_matrix(normals: np.ndarray) -> sp.csc_matrix:
     indptr = np.arange(3 * f + 1, dtype=np.int64)
     indices = np.repeat(np.arange(f, dtype=np.int64), 3)
     return sp.csc_matrix((normals.ravel(), indices, indptr), shape=(f, 3 * f))
+
+
+def _adapt_damping(damping: float, actual: float, predicted: float) -> float:
+    """Levenberg-Marquardt update of the radial damping from the step's actual/predicted decrease."""
+    ratio = actual / predicted if predicted < 0 else 0.0
+    if ratio < 0.25:
+        return min(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR)
+    if ratio > 0.75:
+        return max(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR)
+    return damping
 
 
 def _merit(model, points, initial, weights, gamma, distance, eps_c, penalty) -> float:
@@ -161,13 +178,14 @@ def solve_shape_adaptation(
     pattern: tuple[np.ndarray, np.ndarray] | None = None
     dual = None
     penalty = 0.0
+    radial_damping = INITIAL_RADIAL_DAMPING
     f = len(free)
     free3 = (3 * free[:, None] + np.arange(3)).ravel()
     sd = target.signed_distance(points[free])
     for iteration in range(options.max_iterations):
         if should_stop is not None and should_stop():
             raise Cancelled("solve cancelled")
-        H = hessian(model, points, weights, gamma)[free3][:, free3]
+        H = hessian(model, points, weights, gamma, radial_damping)[free3][:, free3]
         P = sp.triu(H, format="csc")
         P.sort_indices()
         q = gradient(model, points, initial, weights, gamma)[free].ravel()
@@ -191,12 +209,16 @@ def solve_shape_adaptation(
         step = result.x.reshape(f, 3)
         penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(dual), initial=0.0)))
         merit_now = _merit(model, points, initial, weights, gamma, sd.distance, options.eps_c, penalty)
+        predicted = float(q @ result.x + 0.5 * result.x @ (H @ result.x))
         fraction = 1.0
-        for _ in range(MAX_BACKTRACKS):
+        for attempt in range(MAX_BACKTRACKS):
             trial = points.copy()
             trial[free] += fraction * step
             trial_sd = target.signed_distance(trial[free])
-            if _merit(model, trial, initial, weights, gamma, trial_sd.distance, options.eps_c, penalty) <= merit_now:
+            merit_trial = _merit(model, trial, initial, weights, gamma, trial_sd.distance, options.eps_c, penalty)
+            if attempt == 0:
+                radial_damping = _adapt_damping(radial_damping, merit_trial - merit_now, predicted)
+            if merit_trial <= merit_now:
                 break
             fraction *= 0.5
         points, sd = trial, trial_sd

@@ -16,8 +16,13 @@ Deviations from the paper's text, on purpose:
   point is reproduced exactly too (reflexive retargeting is exact).
 * A particle whose rays all miss or leave every valid region keeps its offset to its
   closest surface point in that face's tangent frame (``fallback``); counted in reports.
-* Eq. 4 restores the *source* Laplacian on the unsmooth set (DESIGN.md section 3); the
-  tip gets a one-sided Laplacian so a staircase at the tip is smoothed too.
+* Besides the valid region, Eq. 2's indicator also asks that the hit lie within reach of
+  the particle (:data:`ANCHOR_REACH_FACTOR`); a particle no bone reaches falls back to its
+  closest surface point.
+* Eq. 4 restores the *source* Laplacian on the unsmooth set (DESIGN.md section 3).
+* A bone's ray must leave the body at its hit (the hit face looks along the ray): a ray
+  from a joint lying outside the body (MakeHuman's head tail sits on the scalp) enters
+  the body first, which is no anchor.
 """
 
 from __future__ import annotations
@@ -42,6 +47,16 @@ VALID_REGION_WEIGHT = 0.05
 SMOOTHING_EPS = 0.3
 #: rounds of re-evaluating the unsmooth set on the smoothed strands
 SMOOTHING_ROUNDS = 5
+#: a bone whose ray meets the body much farther from the particle than the body's nearest point
+#: (|eta| > factor * distance + slack) is not a candidate: a ray from a clavicle can hit its
+#: valid shoulder region and travel 10+ cm on to a strand under the chin, and a lever that
+#: long turns small body changes into large hair motion
+ANCHOR_REACH_FACTOR = 2.0
+ANCHOR_REACH_SLACK = 0.01
+#: ray origins stay on the part of a bone at least this deep (m) inside the body
+ANCHOR_BONE_DEPTH = 0.02
+#: samples along a bone when finding that part
+BONE_DEPTH_SAMPLES = 64
 #: rays shorter than this (m) have no direction
 MIN_RAY_LENGTH = 1e-9
 
@@ -121,6 +136,34 @@ def face_frames(vertices: np.ndarray, faces: np.ndarray, face_ids: np.ndarray) -
     return np.stack([normal, edge, np.cross(normal, edge)], axis=1)
 
 
+def inner_bone_range(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> np.ndarray:
+    """Part of each bone lying at least :data:`ANCHOR_BONE_DEPTH` inside the body.
+
+    Rays cast from a joint on or outside the skin (MakeHuman's head tail sits on the scalp)
+    graze the surface and make poor anchors, so ray origins are kept to this part.
+
+    Parameters
+    ----------
+    heads, tails : (B, 3) float64
+    query : MeshQuery
+        The body.
+
+    Returns
+    -------
+    t_range : (B, 2) float64
+        Smallest and largest bone parameter of the inner part; both the deepest sample's
+        parameter where no sample is deep enough.
+    """
+    t = np.linspace(0.0, 1.0, BONE_DEPTH_SAMPLES)
+    samples = heads[:, None, :] + t[None, :, None] * (tails - heads)[:, None, :]
+    depth = -query.signed_distance(samples.reshape(-1, 3)).distance.reshape(len(heads), -1)
+    deep = depth >= ANCHOR_BONE_DEPTH
+    deepest = t[np.argmax(depth, axis=1)]
+    lo = np.where(deep.any(axis=1), t[np.argmax(deep, axis=1)], deepest)
+    hi = np.where(deep.any(axis=1), t[len(t) - 1 - np.argmax(deep[:, ::-1], axis=1)], deepest)
+    return np.stack([lo, hi], axis=1)
+
+
 def compute_anchors(
     source: Character,
     points: np.ndarray,
@@ -150,6 +193,8 @@ def compute_anchors(
     skeleton = source.skeleton
     bones = hair_bone_indices(source)
     valid = valid_face_mask(source, bones)
+    corners = source.vertices[source.faces]
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     n = len(points)
 
     best_score = np.full(n, np.inf)
@@ -161,7 +206,16 @@ def compute_anchors(
         "eta": np.zeros(n),
     }
     free = np.flatnonzero(~is_root)
-    t_all, o_all = closest_points_on_segments(points[free], skeleton.heads[bones], skeleton.tails[bones])
+    reach = ANCHOR_REACH_FACTOR * np.abs(query.signed_distance(points[free]).distance) + ANCHOR_REACH_SLACK
+    reach_of = np.zeros(n)
+    reach_of[free] = reach
+    t_range = inner_bone_range(skeleton.heads[bones], skeleton.tails[bones], query)
+    heads = skeleton.heads[bones]
+    axis_full = skeleton.tails[bones] - heads
+    inner_heads = heads + t_range[:, :1] * axis_full
+    inner_tails = heads + t_range[:, 1:] * axis_full
+    t_inner, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
+    t_all = t_range[None, :, 0] + t_inner * (t_range[None, :, 1] - t_range[None, :, 0])
     axes = skeleton.tails[bones] - skeleton.heads[bones]
     axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), MIN_RAY_LENGTH)
     for j, bone in enumerate(bones):  # a handful of bones; each iteration is vectorised over particles
@@ -171,11 +225,13 @@ def compute_anchors(
         hits = query.first_hits(o_all[usable, j], ray[usable])
         index = free[usable]
         hit_faces = np.where(hits.hit, hits.faces, 0)
-        ok = hits.hit & valid[hit_faces, j]
+        leaving = np.einsum("ij,ij->i", face_normals[hit_faces], ray[usable]) > 0.0
+        ok = hits.hit & valid[hit_faces, j] & leaving
         unit = ray[usable] / length[usable, None]
         eta = np.einsum("ij,ij->i", points[index] - hits.points, unit)
         cosine = unit @ axes[j]
         score = np.where(ok, np.abs(eta) * np.exp(sigma * cosine**2), np.inf)
+        score = np.where(np.abs(eta) <= reach_of[index], score, np.inf)
         better = score < best_score[index]
         take = index[better]
         best_score[take] = score[better]
@@ -236,8 +292,10 @@ def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
 def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
     """Per-strand Laplacian of Eq. 5, weighted by the lengths of ``points``' segments.
 
-    Interior particle ``i``: ``(f[i+1]-f[i])/l[i] - (f[i]-f[i-1])/l[i-1]``; the tip gets the
-    one-sided ``-(f[tip]-f[tip-1])/l[tip-1]``; the root row is empty (always Dirichlet).
+    Interior particle ``i``: ``(f[i+1]-f[i])/l[i] - (f[i]-f[i-1])/l[i-1]``. Roots and tips
+    have empty rows: Eq. 5 is not defined there, and they stay Dirichlet in Eq. 4 (a
+    one-sided tip row lets the strand end drift with the source's orientation: on the
+    MakeHuman pair it put 137 particles inside the jaw instead of 7).
 
     Parameters
     ----------
@@ -252,17 +310,13 @@ def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
     n = len(points)
     lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (N-1,), includes fake cross-strand gaps
     inv = 1.0 / np.maximum(lengths, MIN_RAY_LENGTH)
-    is_root = np.zeros(n, dtype=bool)
-    is_root[offsets[:-1]] = True
-    is_tip = np.zeros(n, dtype=bool)
-    is_tip[offsets[1:] - 1] = True
-    interior = np.flatnonzero(~is_root & ~is_tip)
-    tips = np.flatnonzero(is_tip & ~is_root)
-    rows = np.concatenate([interior, interior, interior, tips, tips])
-    cols = np.concatenate([interior - 1, interior, interior + 1, tips - 1, tips])
-    vals = np.concatenate(
-        [inv[interior - 1], -(inv[interior - 1] + inv[interior]), inv[interior], inv[tips - 1], -inv[tips - 1]]
-    )
+    is_end = np.zeros(n, dtype=bool)
+    is_end[offsets[:-1]] = True
+    is_end[offsets[1:] - 1] = True
+    interior = np.flatnonzero(~is_end)
+    rows = np.repeat(interior, 3)
+    cols = (interior[:, None] + np.array([-1, 0, 1])).ravel()
+    vals = np.stack([inv[interior - 1], -(inv[interior - 1] + inv[interior]), inv[interior]], axis=1).ravel()
     return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 

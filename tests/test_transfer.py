@@ -63,13 +63,14 @@ def test_roots_land_on_the_target_surface():
     assert np.abs(MeshQuery(target.vertices, target.faces).signed_distance(roots).distance).max() < 1e-12
 
 
-def test_strand_laplacian_of_a_straight_line_is_zero_inside_and_the_tip_direction_at_the_tip():
+def test_strand_laplacian_of_a_straight_line_is_zero_and_of_a_corner_is_the_turn():
     points = np.stack([np.zeros(5), -0.01 * np.arange(5), np.zeros(5)], axis=1)
     L = strand_laplacian(points, np.array([0, 5]))
-    features = L @ points
-    np.testing.assert_allclose(features[1:4], 0.0, atol=1e-15)
-    np.testing.assert_allclose(features[4], [0.0, 1.0, 0.0], atol=1e-12)  # -(tip - previous) / length
-    assert np.diff(L.indptr)[0] == 0  # no row for the root
+    np.testing.assert_allclose(L @ points, 0.0, atol=1e-15)
+    assert np.diff(L.indptr)[[0, 4]].tolist() == [0, 0]  # no rows for root and tip
+    corner = np.array([[0.0, 0, 0], [0.0, -0.01, 0], [0.02, -0.01, 0]])
+    # unit directions (0,-1,0) then (1,0,0): the Laplacian is their difference
+    np.testing.assert_allclose((strand_laplacian(corner, np.array([0, 3])) @ corner)[1], [1.0, 1.0, 0.0])
 
 
 def test_smoothing_leaves_a_smooth_transfer_untouched():

@@ -1,0 +1,132 @@
+"""Benchmark of the geometric queries in solver/geometry.py.
+
+Prints, for random points near a ~27k-face body (the MakeHuman "average-female" preset when
+it can be built, else an icosphere of similar size), the median over runs of:
+
+* signed distance: the previous implementation (``igl.signed_distance`` per call, which
+  rebuilds libigl's tree and normals every time), :class:`MeshQuery` with each available
+  face-search backend (tree built once), and fcpw's bare face search alone;
+* first ray hits (trimesh + embreex) for random rays from around the body.
+
+The ratio column is old time / new time in the same run (larger is better). Times are
+wall-clock medians; the CPU column is process time, steadier on a shared machine.
+
+    python bench/geometry.py [--runs 5] [--sizes 1000 10000 100000 1000000] [--rays 100000 1000000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import igl
+import numpy as np
+
+from hairport.solver import geometry
+from hairport.solver.geometry import MeshQuery
+
+
+def load_body():
+    try:
+        from hairport.solver.makehuman import build_preset
+
+        body = build_preset("average-female")
+        return "MakeHuman average-female", np.asarray(body.vertices, float), np.asarray(body.faces, np.int64)
+    except Exception as error:  # no asset cache: a sphere of the same size
+        import trimesh
+
+        print(f"(MakeHuman preset unavailable: {error!r}; using an icosphere)")
+        mesh = trimesh.creation.icosphere(subdivisions=6, radius=0.3)  # 81,920 faces
+        mesh = mesh.simplify_quadric_decimation(face_count=26756) if hasattr(mesh, "simplify_quadric_decimation") else mesh
+        return "icosphere", np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+
+
+def points_near(vertices, n, rng, spread=0.01):
+    """Surface vertices jittered by a normal of ``spread`` m: inside and outside, mostly close."""
+    return vertices[rng.integers(0, len(vertices), n)] + rng.normal(scale=spread, size=(n, 3))
+
+
+def timed(fn, runs):
+    fn()  # warm-up: lazy structures, caches
+    walls, cpus = [], []
+    for _ in range(runs):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        walls.append(time.perf_counter() - w)
+        cpus.append(time.process_time() - c)
+    return statistics.median(walls), statistics.median(cpus)
+
+
+def forced(vertices, faces, backend):
+    query = MeshQuery(vertices, faces)
+    query._prepare()
+    query._closest = geometry._closest_face_index(query.vertices, query.faces, [backend])
+    return query
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 100_000, 1_000_000])
+    parser.add_argument("--rays", type=int, nargs="+", default=[100_000, 1_000_000])
+    args = parser.parse_args()
+
+    name, vertices, faces = load_body()
+    print(f"mesh: {name}, {len(vertices)} vertices, {len(faces)} faces; median of {args.runs} runs\n")
+    rng = np.random.default_rng(0)
+    available = [b for b in geometry.CLOSEST_FACE_BACKENDS if _available(b, vertices, faces)]
+
+    # one-off setup
+    for backend in available:
+        w, c = timed(lambda: forced(vertices, faces, backend), args.runs)
+        print(f"setup MeshQuery[{backend}] (tree + pseudonormal table): {w * 1e3:.1f} ms")
+    print()
+
+    queries = {f"MeshQuery[{b}]": forced(vertices, faces, b) for b in available}
+    methods = {"old igl.signed_distance": lambda p: igl.signed_distance(p, vertices, faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)}
+    methods.update({label: q.signed_distance for label, q in queries.items()})
+    if "fcpw" in available:
+        bare = geometry._FcpwFaces(vertices, faces)
+        methods["fcpw face search only"] = bare.closest_faces
+
+    header = f"{'signed distance':<28}{'N':>10}{'wall s':>10}{'cpu s':>10}{'old/new':>10}"
+    print(header)
+    print("-" * len(header))
+    for n in args.sizes:
+        points = points_near(vertices, n, rng)
+        base = None
+        for label, fn in methods.items():
+            wall, cpu = timed(lambda: fn(points), args.runs)
+            base = wall if base is None else base
+            print(f"{label:<28}{n:>10}{wall:>10.4f}{cpu:>10.4f}{base / wall:>10.1f}")
+        if "MeshQuery[fcpw]" in queries:
+            q = queries["MeshQuery[fcpw]"]
+            share = (np.abs(q.signed_distance(points).distance) < q._exact_band).mean()
+            print(f"{'  (share re-searched in float64 within the band)':<48}{share:>10.1%}")
+        print()
+
+    header = f"{'first_hits (embree)':<28}{'N':>10}{'wall s':>10}{'cpu s':>10}{'hit rate':>10}"
+    print(header)
+    print("-" * len(header))
+    query = MeshQuery(vertices, faces)
+    center = vertices.mean(axis=0)
+    for n in args.rays:
+        origins = points_near(vertices, n, rng, spread=0.05)
+        directions = center + rng.normal(scale=0.1, size=(n, 3)) - origins
+        query.first_hits(origins[:10], directions[:10])  # builds the embree scene
+        wall, cpu = timed(lambda: query.first_hits(origins, directions), args.runs)
+        rate = query.first_hits(origins, directions).hit.mean()
+        print(f"{'MeshQuery.first_hits':<28}{n:>10}{wall:>10.4f}{cpu:>10.4f}{rate:>10.1%}")
+
+
+def _available(backend, vertices, faces):
+    try:
+        geometry._FACE_INDEXES[backend](vertices[:3], np.array([[0, 1, 2]]))
+        return True
+    except ImportError:
+        return False
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,365 @@
+"""Geometric queries (solver/geometry.py): signed distance with a cached tree, ray hits, helpers.
+
+The reference for the signed distance is libigl's ``signed_distance`` with the
+pseudonormal sign (the implementation before the tree was cached), the analytic distance
+inside a convex polyhedron, and the exact winding number for the sign on non-convex meshes.
+"""
+
+import pickle
+
+import igl
+import numpy as np
+import pytest
+import trimesh
+
+from hairport.solver import geometry
+from hairport.solver.geometry import (
+    ON_SURFACE_DISTANCE,
+    MeshQuery,
+    barycentric_coordinates,
+    closest_points_on_segments,
+    interpolate_barycentric,
+)
+
+def _available(name):
+    try:
+        geometry._FACE_INDEXES[name](np.eye(3), np.array([[0, 1, 2]]))
+        return True
+    except ImportError:
+        return False
+
+
+BACKENDS = [name for name in geometry.CLOSEST_FACE_BACKENDS if _available(name)]
+
+
+def query_with(vertices, faces, backend):
+    """A MeshQuery whose face search is forced to ``backend``."""
+    query = MeshQuery(vertices, faces)
+    query._prepare()
+    query._closest = geometry._closest_face_index(query.vertices, query.faces, [backend])
+    return query
+
+
+def old_signed_distance(points, vertices, faces):
+    """The previous implementation: libigl, tree and normals rebuilt per call."""
+    distance, face, closest, pseudonormal = igl.signed_distance(
+        points, vertices, faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
+    )
+    return distance, face, closest, pseudonormal / np.linalg.norm(pseudonormal, axis=1, keepdims=True)
+
+
+def icosphere(radius=0.1, subdivisions=3):
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def dented_box():
+    """A subdivided cube whose top-face centre vertex is pushed in: a concave vertex ringed by
+    convex and concave edges, where a single face normal gets the sign wrong."""
+    mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    for _ in range(2):
+        mesh = mesh.subdivide()
+    mesh.merge_vertices()
+    vertices = np.array(mesh.vertices)
+    top = np.flatnonzero((np.abs(vertices[:, 2] - 0.5) < 1e-9) & (np.abs(vertices[:, 0]) < 1e-9) & (np.abs(vertices[:, 1]) < 1e-9))
+    assert len(top) == 1
+    vertices[top[0], 2] = 0.2
+    return vertices, np.asarray(mesh.faces, dtype=np.int64), top[0]
+
+
+def check_normal_identity(points, sd):
+    """<p - closest, normal> == distance, unit normal, |p - closest| == |distance|."""
+    offset = points - sd.closest
+    np.testing.assert_allclose(np.einsum("ij,ij->i", offset, sd.normal), sd.distance, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(sd.normal, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(offset, axis=1), np.abs(sd.distance), atol=1e-14)
+
+
+def sample_near_features(vertices, faces, rng, n=600):
+    """Points inside/outside near the vertices, edge midpoints and face centroids, plus deep
+    inside and far outside."""
+    corners = vertices[faces]
+    centroid = corners.mean(axis=1)
+    midpoint = 0.5 * (corners[:, 0] + corners[:, 1])
+    extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
+    anchors = np.concatenate([vertices, midpoint, centroid])
+    anchors = anchors[rng.integers(0, len(anchors), n)]
+    offsets = rng.normal(size=(n, 3)) * extent * np.geomspace(1e-7, 1e-1, n)[:, None]
+    center = vertices.mean(axis=0)
+    deep = center + rng.normal(size=(n // 6, 3)) * 0.1 * extent
+    far = center + rng.normal(size=(n // 6, 3)) * 2.0 * extent
+    return np.concatenate([anchors + offsets, deep, far])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_icosphere_matches_previous_implementation(backend):
+    vertices, faces = icosphere()
+    query = query_with(vertices, faces, backend)
+    points = sample_near_features(vertices, faces, np.random.default_rng(0))
+    sd = query.signed_distance(points)
+    distance, face, closest, _ = old_signed_distance(points, vertices, faces)
+    assert sd.distance.shape == (len(points),) and sd.closest.shape == (len(points), 3)
+    assert sd.normal.shape == (len(points), 3) and sd.faces.dtype == np.int64
+    np.testing.assert_array_equal(np.sign(sd.distance[distance != 0]), np.sign(distance[distance != 0]))
+    if geometry._FACE_INDEXES[backend].exact:
+        np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(sd.closest, closest, rtol=0, atol=1e-12)
+    else:
+        # float32 face search: exact within the near-surface band, ~1e-7 of the size beyond
+        extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
+        np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-6 * extent)
+        near = np.abs(distance) < 0.5 * geometry.EXACT_BAND * extent
+        assert near.sum() > 100
+        np.testing.assert_allclose(sd.distance[near], distance[near], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(sd.closest[near], closest[near], rtol=0, atol=1e-12)
+    check_normal_identity(points, sd)
+    # the face holds the closest point
+    bary = barycentric_coordinates(sd.closest, vertices[faces[sd.faces]])
+    assert bary.min() > -1e-9
+    np.testing.assert_allclose(interpolate_barycentric(vertices, faces, sd.faces, bary), sd.closest, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_icosphere_analytic(backend):
+    radius = 0.1
+    vertices, faces = icosphere(radius)
+    query = query_with(vertices, faces, backend)
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    heights = np.einsum("ij,ij->i", corners[:, 0], normals)  # plane offsets from the centre
+    rng = np.random.default_rng(1)
+
+    # outside along a vertex direction: the vertex is the closest point
+    scale = 1.0 + rng.uniform(1e-4, 1.0, len(vertices))
+    sd = query.signed_distance(vertices * scale[:, None])
+    np.testing.assert_allclose(sd.distance, (scale - 1.0) * radius, rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(sd.closest, vertices, atol=1e-12)
+    np.testing.assert_allclose(sd.normal, vertices / radius, atol=1e-9)
+
+    # along a face normal through the centroid, inside and outside
+    centroid = corners.mean(axis=1)
+    along = rng.uniform(-0.5, 0.5, len(faces)) * radius * 0.2
+    sd = query.signed_distance(centroid + along[:, None] * normals)
+    np.testing.assert_allclose(sd.distance, along, atol=1e-12)
+    np.testing.assert_allclose(sd.closest, centroid, atol=1e-12)
+
+    # outside along an edge-midpoint direction: the midpoint is the closest point
+    midpoint = 0.5 * (corners[:, 0] + corners[:, 1])
+    grow = 1.0 + rng.uniform(1e-3, 0.5, len(faces))
+    sd = query.signed_distance(midpoint * grow[:, None])
+    np.testing.assert_allclose(sd.distance, (grow - 1.0) * np.linalg.norm(midpoint, axis=1), rtol=1e-9)
+    np.testing.assert_allclose(sd.closest, midpoint, atol=1e-12)
+
+    # anywhere inside a convex polyhedron: minus the distance to the nearest face plane
+    inside = rng.normal(size=(2000, 3))
+    inside *= (rng.uniform(0.0, 0.9 * heights.min(), 2000) / np.linalg.norm(inside, axis=1))[:, None]
+    sd = query.signed_distance(inside)
+    np.testing.assert_allclose(sd.distance, -(heights[None] - inside @ normals.T).min(axis=1), atol=1e-6 * radius)
+    assert (sd.distance < 0).all()
+    # and close to a sphere of the same radius (the polyhedron is inscribed)
+    assert np.abs(sd.distance - (np.linalg.norm(inside, axis=1) - radius)).max() < radius - heights.min() + 1e-12
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_points_on_the_surface_get_the_outward_pseudonormal(backend):
+    vertices, faces = icosphere()
+    query = query_with(vertices, faces, backend)
+    corners = vertices[faces]
+    face_normals = igl.per_face_normals(vertices, faces, np.array([0.0, 0.0, 1.0]))
+    vertex_normals = igl.per_vertex_normals(vertices, faces, igl.PER_VERTEX_NORMALS_WEIGHTING_TYPE_ANGLE)
+
+    # at the vertices: the angle-weighted vertex normal
+    sd = query.signed_distance(vertices)
+    assert np.abs(sd.distance).max() < ON_SURFACE_DISTANCE
+    np.testing.assert_allclose(sd.normal, vertex_normals, atol=1e-12)
+
+    # at edge midpoints: the normalised sum of the two face normals
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    pairs = mesh.face_adjacency
+    edges = mesh.face_adjacency_edges
+    midpoints = 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])
+    sd = query.signed_distance(midpoints)
+    assert np.abs(sd.distance).max() < ON_SURFACE_DISTANCE
+    expected = face_normals[pairs[:, 0]] + face_normals[pairs[:, 1]]
+    np.testing.assert_allclose(sd.normal, expected / np.linalg.norm(expected, axis=1, keepdims=True), atol=1e-12)
+
+    # at face centroids: the face normal
+    sd = query.signed_distance(corners.mean(axis=1))
+    assert np.abs(sd.distance).max() < ON_SURFACE_DISTANCE
+    np.testing.assert_allclose(sd.normal, face_normals, atol=1e-12)
+    # all of it as the previous implementation had it
+    points = np.concatenate([vertices, midpoints, corners.mean(axis=1)])
+    _, _, _, old_normal = old_signed_distance(points, vertices, faces)
+    np.testing.assert_allclose(query.signed_distance(points).normal, old_normal, atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("shape", ["torus", "dented_box"])
+def test_sign_near_features_of_non_convex_meshes(backend, shape):
+    rng = np.random.default_rng(2)
+    if shape == "torus":
+        mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=32, minor_sections=16)
+        vertices, faces = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+        anchors = vertices
+    else:
+        vertices, faces, dent = dented_box()
+        ring = np.unique(faces[(faces == dent).any(axis=1)])
+        anchors = np.concatenate([vertices[[dent]]] * 50 + [vertices[ring]] * 10)
+    assert trimesh.Trimesh(vertices, faces, process=False).is_watertight
+    # points very close to vertices (and their edges), in every direction
+    directions = rng.normal(size=(len(anchors) * 4, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    step = np.geomspace(1e-6, 1e-2, len(directions))
+    points = np.repeat(anchors, 4, axis=0) + directions * step[:, None]
+    query = query_with(vertices, faces, backend)
+    sd = query.signed_distance(points)
+    winding = igl.winding_number(vertices, faces, points)
+    decided = np.abs(winding - 0.5) > 0.25  # exact winding number: 1 inside, 0 outside
+    assert decided.mean() > 0.99
+    np.testing.assert_array_equal(sd.distance[decided] < 0, winding[decided] > 0.5)
+    distance, _, closest, _ = old_signed_distance(points, vertices, faces)
+    if geometry._FACE_INDEXES[backend].exact:
+        np.testing.assert_allclose(sd.distance, distance, atol=1e-12)
+        np.testing.assert_allclose(sd.closest, closest, atol=1e-12)
+    else:  # exact near the surface; beyond, a near-tie face may be picked (medial points of the dent)
+        extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
+        np.testing.assert_allclose(sd.distance, distance, atol=1e-6 * extent)
+        near = np.abs(distance) < 0.5 * geometry.EXACT_BAND * extent
+        np.testing.assert_allclose(sd.distance[near], distance[near], atol=1e-12)
+    check_normal_identity(points, sd)
+
+
+def test_float32_face_search_is_close_everywhere_and_exact_near_the_surface():
+    if "fcpw" not in BACKENDS:
+        pytest.skip("fcpw not installed")
+    vertices, faces = icosphere(0.1, subdivisions=4)
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    surface, _ = trimesh.sample.sample_surface(mesh, 20000, seed=3)
+    rng = np.random.default_rng(3)
+    points = surface + rng.normal(size=surface.shape) * np.geomspace(1e-9, 1e-2, len(surface))[:, None]
+    fast, exact = query_with(vertices, faces, "fcpw"), query_with(vertices, faces, "igl")
+    a, b = fast.signed_distance(points), exact.signed_distance(points)
+    np.testing.assert_array_equal(a.distance < 0, b.distance < 0)
+    extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
+    np.testing.assert_allclose(a.distance, b.distance, atol=1e-6 * extent)
+    near = np.abs(b.distance) < 0.5 * geometry.EXACT_BAND * extent
+    np.testing.assert_allclose(a.distance[near], b.distance[near], atol=1e-14)
+
+
+def test_default_backend_and_structures_are_built_once():
+    vertices, faces = icosphere()
+    query = MeshQuery(vertices, faces)
+    assert query._closest is None  # lazily
+    points = np.random.default_rng(4).normal(size=(50, 3)) * 0.1
+    first = query.signed_distance(points)
+    index = query._closest
+    assert type(index) is geometry._FACE_INDEXES[BACKENDS[0]]
+    second = query.signed_distance(points)
+    assert query._closest is index
+    np.testing.assert_array_equal(first.distance, second.distance)
+    # an unavailable backend falls through to the next one
+    assert isinstance(geometry._closest_face_index(vertices, faces, ["igl"]), geometry._IglFaces)
+
+
+def test_pickle_and_empty_input():
+    vertices, faces = icosphere()
+    query = MeshQuery(vertices, faces)
+    points = np.random.default_rng(5).normal(size=(40, 3)) * 0.1
+    before = query.signed_distance(points)
+    query.first_hits(points, -points)
+    clone = pickle.loads(pickle.dumps(query))
+    after = clone.signed_distance(points)
+    np.testing.assert_array_equal(before.distance, after.distance)
+    np.testing.assert_array_equal(before.normal, after.normal)
+    empty = query.signed_distance(np.zeros((0, 3)))
+    assert empty.distance.shape == (0,) and empty.closest.shape == (0, 3) and empty.faces.dtype == np.int64
+    hits = query.first_hits(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert hits.hit.shape == (0,) and hits.points.shape == (0, 3)
+
+
+def test_first_hits_match_trimesh_reference():
+    vertices, faces = icosphere(0.1, subdivisions=2)
+    query = MeshQuery(vertices, faces)
+    rng = np.random.default_rng(6)
+    n = 400
+    origins = rng.normal(size=(n, 3)) * 0.1
+    origins[: n // 4] *= 0.3  # some start inside
+    aim = rng.normal(size=(n, 3)) * 0.08 - origins  # roughly at the sphere: hits and misses
+    directions = aim * rng.uniform(0.1, 10.0, (n, 1))  # not unit length
+    hits = query.first_hits(origins, directions)
+
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    reference = trimesh.ray.ray_triangle.RayMeshIntersector(trimesh.Trimesh(vertices, faces, process=False))
+    locations, ray_index, _ = reference.intersects_location(origins, unit, multiple_hits=True)
+    t = np.einsum("ij,ij->i", locations - origins[ray_index], unit[ray_index])
+    first = np.full(n, np.inf)
+    np.minimum.at(first, ray_index, np.where(t >= 0, t, np.inf))
+    expect_hit = np.isfinite(first)
+    assert 0.2 < expect_hit.mean() < 0.9
+    np.testing.assert_array_equal(hits.hit, expect_hit)
+    np.testing.assert_allclose(hits.distance[expect_hit], first[expect_hit], atol=1e-6)
+    assert np.isinf(hits.distance[~expect_hit]).all() and (hits.faces[~expect_hit] == -1).all()
+    assert (hits.barycentric[~expect_hit] == 0).all()
+    h = hits.hit
+    np.testing.assert_allclose(hits.points[h], origins[h] + hits.distance[h, None] * unit[h], atol=1e-9)
+    np.testing.assert_allclose(interpolate_barycentric(vertices, faces, hits.faces[h], hits.barycentric[h]), hits.points[h], atol=1e-9)
+    assert hits.barycentric[h].min() > -1e-6
+    np.testing.assert_allclose(hits.barycentric[h].sum(axis=1), 1.0, atol=1e-12)
+
+
+def test_barycentric_helpers_round_trip():
+    rng = np.random.default_rng(7)
+    triangles = rng.normal(size=(500, 3, 3))
+    weights = rng.dirichlet(np.ones(3), 500)
+    weights[:50] = np.eye(3)[rng.integers(0, 3, 50)]  # corners
+    points = np.einsum("ij,ijk->ik", weights, triangles)
+    np.testing.assert_allclose(barycentric_coordinates(points, triangles), weights, atol=1e-9)
+    # off the plane: coordinates of the projection
+    normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    lifted = points + normal * rng.normal(size=(500, 1))
+    np.testing.assert_allclose(barycentric_coordinates(lifted, triangles), weights, atol=1e-9)
+    # interpolate through a face table
+    vertices = triangles.reshape(-1, 3)
+    faces = np.arange(len(vertices)).reshape(-1, 3)
+    ids = rng.permutation(500)
+    np.testing.assert_allclose(interpolate_barycentric(vertices, faces, ids, weights[ids]), points[ids], atol=1e-12)
+
+
+def test_closest_points_on_segments_against_dense_sampling():
+    rng = np.random.default_rng(8)
+    points = rng.normal(size=(30, 3))
+    heads, tails = rng.normal(size=(7, 3)), rng.normal(size=(7, 3))
+    tails[0] = heads[0]  # a degenerate segment
+    t, closest = closest_points_on_segments(points, heads, tails)
+    assert t.shape == (30, 7) and closest.shape == (30, 7, 3)
+    assert t.min() >= 0 and t.max() <= 1
+    grid = np.linspace(0.0, 1.0, 20001)
+    samples = heads[None, :, None] + grid[None, None, :, None] * (tails - heads)[None, :, None]  # (1, B, G, 3)
+    best = np.linalg.norm(points[:, None, None] - samples, axis=-1).min(axis=-1)
+    got = np.linalg.norm(points[:, None] - closest, axis=-1)
+    assert (got <= best + 1e-12).all() and (best - got).max() < 1e-6
+    np.testing.assert_allclose(closest[:, 0], np.broadcast_to(heads[0], (30, 3)))
+
+
+def test_closest_point_regions_against_brute_force():
+    """The vectorised point-triangle routine on random (also thin) triangles."""
+    rng = np.random.default_rng(9)
+    n = 3000
+    triangles = rng.normal(size=(n, 3, 3))
+    triangles[:300, 2] = triangles[:300, 0] + 1e-4 * rng.normal(size=(300, 3)) + (triangles[:300, 1] - triangles[:300, 0]) * 0.5
+    points = rng.normal(size=(n, 3)) * 2.0
+    closest, feature = geometry._closest_points_on_triangles(points, triangles)
+    # squared distance from libigl per (point, triangle)
+    for i in range(0, n, 100):
+        v = triangles[i]
+        sqr, _, c = igl.point_mesh_squared_distance(points[i : i + 1], v, np.array([[0, 1, 2]]))
+        assert abs(np.sum((points[i] - closest[i]) ** 2) - sqr[0]) < 1e-12
+    bary = barycentric_coordinates(closest, triangles)
+    inside = feature == 0
+    assert (bary[inside] > -1e-9).all()
+    for k in range(3):
+        on_edge = feature == 1 + k
+        assert np.abs(bary[on_edge, k]).max(initial=0) < 1e-6
+        at_corner = feature == 4 + k
+        np.testing.assert_allclose(closest[at_corner], triangles[at_corner, k])
