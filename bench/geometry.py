@@ -3,16 +3,18 @@
 Prints, for random points near a ~27k-face body (the MakeHuman "average-female" preset when
 it can be built, else an icosphere of similar size), the median over runs of:
 
-* signed distance: the previous implementation (``igl.signed_distance`` per call, which
-  rebuilds libigl's tree and normals every time) and :class:`MeshQuery` with each available
-  face-search backend (tree built once), with and without sorting the queries along a
-  Z-curve first;
-* first ray hits (trimesh + embreex) for random rays from around the body.
+* signed distance (points jittered 1 cm around the surface; and hair-like strands, 100
+  particles each, reaching 30 cm out): the previous implementation (``igl.signed_distance``
+  per call, which rebuilds libigl's tree and normals every time); :class:`MeshQuery` as
+  configured; its cached-tree path with each available face-search backend, with and
+  without sorting the queries along a Z-curve first; and its whole-batch path (libigl's
+  multithreaded ``signed_distance`` on Z-sorted points), each forced at every size;
+* first ray hits (Embree through embreex) for random rays from around the body.
 
 The ratio column is old time / new time in the same run (larger is better). Times are
 wall-clock medians; the CPU column is process time, steadier on a shared machine.
 
-    python bench/geometry.py [--runs 5] [--sizes 1000 10000 100000 1000000] [--rays 100000 1000000]
+    python bench/geometry.py [--runs 5] [--sizes 1000 10000 100000 1000000] [--strands 1000000] [--rays 100000 1000000]
 """
 
 from __future__ import annotations
@@ -48,6 +50,17 @@ def points_near(vertices, n, rng, spread=0.01):
     return vertices[rng.integers(0, len(vertices), n)] + rng.normal(scale=spread, size=(n, 3))
 
 
+def strand_points(vertices, n, rng, per_strand=100):
+    """Hair-like queries: strands of ``per_strand`` particles leaving random vertices, 3 mm
+    apart with a random walk, in strand order (farther from the body, already coherent)."""
+    m = n // per_strand
+    roots = vertices[rng.integers(0, len(vertices), m)]
+    heading = rng.normal(size=(m, 3))
+    heading /= np.linalg.norm(heading, axis=1, keepdims=True)
+    steps = heading[:, None] * 0.003 + rng.normal(scale=0.001, size=(m, per_strand, 3))
+    return (roots[:, None] + np.cumsum(steps, axis=1)).reshape(-1, 3)
+
+
 def timed(fn, runs):
     fn()  # warm-up: lazy structures, caches
     walls, cpus = [], []
@@ -70,13 +83,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 100_000, 1_000_000])
+    parser.add_argument("--strands", type=int, nargs="*", default=[1_000_000])
     parser.add_argument("--rays", type=int, nargs="+", default=[100_000, 1_000_000])
     args = parser.parse_args()
 
     name, vertices, faces = load_body()
     print(f"mesh: {name}, {len(vertices)} vertices, {len(faces)} faces; median of {args.runs} runs\n")
     rng = np.random.default_rng(0)
-    available = [b for b in geometry.CLOSEST_FACE_BACKENDS if _available(b, vertices, faces)]
+    available = [b for b in geometry._FACE_INDEXES if _available(b, vertices, faces)]
 
     # one-off setup
     for backend in available:
@@ -84,29 +98,32 @@ def main():
         print(f"setup MeshQuery[{backend}] (tree + pseudonormal table): {w * 1e3:.1f} ms")
     print()
 
-    queries = {f"MeshQuery[{b}]": forced(vertices, faces, b) for b in available}
+    queries = {f"cached[{b}]": forced(vertices, faces, b) for b in available}
     methods = {"old igl.signed_distance": lambda p: igl.signed_distance(p, vertices, faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)}
-    methods.update({label: q.signed_distance for label, q in queries.items()})
+    methods["MeshQuery (default)"] = MeshQuery(vertices, faces).signed_distance
+    methods.update({label: cached_only(q.signed_distance) for label, q in queries.items()})
     for label, q in queries.items():
-        methods[f"{label}, no Z-sort"] = unsorted(q.signed_distance)
+        methods[f"{label}, no Z-sort"] = cached_only(unsorted(q.signed_distance))
+    methods["whole batch to libigl, Z-sorted"] = whole_batch(MeshQuery(vertices, faces).signed_distance)
 
-    header = f"{'signed distance':<34}{'N':>10}{'wall s':>10}{'cpu s':>10}{'old/new':>10}"
+    header = f"{'signed distance':<34}{'N':>18}{'wall s':>10}{'cpu s':>10}{'old/new':>10}"
     print(header)
     print("-" * len(header))
-    for n in args.sizes:
-        points = points_near(vertices, n, rng)
+    workloads = [(f"{n}", points_near(vertices, n, rng)) for n in args.sizes]
+    workloads += [(f"{n} strands", strand_points(vertices, n, rng)) for n in args.strands]
+    for n, points in workloads:
         base = None
         for label, fn in methods.items():
             wall, cpu = timed(lambda: fn(points), args.runs)
             base = wall if base is None else base
-            print(f"{label:<34}{n:>10}{wall:>10.4f}{cpu:>10.4f}{base / wall:>10.1f}")
-        if "MeshQuery[fcpw]" in queries:
-            q = queries["MeshQuery[fcpw]"]
+            print(f"{label:<34}{n:>18}{wall:>10.4f}{cpu:>10.4f}{base / wall:>10.1f}")
+        if "cached[fcpw]" in queries:
+            q = queries["cached[fcpw]"]
             share = (np.abs(q.signed_distance(points).distance) < q._exact_band).mean()
             print(f"{'  (fcpw: share re-searched in float64, near surface)':<54}{share:>10.1%}")
         print()
 
-    header = f"{'first_hits (embree)':<34}{'N':>10}{'wall s':>10}{'cpu s':>10}{'hit rate':>10}"
+    header = f"{'first_hits (embree)':<34}{'N':>18}{'wall s':>10}{'cpu s':>10}{'hit rate':>10}"
     print(header)
     print("-" * len(header))
     query = MeshQuery(vertices, faces)
@@ -117,21 +134,36 @@ def main():
         query.first_hits(origins[:10], directions[:10])  # builds the embree scene
         wall, cpu = timed(lambda: query.first_hits(origins, directions), args.runs)
         rate = query.first_hits(origins, directions).hit.mean()
-        print(f"{'MeshQuery.first_hits':<34}{n:>10}{wall:>10.4f}{cpu:>10.4f}{rate:>10.1%}")
+        print(f"{'MeshQuery.first_hits':<34}{n:>18}{wall:>10.4f}{cpu:>10.4f}{rate:>10.1%}")
+
+
+def with_setting(name, value, fn):
+    """``fn`` with ``geometry.<name>`` set to ``value`` during the call."""
+
+    def call(points):
+        keep = getattr(geometry, name)
+        setattr(geometry, name, value)
+        try:
+            return fn(points)
+        finally:
+            setattr(geometry, name, keep)
+
+    return call
+
+
+def cached_only(fn):
+    """``fn`` always on the cached-tree path, whatever the batch size."""
+    return with_setting("WHOLE_BATCH_FROM", np.iinfo(np.int64).max, fn)
+
+
+def whole_batch(fn):
+    """``fn`` always handing the batch to libigl's signed_distance."""
+    return with_setting("WHOLE_BATCH_FROM", 0, fn)
 
 
 def unsorted(fn):
     """``fn`` with the Morton ordering of the queries switched off."""
-
-    def call(points):
-        keep = geometry.SORT_QUERIES_FROM
-        geometry.SORT_QUERIES_FROM = np.iinfo(np.int64).max
-        try:
-            return fn(points)
-        finally:
-            geometry.SORT_QUERIES_FROM = keep
-
-    return call
+    return with_setting("SORT_QUERIES_FROM", np.iinfo(np.int64).max, fn)
 
 
 def _available(backend, vertices, faces):

@@ -7,32 +7,37 @@ cheap repeated queries.
 
 Signed distance
 ---------------
-A BVH over the triangles is built once per :class:`MeshQuery` (lazily, on the first query)
-and only answers *which face* holds the closest point; queries of 2048 points or more are
-visited in Z-curve order, so that consecutive ones walk the same tree nodes. Everything
-else is float64 numpy over all points at once: the closest point on that face (Ericson's
-region test) and the sign from the angle-weighted pseudonormal of the feature it lies on
-(Baerentzen & Aanaes 2005): the face normal inside a face, the normalised sum of the
-adjacent face normals on an edge, the angle-weighted vertex normal at a corner, all
+Below :data:`WHOLE_BATCH_FROM` points (the repeated calls of the solver and the groom
+generator), a BVH built once per :class:`MeshQuery` (lazily, on the first query) only
+answers *which face* holds the closest point; queries of :data:`SORT_QUERIES_FROM` points
+or more are visited in Z-curve order, so that consecutive ones walk the same tree nodes.
+Everything else is float64 numpy over all points at once: the closest point on that face
+(Ericson's region test) and the sign from the angle-weighted pseudonormal of the feature it
+lies on (Baerentzen & Aanaes 2005): the face normal inside a face, the normalised sum of
+the adjacent face normals on an edge, the angle-weighted vertex normal at a corner, all
 precomputed per face. The feature is read off the barycentric coordinates with libigl's
 tolerance, so this is the sign rule of
-``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which rebuilt its tree and
-normals on every call.
+``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which the previous
+implementation called on every query, rebuilding its tree and normals each time.
+
+From :data:`WHOLE_BATCH_FROM` points on, that libigl call *is* the fastest (its query loop is
+multithreaded, the rebuild is then a few percent), once the points are in Z-curve order: it
+is used whole. Both paths agree to rounding (``tests/test_geometry.py``).
 
 The pseudonormal sign is exact for a closed, consistently oriented, manifold mesh (the
 MakeHuman body is one). On an open mesh it is still the side of the nearest feature, which
 is what the collision constraint wants near the surface, but "inside" far from a hole means
 nothing (``igl.fast_winding_number`` would say it, at a higher price).
 
-Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: ``fcpw``
-(float32 wide BVH, the fastest measured, see ``bench/geometry.py``), then libigl's ``AABB``
-(float64, exact). With fcpw, a point whose distance is within ~1e-7 of the mesh size of
-that of another face not holding its closest point (near the medial axis; next to an edge
-inside a slightly bent pair of faces) may get that other face: its float64 distance is then
-too large by at most that much, and its closest point and normal are that face's. Points
-closer to the surface than :data:`EXACT_BAND` of the mesh size are searched again with the
-float64 tree, so near the surface, where a wrong face could flip the sign at a sharp crease,
-the result is exact.
+Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: libigl's
+``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH, not a
+declared dependency; 10-40 % faster end to end below 10^5 points). With fcpw, a point whose
+distance is within ~1e-7 of the mesh size of that of another face not holding its closest
+point (near the medial axis; next to an edge between slightly bent faces) may get that
+other face: its float64 distance is then too large by at most that much, and its closest
+point and normal are that face's. Points closer to the surface than :data:`EXACT_BAND` of
+the mesh size are searched again with the float64 tree, so near the surface, where a wrong
+face could flip the sign at a sharp crease, the result is exact.
 
 Rays
 ----
@@ -58,10 +63,14 @@ SORT_QUERIES_FROM = 2048
 #: of its face (the pseudonormal's feature), libigl's value
 FEATURE_EPSILON = 1e-12
 
-#: face-search backends for :meth:`MeshQuery.signed_distance`, the first importable one is used
-CLOSEST_FACE_BACKENDS = ("fcpw", "igl")
+#: face-search backends for :meth:`MeshQuery.signed_distance` below :data:`WHOLE_BATCH_FROM`
+#: points, the first importable one is used: ``("fcpw", "igl")`` opts in to fcpw (float32)
+CLOSEST_FACE_BACKENDS = ("igl",)
 
-#: with a float32 face search, points closer to the surface than this fraction of the mesh's
+#: from this many points on, a query goes to libigl's multithreaded ``signed_distance`` whole
+WHOLE_BATCH_FROM = 100_000
+
+#: with a float32 face search (fcpw), points closer to the surface than this fraction of the mesh's
 #: bounding-box diagonal are searched again in float64 (exact sign next to sharp creases)
 EXACT_BAND = 1e-4
 
@@ -169,6 +178,8 @@ class MeshQuery:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if len(points) == 0:
             return SignedDistance(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
+        if len(points) >= WHOLE_BATCH_FROM:
+            return self._signed_distance_libigl(points)
         index = self._prepare()
         faces = _search_in_space_order(index, points)
         closest, feature = _closest_on_table(points, self._triangles, faces)
@@ -190,6 +201,33 @@ class MeshQuery:
         normal = offset * (sign / np.where(on_surface, 1.0, length))[:, None]
         if on_surface.any():
             normal[on_surface] = pseudonormal[on_surface]
+        return SignedDistance(distance, closest, normal, faces)
+
+    def _signed_distance_libigl(self, points: np.ndarray) -> SignedDistance:
+        """Large batches: libigl's own multithreaded signed distance, on points in Z-curve order.
+
+        Rebuilding its tree and normals (~40 ms on the body) is then small next to the query,
+        which runs in C++ on every core. Same result as the cached path, to rounding.
+        """
+        order = np.argsort(_morton_keys(points))
+        distance_s, faces_s, closest_s, pseudonormal_s = igl.signed_distance(
+            points[order], self.vertices, self.faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
+        )
+        distance = np.empty(len(points))
+        distance[order] = distance_s
+        faces = np.empty(len(points), dtype=np.int64)
+        faces[order] = faces_s
+        closest = np.empty_like(points)
+        closest[order] = closest_s
+        offset = points - closest
+        length = np.sqrt(np.einsum("ij,ij->i", offset, offset))
+        on_surface = length < ON_SURFACE_DISTANCE
+        normal = offset * (np.where(distance < 0.0, -1.0, 1.0) / np.where(on_surface, 1.0, length))[:, None]
+        if on_surface.any():
+            surface = np.flatnonzero(on_surface)
+            position = np.empty_like(order)
+            position[order] = np.arange(len(order))
+            normal[surface] = _normalized(pseudonormal_s[position[surface]])
         return SignedDistance(distance, closest, normal, faces)
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:

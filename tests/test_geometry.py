@@ -29,7 +29,7 @@ def _available(name):
         return False
 
 
-BACKENDS = [name for name in geometry.CLOSEST_FACE_BACKENDS if _available(name)]
+BACKENDS = [name for name in geometry._FACE_INDEXES if _available(name)]  # the default and the opt-in ones
 
 
 def query_with(vertices, faces, backend):
@@ -317,6 +317,23 @@ def test_z_order_sorting_does_not_change_results(backend, monkeypatch):
         np.testing.assert_array_equal(getattr(sorted_, field), getattr(plain, field))
 
 
+def test_large_batches_through_libigl_agree_with_the_cached_path(monkeypatch):
+    vertices, faces = icosphere()
+    points = sample_near_features(vertices, faces, np.random.default_rng(13), n=3000)
+    points = np.concatenate([points, vertices, vertices[faces].mean(axis=1)])  # some on the surface
+    query = MeshQuery(vertices, faces)
+    cached = query.signed_distance(points)
+    monkeypatch.setattr(geometry, "WHOLE_BATCH_FROM", 1)
+    whole = query.signed_distance(points)
+    np.testing.assert_allclose(whole.distance, cached.distance, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(whole.closest, cached.closest, rtol=0, atol=1e-14)
+    # the normal is (p - closest) / |p - closest|: rounding of the closest point over the distance
+    scale = 1e-15 / np.maximum(np.abs(cached.distance), 1e-15)
+    assert (np.abs(whole.normal - cached.normal).max(axis=1) <= np.maximum(10 * scale, 1e-12)).all()
+    np.testing.assert_array_equal(whole.faces, cached.faces)
+    check_normal_identity(points, whole)
+
+
 def test_default_backend_and_structures_are_built_once():
     vertices, faces = icosphere()
     query = MeshQuery(vertices, faces)
@@ -324,12 +341,21 @@ def test_default_backend_and_structures_are_built_once():
     points = np.random.default_rng(4).normal(size=(50, 3)) * 0.1
     first = query.signed_distance(points)
     index = query._closest
-    assert type(index) is geometry._FACE_INDEXES[BACKENDS[0]]
+    assert type(index) is geometry._FACE_INDEXES[geometry.CLOSEST_FACE_BACKENDS[0]]
     second = query.signed_distance(points)
     assert query._closest is index
     np.testing.assert_array_equal(first.distance, second.distance)
-    # an unavailable backend falls through to the next one
-    assert isinstance(geometry._closest_face_index(vertices, faces, ["igl"]), geometry._IglFaces)
+
+def test_an_unavailable_backend_falls_through(monkeypatch):
+    vertices, faces = icosphere()
+
+    def missing(*_):
+        raise ImportError("not installed")
+
+    monkeypatch.setitem(geometry._FACE_INDEXES, "missing", missing)
+    assert isinstance(geometry._closest_face_index(vertices, faces, ["missing", "igl"]), geometry._IglFaces)
+    with pytest.raises(ImportError):
+        geometry._closest_face_index(vertices, faces, ["missing"])
 
 
 def test_pickle_and_empty_input():
