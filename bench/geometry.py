@@ -1,15 +1,15 @@
 """Benchmark of the geometric queries in solver/geometry.py.
 
 Prints, for random points near a ~27k-face body (the MakeHuman "average-female" preset when
-it can be built, else an icosphere of similar size), the median over runs of:
+it can be built, else a 20k-face icosphere), the median over runs of:
 
 * signed distance (points jittered 1 cm around the surface; and hair-like strands, 100
   particles each, reaching 30 cm out): the previous implementation (``igl.signed_distance``
-  per call, which rebuilds libigl's tree and normals every time); :class:`MeshQuery` as
-  configured; its cached-tree path with each available face-search backend, with and
-  without sorting the queries along a Z-curve first; and its whole-batch path (libigl's
-  multithreaded ``signed_distance`` on Z-sorted points), each forced at every size;
-* first ray hits (Embree through embreex) for random rays from around the body.
+  per call, which rebuilds libigl's tree and normals every time) and :class:`MeshQuery`
+  with each available face-search backend (libigl, the default; fcpw if installed), with
+  and without sorting the queries along a Z-curve first;
+* first ray hits (Embree through embreex) for random rays from around the body: the
+  previous implementation (trimesh's ``intersects_location``) and the current one.
 
 The ratio column is old time / new time in the same run (larger is better). Times are
 wall-clock medians; the CPU column is process time, steadier on a shared machine.
@@ -40,8 +40,7 @@ def load_body():
         import trimesh
 
         print(f"(MakeHuman preset unavailable: {error!r}; using an icosphere)")
-        mesh = trimesh.creation.icosphere(subdivisions=6, radius=0.3)  # 81,920 faces
-        mesh = mesh.simplify_quadric_decimation(face_count=26756) if hasattr(mesh, "simplify_quadric_decimation") else mesh
+        mesh = trimesh.creation.icosphere(subdivisions=5, radius=0.3)  # 20,480 faces
         return "icosphere", np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
 
 
@@ -98,13 +97,11 @@ def main():
         print(f"setup MeshQuery[{backend}] (tree + pseudonormal table): {w * 1e3:.1f} ms")
     print()
 
-    queries = {f"cached[{b}]": forced(vertices, faces, b) for b in available}
+    queries = {f"MeshQuery[{b}]": forced(vertices, faces, b) for b in available}
     methods = {"old igl.signed_distance": lambda p: igl.signed_distance(p, vertices, faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)}
-    methods["MeshQuery (default)"] = MeshQuery(vertices, faces).signed_distance
-    methods.update({label: cached_only(q.signed_distance) for label, q in queries.items()})
+    methods.update({label: q.signed_distance for label, q in queries.items()})
     for label, q in queries.items():
-        methods[f"{label}, no Z-sort"] = cached_only(unsorted(q.signed_distance))
-    methods["whole batch to libigl, Z-sorted"] = whole_batch(MeshQuery(vertices, faces).signed_distance)
+        methods[f"{label}, no Z-sort"] = unsorted(q.signed_distance)
 
     header = f"{'signed distance':<34}{'N':>18}{'wall s':>10}{'cpu s':>10}{'old/new':>10}"
     print(header)
@@ -117,24 +114,50 @@ def main():
             wall, cpu = timed(lambda: fn(points), args.runs)
             base = wall if base is None else base
             print(f"{label:<34}{n:>18}{wall:>10.4f}{cpu:>10.4f}{base / wall:>10.1f}")
-        if "cached[fcpw]" in queries:
-            q = queries["cached[fcpw]"]
+        if "MeshQuery[fcpw]" in queries:
+            q = queries["MeshQuery[fcpw]"]
             share = (np.abs(q.signed_distance(points).distance) < q._exact_band).mean()
             print(f"{'  (fcpw: share re-searched in float64, near surface)':<54}{share:>10.1%}")
         print()
 
-    header = f"{'first_hits (embree)':<34}{'N':>18}{'wall s':>10}{'cpu s':>10}{'hit rate':>10}"
+    header = f"{'first_hits (embree)':<34}{'N':>18}{'wall s':>10}{'cpu s':>10}{'old/new':>10}{'hit rate':>10}"
     print(header)
     print("-" * len(header))
     query = MeshQuery(vertices, faces)
+    old = old_first_hits(vertices, faces)
     center = vertices.mean(axis=0)
     for n in args.rays:
         origins = points_near(vertices, n, rng, spread=0.05)
         directions = center + rng.normal(scale=0.1, size=(n, 3)) - origins
-        query.first_hits(origins[:10], directions[:10])  # builds the embree scene
-        wall, cpu = timed(lambda: query.first_hits(origins, directions), args.runs)
         rate = query.first_hits(origins, directions).hit.mean()
-        print(f"{'MeshQuery.first_hits':<34}{n:>18}{wall:>10.4f}{cpu:>10.4f}{rate:>10.1%}")
+        base = None
+        for label, fn in (("old trimesh intersects_location", old), ("MeshQuery.first_hits", query.first_hits)):
+            wall, cpu = timed(lambda: fn(origins, directions), args.runs)
+            base = wall if base is None else base
+            print(f"{label:<34}{n:>18}{wall:>10.4f}{cpu:>10.4f}{base / wall:>10.1f}{rate:>10.1%}")
+
+
+def old_first_hits(vertices, faces):
+    """The previous first_hits: trimesh's embree intersector, locations, then barycentrics."""
+    import trimesh
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    from hairport.solver.geometry import barycentric_coordinates
+
+    rays = RayMeshIntersector(trimesh.Trimesh(vertices, faces, process=False))
+
+    def call(origins, directions):
+        unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+        n = len(origins)
+        hit, tri, points = np.zeros(n, bool), np.full(n, -1), np.zeros((n, 3))
+        locations, ray_index, tri_index = rays.intersects_location(origins, unit, multiple_hits=False)
+        hit[ray_index], tri[ray_index], points[ray_index] = True, tri_index, locations
+        distance = np.where(hit, np.einsum("ij,ij->i", points - origins, unit), np.inf)
+        barycentric = np.zeros((n, 3))
+        barycentric[hit] = barycentric_coordinates(points[hit], vertices[faces[tri[hit]]])
+        return hit, distance, tri, barycentric, points
+
+    return call
 
 
 def with_setting(name, value, fn):
@@ -149,16 +172,6 @@ def with_setting(name, value, fn):
             setattr(geometry, name, keep)
 
     return call
-
-
-def cached_only(fn):
-    """``fn`` always on the cached-tree path, whatever the batch size."""
-    return with_setting("WHOLE_BATCH_FROM", np.iinfo(np.int64).max, fn)
-
-
-def whole_batch(fn):
-    """``fn`` always handing the batch to libigl's signed_distance."""
-    return with_setting("WHOLE_BATCH_FROM", 0, fn)
 
 
 def unsorted(fn):

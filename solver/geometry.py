@@ -7,22 +7,17 @@ cheap repeated queries.
 
 Signed distance
 ---------------
-Below :data:`WHOLE_BATCH_FROM` points (the repeated calls of the solver and the groom
-generator), a BVH built once per :class:`MeshQuery` (lazily, on the first query) only
-answers *which face* holds the closest point; queries of :data:`SORT_QUERIES_FROM` points
-or more are visited in Z-curve order, so that consecutive ones walk the same tree nodes.
-Everything else is float64 numpy over all points at once: the closest point on that face
-(Ericson's region test) and the sign from the angle-weighted pseudonormal of the feature it
-lies on (Baerentzen & Aanaes 2005): the face normal inside a face, the normalised sum of
-the adjacent face normals on an edge, the angle-weighted vertex normal at a corner, all
-precomputed per face. The feature is read off the barycentric coordinates with libigl's
-tolerance, so this is the sign rule of
+A BVH built once per :class:`MeshQuery` (lazily, on the first query) finds the face holding
+the closest point and, with libigl's float64 ``AABB`` (the default), the closest point
+itself; queries of :data:`SORT_QUERIES_FROM` points or more are visited in Z-curve order,
+so that consecutive ones walk the same tree nodes (2-3x on scattered points). The sign is
+float64 numpy over all points at once, from the angle-weighted pseudonormal of the feature
+the closest point lies on (Baerentzen & Aanaes 2005): the face normal inside a face, the
+normalised sum of the adjacent face normals on an edge, the angle-weighted vertex normal at
+a corner, all precomputed per face. The feature is read off the barycentric coordinates
+with libigl's tolerance, so this is exactly the sign rule of
 ``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which the previous
 implementation called on every query, rebuilding its tree and normals each time.
-
-From :data:`WHOLE_BATCH_FROM` points on, that libigl call *is* the fastest (its query loop is
-multithreaded, the rebuild is then a few percent), once the points are in Z-curve order: it
-is used whole. Both paths agree to rounding (``tests/test_geometry.py``).
 
 The pseudonormal sign is exact for a closed, consistently oriented, manifold mesh (the
 MakeHuman body is one). On an open mesh it is still the side of the nearest feature, which
@@ -30,14 +25,16 @@ is what the collision constraint wants near the surface, but "inside" far from a
 nothing (``igl.fast_winding_number`` would say it, at a higher price).
 
 Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: libigl's
-``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH, not a
-declared dependency; 10-40 % faster end to end below 10^5 points). With fcpw, a point whose
-distance is within ~1e-7 of the mesh size of that of another face not holding its closest
-point (near the medial axis; next to an edge between slightly bent faces) may get that
-other face: its float64 distance is then too large by at most that much, and its closest
-point and normal are that face's. Points closer to the surface than :data:`EXACT_BAND` of
-the mesh size are searched again with the float64 tree, so near the surface, where a wrong
-face could flip the sign at a sharp crease, the result is exact.
+``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH; not a
+declared dependency; in ``bench/geometry.py`` no faster end to end except ~15 % on
+hair-like points far from the body). fcpw gives the face only; the closest point on it is
+then Ericson's region test in float64 numpy. A point whose distance is within ~1e-7 of
+the mesh size of that of another face not holding its closest point (near the medial axis;
+next to an edge between slightly bent faces) may get that other face: its float64
+distance is then too large by at most that much, and its closest point and normal are that
+face's. Points closer to the surface than :data:`EXACT_BAND` of the mesh size are searched
+again with the float64 tree, so near the surface, where a wrong face could flip the sign
+at a sharp crease, the result is exact.
 
 Rays
 ----
@@ -63,12 +60,9 @@ SORT_QUERIES_FROM = 2048
 #: of its face (the pseudonormal's feature), libigl's value
 FEATURE_EPSILON = 1e-12
 
-#: face-search backends for :meth:`MeshQuery.signed_distance` below :data:`WHOLE_BATCH_FROM`
-#: points, the first importable one is used: ``("fcpw", "igl")`` opts in to fcpw (float32)
+#: face-search backends for :meth:`MeshQuery.signed_distance`, the first importable one is
+#: used: ``("fcpw", "igl")`` opts in to fcpw (float32)
 CLOSEST_FACE_BACKENDS = ("igl",)
-
-#: from this many points on, a query goes to libigl's multithreaded ``signed_distance`` whole
-WHOLE_BATCH_FROM = 100_000
 
 #: with a float32 face search (fcpw), points closer to the surface than this fraction of the mesh's
 #: bounding-box diagonal are searched again in float64 (exact sign next to sharp creases)
@@ -178,11 +172,12 @@ class MeshQuery:
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if len(points) == 0:
             return SignedDistance(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
-        if len(points) >= WHOLE_BATCH_FROM:
-            return self._signed_distance_libigl(points)
         index = self._prepare()
-        faces = _search_in_space_order(index, points)
-        closest, feature = _closest_on_table(points, self._triangles, faces)
+        faces, closest = _search_in_space_order(index, points)
+        if closest is None:
+            closest, feature = _closest_on_table(points, self._triangles, faces)
+        else:
+            feature = _feature_of(closest, self._triangles, faces)
         offset = points - closest
         length = np.sqrt(np.einsum("ij,ij->i", offset, offset))
         if not index.exact:
@@ -190,8 +185,8 @@ class MeshQuery:
             # crease: redo those few points with the float64 tree
             near = np.flatnonzero(length < self._exact_band)
             if len(near):
-                faces[near] = _search_in_space_order(self._exact_index(), points[near])
-                closest[near], feature[near] = _closest_on_table(points[near], self._triangles, faces[near])
+                faces[near], closest[near] = _search_in_space_order(self._exact_index(), points[near])
+                feature[near] = _feature_of(closest[near], self._triangles, faces[near])
                 offset[near] = points[near] - closest[near]
                 length[near] = np.sqrt(np.einsum("ij,ij->i", offset[near], offset[near]))
         pseudonormal = self._pseudonormals[faces, feature]
@@ -201,33 +196,6 @@ class MeshQuery:
         normal = offset * (sign / np.where(on_surface, 1.0, length))[:, None]
         if on_surface.any():
             normal[on_surface] = pseudonormal[on_surface]
-        return SignedDistance(distance, closest, normal, faces)
-
-    def _signed_distance_libigl(self, points: np.ndarray) -> SignedDistance:
-        """Large batches: libigl's own multithreaded signed distance, on points in Z-curve order.
-
-        Rebuilding its tree and normals (~40 ms on the body) is then small next to the query,
-        which runs in C++ on every core. Same result as the cached path, to rounding.
-        """
-        order = np.argsort(_morton_keys(points))
-        distance_s, faces_s, closest_s, pseudonormal_s = igl.signed_distance(
-            points[order], self.vertices, self.faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
-        )
-        distance = np.empty(len(points))
-        distance[order] = distance_s
-        faces = np.empty(len(points), dtype=np.int64)
-        faces[order] = faces_s
-        closest = np.empty_like(points)
-        closest[order] = closest_s
-        offset = points - closest
-        length = np.sqrt(np.einsum("ij,ij->i", offset, offset))
-        on_surface = length < ON_SURFACE_DISTANCE
-        normal = offset * (np.where(distance < 0.0, -1.0, 1.0) / np.where(on_surface, 1.0, length))[:, None]
-        if on_surface.any():
-            surface = np.flatnonzero(on_surface)
-            position = np.empty_like(order)
-            position[order] = np.arange(len(order))
-            normal[surface] = _normalized(pseudonormal_s[position[surface]])
         return SignedDistance(distance, closest, normal, faces)
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
@@ -413,14 +381,34 @@ def _closest_on_table(points: np.ndarray, table: np.ndarray, ids: np.ndarray) ->
     closest = np.empty((len(ids), 3))
     for k in range(3):
         closest[:, k] = a[k] + v * ab[k] + w * ac[k]
-    # on an edge or a corner up to rounding counts as on it (its surface normal is that feature's)
+    return closest, _feature_from_coordinates(v, w)
+
+
+def _feature_of(closest: np.ndarray, table: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Feature (as :func:`_closest_on_table`) of points already on triangle ``ids[i]``."""
+    rows = [row[ids] for row in table]
+    a, ab, ac = rows[0:3], rows[3:6], rows[6:9]
+    g00, g01, g11 = rows[9:12]
+    ap = [closest[:, k] - a[k] for k in range(3)]
+    d20 = ab[0] * ap[0] + ab[1] * ap[1] + ab[2] * ap[2]
+    d21 = ac[0] * ap[0] + ac[1] * ap[1] + ac[2] * ap[2]
+    denom = g00 * g11 - g01 * g01
+    denom = np.where(np.abs(denom) > 0, denom, 1.0)
+    v = (g11 * d20 - g01 * d21) / denom
+    w = (g00 * d21 - g01 * d20) / denom
+    return _feature_from_coordinates(v, w)
+
+
+def _feature_from_coordinates(v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Face (0), edge opposite corner k (1 + k) or corner k (4 + k) from the barycentric
+    coordinates ``(1 - v - w, v, w)``: one at or below :data:`FEATURE_EPSILON` puts the point
+    on an edge, two at a corner (libigl's rule for its pseudonormal sign)."""
     u = 1.0 - v - w
     su, sv, sw = u <= FEATURE_EPSILON, v <= FEATURE_EPSILON, w <= FEATURE_EPSILON
     count = su.astype(np.int64) + sv + sw
     edge = np.where(su, 1, np.where(sv, 2, 3))  # the edge opposite the small coordinate
     corner = np.where(~su, 4, np.where(~sv, 5, 6))  # the corner whose coordinate is not small
-    feature = np.where(count == 0, 0, np.where(count == 1, edge, corner))
-    return closest, feature
+    return np.where(count == 0, 0, np.where(count == 1, edge, corner))
 
 
 def _closest_points_on_triangles(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -474,18 +462,23 @@ def _normalized(vectors: np.ndarray) -> np.ndarray:
     return vectors / np.where(length > 0, length, 1.0)
 
 
-def _search_in_space_order(index, points: np.ndarray) -> np.ndarray:
-    """``index.closest_faces(points)``, the points visited in Morton (Z-curve) order.
+def _search_in_space_order(index, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``index.closest(points)``, the points visited in Morton (Z-curve) order.
 
     Consecutive queries then walk the same BVH nodes: 1.5-3x faster for scattered points
     (see ``bench/geometry.py``) for ~0.1 s per 10^6 points of sorting.
     """
     if len(points) < SORT_QUERIES_FROM:
-        return index.closest_faces(points)
+        return index.closest(points)
     order = np.argsort(_morton_keys(points))
+    faces_sorted, closest_sorted = index.closest(points[order])
     faces = np.empty(len(points), dtype=np.int64)
-    faces[order] = index.closest_faces(points[order])
-    return faces
+    faces[order] = faces_sorted
+    if closest_sorted is None:
+        return faces, None
+    closest = np.empty_like(points)
+    closest[order] = closest_sorted
+    return faces, closest
 
 
 def _morton_keys(points: np.ndarray) -> np.ndarray:
@@ -532,7 +525,8 @@ class _FcpwFaces:
         scene.build(fcpw.aggregate_type.bvh_surface_area, True, False, False)
         self._scene = scene
 
-    def closest_faces(self, points: np.ndarray) -> np.ndarray:
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, None]:
+        """Face holding the closest point (no closest point: float32 would not do)."""
         n = len(points)
         interactions = self._fcpw.interaction_3D_list()
         self._scene.find_closest_points(
@@ -542,7 +536,7 @@ class _FcpwFaces:
             False,
         )
         faces = np.fromiter(map(_PRIMITIVE_INDEX, interactions), dtype=np.int64, count=n)
-        return np.maximum(faces, 0)  # -1 only for non-finite points, whose results are NaN anyway
+        return np.maximum(faces, 0), None  # -1 only for non-finite points, whose results are NaN anyway
 
 
 class _EmbreeFaces:
@@ -572,9 +566,10 @@ class _IglFaces:
         self._tree = igl.AABB()
         self._tree.init(vertices, faces)
 
-    def closest_faces(self, points: np.ndarray) -> np.ndarray:
-        _, faces, _ = self._tree.squared_distance(self._vertices, self._faces, points)
-        return np.maximum(faces.astype(np.int64), 0)
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Face holding the closest point, and the closest point."""
+        _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
+        return np.maximum(faces.astype(np.int64), 0), closest
 
 
 _FACE_INDEXES = {"fcpw": _FcpwFaces, "igl": _IglFaces}

@@ -249,8 +249,8 @@ def test_float32_face_search_is_close_everywhere_and_exact_near_the_surface():
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_sign_next_to_a_knife_edge(backend):
-    """A thin wedge (5 degree edge): points within micrometres of the sharp edge, where a face
-    picked with float32 rounding could be on the wrong side."""
+    """A thin wedge (5 degree edge), points from 1e-8 to 1e-3 away from its sharp edge: the
+    sign must follow the edge and vertex pseudonormals there."""
     vertices = np.array([[0, 0, 0], [1, -0.0437, 0], [1, 0.0437, 0], [0, 0, 0.5], [1, -0.0437, 0.5], [1, 0.0437, 0.5]], float)
     faces = np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]])
     mesh = trimesh.Trimesh(vertices, faces, process=False)
@@ -259,7 +259,7 @@ def test_sign_next_to_a_knife_edge(backend):
     assert mesh.is_watertight and mesh.volume > 0
     rng = np.random.default_rng(10)
     n = 4000
-    on_edge = np.stack([np.zeros(n), np.zeros(n), rng.uniform(0.05, 0.45, n)], axis=1) + np.array([1.0, 0, 0]) * rng.uniform(0, 0.02, (n, 1))
+    on_edge = np.stack([rng.uniform(0, 0.02, n), np.zeros(n), rng.uniform(0.05, 0.45, n)], axis=1)  # at the sharp edge x = 0
     points = on_edge + rng.normal(size=(n, 3)) * np.geomspace(1e-8, 1e-3, n)[:, None]
     sd = query_with(vertices, faces, backend).signed_distance(points)
     distance, _, closest, _ = old_signed_distance(points, vertices, faces)
@@ -315,23 +315,6 @@ def test_z_order_sorting_does_not_change_results(backend, monkeypatch):
     plain = query.signed_distance(points)
     for field in ("distance", "closest", "normal", "faces"):
         np.testing.assert_array_equal(getattr(sorted_, field), getattr(plain, field))
-
-
-def test_large_batches_through_libigl_agree_with_the_cached_path(monkeypatch):
-    vertices, faces = icosphere()
-    points = sample_near_features(vertices, faces, np.random.default_rng(13), n=3000)
-    points = np.concatenate([points, vertices, vertices[faces].mean(axis=1)])  # some on the surface
-    query = MeshQuery(vertices, faces)
-    cached = query.signed_distance(points)
-    monkeypatch.setattr(geometry, "WHOLE_BATCH_FROM", 1)
-    whole = query.signed_distance(points)
-    np.testing.assert_allclose(whole.distance, cached.distance, rtol=0, atol=1e-14)
-    np.testing.assert_allclose(whole.closest, cached.closest, rtol=0, atol=1e-14)
-    # the normal is (p - closest) / |p - closest|: rounding of the closest point over the distance
-    scale = 1e-15 / np.maximum(np.abs(cached.distance), 1e-15)
-    assert (np.abs(whole.normal - cached.normal).max(axis=1) <= np.maximum(10 * scale, 1e-12)).all()
-    np.testing.assert_array_equal(whole.faces, cached.faces)
-    check_normal_identity(points, whole)
 
 
 def test_default_backend_and_structures_are_built_once():
