@@ -39,7 +39,7 @@ from scipy.interpolate import RBFInterpolator
 
 from .character import Character, check_same_topology
 from .errors import InputError
-from .geometry import MeshQuery, barycentric_coordinates, interpolate_barycentric
+from .geometry import MeshQuery, barycentric_coordinates, face_frames, interpolate_barycentric
 from .hair import Hair
 
 #: the method names accepted by :func:`retarget_baseline` (each may carry :data:`PUSHOUT_SUFFIX`)
@@ -79,8 +79,6 @@ RBF_KERNEL = "thin_plate_spline"
 RBF_CHUNK_PARTICLES = 4096
 #: particles rotated per chunk in ``root-rigid`` (bounds the (chunk, 3, 3) gathered rotations)
 ROTATION_CHUNK_PARTICLES = 1 << 18
-#: faces whose doubled area (m^2) or first edge length (m) is below this have no frame (R = I)
-DEGENERATE_LENGTH = 1e-15
 
 
 # --------------------------------------------------------------------------------------------
@@ -250,40 +248,6 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return M, dst_mean - src_mean @ M
 
 
-def surface_frames(vertices: np.ndarray, faces: np.ndarray, face_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Orthonormal frames of faces: columns (normal, first edge direction, their cross product).
-
-    Parameters
-    ----------
-    vertices : (V, 3) float64
-    faces : (F, 3) int64
-    face_ids : (K,) int64
-
-    Returns
-    -------
-    frames : (K, 3, 3) float64
-        ``frames[k] = [n | t | n x t]`` as columns; a rotation matrix (det +1).
-    valid : (K,) bool
-        False for degenerate faces (their frame is the identity).
-    """
-    corners = vertices[faces[face_ids]]
-    edge1 = corners[:, 1] - corners[:, 0]
-    edge2 = corners[:, 2] - corners[:, 0]
-    normal = np.cross(edge1, edge2)
-    normal_len = np.linalg.norm(normal, axis=1)
-    valid = normal_len > DEGENERATE_LENGTH
-    normal = normal / np.where(valid, normal_len, 1.0)[:, None]
-    # the first edge lies in the face plane, so it is already orthogonal to the normal;
-    # Gram-Schmidt removes the round-off component
-    tangent = edge1 - np.einsum("ij,ij->i", edge1, normal)[:, None] * normal
-    tangent_len = np.linalg.norm(tangent, axis=1)
-    valid &= tangent_len > DEGENERATE_LENGTH
-    tangent = tangent / np.where(valid, tangent_len, 1.0)[:, None]
-    frames = np.stack([normal, tangent, np.cross(normal, tangent)], axis=2)
-    frames[~valid] = np.eye(3)
-    return frames, valid
-
-
 def farthest_point_sample(points: np.ndarray, count: int) -> np.ndarray:
     """Greedy farthest-point sampling, deterministic (starts at the point nearest the centroid).
 
@@ -369,8 +333,8 @@ def _root_translate(source: Character, target: Character, hair: Hair, faces: np.
 
 def _root_rigid(source: Character, target: Character, hair: Hair, faces: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """Each strand moves with its root and turns with its root face's frame, ``R = F_t F_s^T``."""
-    frames_s, valid_s = surface_frames(source.vertices, source.faces, faces)
-    frames_t, valid_t = surface_frames(target.vertices, target.faces, faces)
+    frames_s, valid_s = face_frames(source.vertices, source.faces, faces)
+    frames_t, valid_t = face_frames(target.vertices, target.faces, faces)
     rotation = frames_t @ frames_s.transpose(0, 2, 1)  # (S, 3, 3)
     rotation[~(valid_s & valid_t)] = np.eye(3)
     strand_of = hair.strand_of

@@ -582,3 +582,41 @@ def _closest_face_index(vertices: np.ndarray, faces: np.ndarray, backends=None):
         except ImportError:
             continue
     raise ImportError(f"no closest-point backend available among {backends or CLOSEST_FACE_BACKENDS}")
+
+
+#: faces whose normal or first edge is shorter than this (m) have no frame (identity)
+DEGENERATE_FACE_LENGTH = 1e-15
+
+
+def face_frames(vertices: np.ndarray, faces: np.ndarray, face_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal frames of faces: columns (normal, first edge direction, their cross product).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+    face_ids : (K,) int64
+
+    Returns
+    -------
+    frames : (K, 3, 3) float64
+        ``frames[k] = [n | t | n x t]`` as columns; a rotation matrix (det +1).
+    valid : (K,) bool
+        False for degenerate faces (their frame is the identity).
+    """
+    corners = vertices[faces[face_ids]]
+    edge1 = corners[:, 1] - corners[:, 0]
+    edge2 = corners[:, 2] - corners[:, 0]
+    normal = np.cross(edge1, edge2)
+    normal_len = np.linalg.norm(normal, axis=1)
+    valid = normal_len > DEGENERATE_FACE_LENGTH
+    normal = normal / np.where(valid, normal_len, 1.0)[:, None]
+    # the first edge lies in the face plane, so it is already orthogonal to the normal;
+    # Gram-Schmidt removes the round-off component
+    tangent = edge1 - np.einsum("ij,ij->i", edge1, normal)[:, None] * normal
+    tangent_len = np.linalg.norm(tangent, axis=1)
+    valid &= tangent_len > DEGENERATE_FACE_LENGTH
+    tangent = tangent / np.where(valid, tangent_len, 1.0)[:, None]
+    frames = np.stack([normal, tangent, np.cross(normal, tangent)], axis=2)
+    frames[~valid] = np.eye(3)
+    return frames, valid

@@ -35,7 +35,13 @@ import scipy.sparse.linalg as spla
 
 from .character import Character
 from .errors import InputError
-from .geometry import MeshQuery, barycentric_coordinates, closest_points_on_segments, interpolate_barycentric
+from .geometry import (
+    MeshQuery,
+    barycentric_coordinates,
+    closest_points_on_segments,
+    face_frames,
+    interpolate_barycentric,
+)
 
 #: bones hair can rest on, in the MakeHuman game-engine rig's names
 HAIR_BONES = ("head", "neck_01", "spine_03", "spine_02", "clavicle_l", "clavicle_r", "upperarm_l", "upperarm_r")
@@ -118,22 +124,6 @@ def valid_face_mask(character: Character, bones: np.ndarray) -> np.ndarray:
     weights = character.weights[:, bones].toarray()
     face_weight = weights[character.faces].mean(axis=1)
     return face_weight > VALID_REGION_WEIGHT
-
-
-def face_frames(vertices: np.ndarray, faces: np.ndarray, face_ids: np.ndarray) -> np.ndarray:
-    """Orthonormal frame (normal, first edge, binormal) of each given face.
-
-    Returns
-    -------
-    frames : (N, 3, 3) float64
-        Rows are the frame axes.
-    """
-    corners = vertices[faces[face_ids]]
-    edge = corners[:, 1] - corners[:, 0]
-    normal = np.cross(edge, corners[:, 2] - corners[:, 0])
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
-    return np.stack([normal, edge, np.cross(normal, edge)], axis=1)
 
 
 def inner_bone_range(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> np.ndarray:
@@ -251,11 +241,11 @@ def compute_anchors(
         corners = source.vertices[source.faces[sd.faces]]
         best["barycentric"][idx] = barycentric_coordinates(sd.closest, corners)
         best["bone"][idx] = -1
-        frames = face_frames(source.vertices, source.faces, sd.faces)
+        frames, _ = face_frames(source.vertices, source.faces, sd.faces)
         offsets = points[idx] - interpolate_barycentric(
             source.vertices, source.faces, sd.faces, best["barycentric"][idx]
         )
-        frame_offset[idx] = np.einsum("nij,nj->ni", frames, offsets)
+        frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
         frame_offset[np.flatnonzero(is_root)] = 0.0
     return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
 
@@ -284,8 +274,8 @@ def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
     direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
     points[ray_based] += anchors.eta[ray_based, None] * direction
     if anchors.fallback.any():
-        frames = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
-        points[anchors.fallback] += np.einsum("nji,nj->ni", frames, anchors.frame_offset[anchors.fallback])
+        frames, _ = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
+        points[anchors.fallback] += np.einsum("nij,nj->ni", frames, anchors.frame_offset[anchors.fallback])
     return points
 
 

@@ -8,6 +8,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from hairport.solver.geometry import face_frames
 from hairport.solver.baselines import (
     BASELINE_METHODS,
     anchor_roots,
@@ -15,7 +16,6 @@ from hairport.solver.baselines import (
     push_out,
     retarget_baseline,
     root_targets,
-    surface_frames,
 )
 from hairport.solver.character import Character, Skeleton
 from hairport.solver.errors import InputError, TopologyMismatch
@@ -158,8 +158,8 @@ def test_rigid_motion(head, hair, method):
     np.testing.assert_allclose(out.points, expected, rtol=0, atol=RIGID_TOLERANCE[method])
 
 
-def test_surface_frames_are_rotations(head):
-    frames, valid = surface_frames(head.vertices, head.faces, np.arange(head.n_faces))
+def test_face_frames_are_rotations(head):
+    frames, valid = face_frames(head.vertices, head.faces, np.arange(head.n_faces))
     assert valid.all()
     np.testing.assert_allclose(frames @ frames.transpose(0, 2, 1), np.broadcast_to(np.eye(3), frames.shape), atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(frames), 1.0, atol=1e-12)
