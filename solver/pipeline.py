@@ -166,7 +166,12 @@ def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Characte
     return target
 
 
-def initial_transfer(adaptable: AdaptableHairstyle, target: Character, eps_s: float = SMOOTHING_EPS) -> tuple[np.ndarray, np.ndarray]:
+def initial_transfer(
+    adaptable: AdaptableHairstyle,
+    target: Character,
+    eps_s: float = SMOOTHING_EPS,
+    query: MeshQuery | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 3 then Eq. 4-6.
 
     Returns
@@ -177,7 +182,7 @@ def initial_transfer(adaptable: AdaptableHairstyle, target: Character, eps_s: fl
         Particles that were smoothed.
     """
     hair = adaptable.hair
-    anchored = place_anchors(adaptable.anchors, target)
+    anchored = place_anchors(adaptable.anchors, target, query)
     laplacian = strand_laplacian(hair.points, hair.offsets)
     return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=laplacian)
 
@@ -223,7 +228,7 @@ def retarget(
 
     began = time.perf_counter()
     progress("initial_transfer", 0.05, "initial transfer")
-    initial, unsmooth = initial_transfer(adaptable, target, options.eps_s)
+    initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
     timings["initial_transfer"] = time.perf_counter() - began
 
     model = adaptable.shape_model()

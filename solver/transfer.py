@@ -20,6 +20,13 @@ Deviations from the paper's text, on purpose:
   the particle (:data:`ANCHOR_REACH_FACTOR`); a particle no bone reaches falls back to its
   closest surface point.
 * Eq. 4 restores the *source* Laplacian on the unsmooth set (DESIGN.md section 3).
+* On the target, the ray origin ``o_b`` is the point of the (inner part of the) bone
+  closest to the mapped hit ``q_b``, not the point at the source's bone parameter: on the
+  source ``p``, ``q_b`` and ``o_b`` are collinear with ``o_b`` the foot of ``p`` (and of
+  ``q_b``) on the bone, so choosing the foot again on the target makes anchoring exactly
+  invertible for a particle that keeps its bone. Measured on an A -> B -> A round trip of
+  anchoring alone (average female and male): 0.12 mm / 0.012 rad instead of 0.96 mm /
+  0.046 rad.
 * A bone's ray must leave the body at its hit (the hit face looks along the ray): a ray
   from a joint lying outside the body (MakeHuman's head tail sits on the scalp) enters
   the body first, which is no anchor.
@@ -75,8 +82,6 @@ class Anchors:
     ----------
     bone : (N,) int64
         Anchor bone (skeleton index); ``-1`` for roots and fallback particles.
-    bone_t : (N,) float64
-        Parameter along the bone of the ray origin ``o_b``.
     face : (N,) int64
         Face hit by the ray (roots and fallbacks: face of the closest point).
     barycentric : (N, 3) float64
@@ -89,7 +94,6 @@ class Anchors:
     """
 
     bone: np.ndarray
-    bone_t: np.ndarray
     face: np.ndarray
     barycentric: np.ndarray
     eta: np.ndarray
@@ -126,7 +130,7 @@ def valid_face_mask(character: Character, bones: np.ndarray) -> np.ndarray:
     return face_weight > VALID_REGION_WEIGHT
 
 
-def inner_bone_range(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> np.ndarray:
+def inner_bone_segments(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
     """Part of each bone lying at least :data:`ANCHOR_BONE_DEPTH` inside the body.
 
     Rays cast from a joint on or outside the skin (MakeHuman's head tail sits on the scalp)
@@ -140,9 +144,8 @@ def inner_bone_range(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> 
 
     Returns
     -------
-    t_range : (B, 2) float64
-        Smallest and largest bone parameter of the inner part; both the deepest sample's
-        parameter where no sample is deep enough.
+    inner_heads, inner_tails : (B, 3) float64
+        Ends of the inner part; both the deepest sample where no sample is deep enough.
     """
     t = np.linspace(0.0, 1.0, BONE_DEPTH_SAMPLES)
     samples = heads[:, None, :] + t[None, :, None] * (tails - heads)[:, None, :]
@@ -151,7 +154,8 @@ def inner_bone_range(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> 
     deepest = t[np.argmax(depth, axis=1)]
     lo = np.where(deep.any(axis=1), t[np.argmax(deep, axis=1)], deepest)
     hi = np.where(deep.any(axis=1), t[len(t) - 1 - np.argmax(deep[:, ::-1], axis=1)], deepest)
-    return np.stack([lo, hi], axis=1)
+    axis = tails - heads
+    return heads + lo[:, None] * axis, heads + hi[:, None] * axis
 
 
 def compute_anchors(
@@ -190,7 +194,6 @@ def compute_anchors(
     best_score = np.full(n, np.inf)
     best = {
         "bone": np.full(n, -1, np.int64),
-        "bone_t": np.zeros(n),
         "face": np.full(n, -1, np.int64),
         "barycentric": np.zeros((n, 3)),
         "eta": np.zeros(n),
@@ -199,13 +202,8 @@ def compute_anchors(
     reach = ANCHOR_REACH_FACTOR * np.abs(query.signed_distance(points[free]).distance) + ANCHOR_REACH_SLACK
     reach_of = np.zeros(n)
     reach_of[free] = reach
-    t_range = inner_bone_range(skeleton.heads[bones], skeleton.tails[bones], query)
-    heads = skeleton.heads[bones]
-    axis_full = skeleton.tails[bones] - heads
-    inner_heads = heads + t_range[:, :1] * axis_full
-    inner_tails = heads + t_range[:, 1:] * axis_full
-    t_inner, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
-    t_all = t_range[None, :, 0] + t_inner * (t_range[None, :, 1] - t_range[None, :, 0])
+    inner_heads, inner_tails = inner_bone_segments(skeleton.heads[bones], skeleton.tails[bones], query)
+    _, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
     axes = skeleton.tails[bones] - skeleton.heads[bones]
     axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), MIN_RAY_LENGTH)
     for j, bone in enumerate(bones):  # a handful of bones; each iteration is vectorised over particles
@@ -226,7 +224,6 @@ def compute_anchors(
         take = index[better]
         best_score[take] = score[better]
         best["bone"][take] = bone
-        best["bone_t"][take] = t_all[usable, j][better]
         best["face"][take] = hits.faces[better]
         best["barycentric"][take] = hits.barycentric[better]
         best["eta"][take] = eta[better]
@@ -250,7 +247,14 @@ def compute_anchors(
     return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
 
 
-def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
+def _closest_on_bones(points: np.ndarray, heads: np.ndarray, tails: np.ndarray) -> np.ndarray:
+    """Closest point on each particle's own bone segment: ``points, heads, tails (K, 3)``."""
+    axis = tails - heads
+    t = np.einsum("ij,ij->i", points - heads, axis) / np.maximum(np.einsum("ij,ij->i", axis, axis), MIN_RAY_LENGTH**2)
+    return heads + np.clip(t, 0.0, 1.0)[:, None] * axis
+
+
+def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None = None) -> np.ndarray:
     """Apply the local coordinates on the target (Eq. 3).
 
     Parameters
@@ -258,6 +262,8 @@ def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
     anchors : Anchors
     target : Character
         Same topology and skeleton layout as the source.
+    query : MeshQuery, optional
+        Prebuilt query structure of the target mesh.
 
     Returns
     -------
@@ -269,7 +275,12 @@ def place_anchors(anchors: Anchors, target: Character) -> np.ndarray:
     points = q.copy()
     ray_based = anchors.bone >= 0
     bone = anchors.bone[ray_based]
-    origin = skeleton.heads[bone] + anchors.bone_t[ray_based, None] * (skeleton.tails[bone] - skeleton.heads[bone])
+    query = query or MeshQuery(target.vertices, target.faces)
+    used = np.unique(bone)
+    inner_heads = np.zeros((skeleton.n_bones, 3))
+    inner_tails = np.zeros((skeleton.n_bones, 3))
+    inner_heads[used], inner_tails[used] = inner_bone_segments(skeleton.heads[used], skeleton.tails[used], query)
+    origin = _closest_on_bones(q[ray_based], inner_heads[bone], inner_tails[bone])
     direction = q[ray_based] - origin
     direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
     points[ray_based] += anchors.eta[ray_based, None] * direction
