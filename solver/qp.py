@@ -30,7 +30,7 @@ import osqp
 import scipy.sparse as sp
 
 from .energies import EnergyWeights, ShapeModel, energy_terms, gradient, hessian
-from .geometry import MeshQuery
+from .geometry import MeshQuery, push_out
 
 
 #: the l1 penalty on constraint violation in the merit function is this times the largest multiplier
@@ -89,6 +89,7 @@ class SolveReport:
     osqp_status: list[str] = field(default_factory=list)
     osqp_iterations: list[int] = field(default_factory=list)
     step_fractions: list[float] = field(default_factory=list)
+    pushed_out: int = 0
     seconds: float = 0.0
 
 
@@ -235,5 +236,12 @@ def solve_shape_adaptation(
         if max_step < options.step_tolerance and clearance >= options.eps_c - options.clearance_tolerance:
             report.converged = True
             break
+    if not report.converged:
+        # stopped by the iteration cap, possibly after a shortened step that left some
+        # particle short of its clearance: the result must never break Eq. 13
+        short = sd.distance < options.eps_c - options.clearance_tolerance
+        report.pushed_out = int(short.sum())
+        if report.pushed_out:
+            points = push_out(points, fixed, target, options.eps_c)
     report.seconds = time.perf_counter() - began
     return points, report

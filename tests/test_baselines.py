@@ -8,12 +8,11 @@ import scipy.sparse as sp
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from hairport.solver.geometry import face_frames
+from hairport.solver.geometry import face_frames, push_out
 from hairport.solver.baselines import (
     BASELINE_METHODS,
     anchor_roots,
     parse_method,
-    push_out,
     retarget_baseline,
     root_targets,
 )
