@@ -39,6 +39,10 @@ MERIT_PENALTY_FACTOR = 2.0
 MAX_BACKTRACKS = 6
 
 
+#: OSQP's tolerance is at most this factor above the floor (options.osqp_eps_*) ...
+QP_LOOSEST_EPS = 1e3
+#: ... and at most this fraction (per meter of tolerance) of the previous step
+QP_ACCURACY_PER_STEP = 1e-3
 #: radial damping of Eq. 7's curvature model (see energies.shape_blocks): start, bounds, factor
 INITIAL_RADIAL_DAMPING = 1.0
 MIN_RADIAL_DAMPING = 1e-4
@@ -180,6 +184,7 @@ def solve_shape_adaptation(
     dual = None
     penalty = 0.0
     radial_damping = INITIAL_RADIAL_DAMPING
+    last_step = np.inf
     f = len(free)
     free3 = (3 * free[:, None] + np.arange(3)).ravel()
     sd = target.signed_distance(points[free])
@@ -201,6 +206,10 @@ def solve_shape_adaptation(
             pattern = (P.indptr.copy(), P.indices.copy())
         else:
             solver.update(q=q, l=lower, u=upper, Px=P.data, Ax=A.data)
+        # the QP need only be as accurate as the step it yields is small: loose while the
+        # hairstyle still moves by millimetres, tight (options.osqp_eps_*) near convergence
+        accuracy = min(QP_LOOSEST_EPS, max(1.0, QP_ACCURACY_PER_STEP * last_step / options.osqp_eps_abs))
+        solver.update_settings(eps_abs=options.osqp_eps_abs * accuracy, eps_rel=options.osqp_eps_rel * accuracy)
         solver.warm_start(x=np.zeros(3 * f), y=dual if dual is not None else np.zeros(f))
         result = solver.solve(raise_error=False)
         status = str(result.info.status)
@@ -225,6 +234,7 @@ def solve_shape_adaptation(
         points, sd = trial, trial_sd
         report.step_fractions.append(fraction)
         max_step = fraction * float(np.max(np.linalg.norm(step, axis=1)))
+        last_step = max_step
         report.iterations = iteration + 1
         report.max_step.append(max_step)
         report.osqp_status.append(status)
