@@ -109,10 +109,11 @@ def hairstyle_metrics(
     n = len(points)
     pen = penetration(points, is_root, query, eps_c)
     terms = energy_terms(model, points, initial)
+    angles = segment_angles(points, source_points, model.segments)
     metrics = {
         "particles": n,
-        "mean_segment_angle_rad": mean_segment_angle(points, source_points, model.segments),
-        "max_segment_angle_rad": float(segment_angles(points, source_points, model.segments).max(initial=0.0)),
+        "mean_segment_angle_rad": float(angles.mean()) if len(angles) else 0.0,
+        "max_segment_angle_rad": float(angles.max(initial=0.0)),
         "mean_distance_to_initial_m": mean_particle_distance(points, initial),
         "interstrand_error_m": interstrand_error(model, points),
         "penetrating_particles": pen["inside"],

@@ -10,11 +10,12 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from .baselines import BASELINE_METHODS, parse_method, retarget_baseline
-from .character import Character, check_same_topology
+from .character import Character, Skeleton, check_same_topology
 from .energies import EnergyWeights, Neighbours, ShapeModel, knn_other_strands, laplacian_operator
 from .errors import InputError
 from .geometry import MeshQuery, interpolate_barycentric
@@ -85,11 +86,19 @@ class AdaptableHairstyle:
     bone_names: tuple[str, ...]
     timings: dict = field(default_factory=dict)
 
+    # derived from the source only: built once, reused by every retarget of this hairstyle
+    # (cached_property writes the instance __dict__ directly, which a frozen dataclass allows)
+    @cached_property
     def shape_model(self) -> ShapeModel:
         """Eq. 7/10 operators of the whole hairstyle."""
         n = self.hair.n_particles
         K = laplacian_operator(self.neighbours, np.arange(n), n)
         return ShapeModel.build(self.hair.points, self.hair.segments, K)
+
+    @cached_property
+    def strand_laplacian(self):
+        """Eq. 5's per-strand Laplacian of the source, ``(N, N)`` csr_matrix."""
+        return strand_laplacian(self.hair.points, self.hair.offsets)
 
 
 @dataclass(eq=False)
@@ -155,8 +164,6 @@ def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Characte
         if missing:
             raise InputError(f"target skeleton lacks bones {missing[:5]}", target.name, "bad_skeleton")
         order = [target.skeleton.names.index(name) for name in adaptable.bone_names]
-        from .character import Skeleton
-
         parents = np.array([
             adaptable.bone_names.index(target.skeleton.names[p]) if p >= 0 else -1 for p in target.skeleton.parents[order]
         ])
@@ -183,8 +190,7 @@ def initial_transfer(
     """
     hair = adaptable.hair
     anchored = place_anchors(adaptable.anchors, target, query)
-    laplacian = strand_laplacian(hair.points, hair.offsets)
-    return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=laplacian)
+    return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=adaptable.strand_laplacian)
 
 
 def root_targets(adaptable: AdaptableHairstyle, target: Character) -> np.ndarray:
@@ -231,7 +237,7 @@ def retarget(
     initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
     timings["initial_transfer"] = time.perf_counter() - began
 
-    model = adaptable.shape_model()
+    model = adaptable.shape_model
     weights = EnergyWeights(options.alpha, options.beta)
     solve_report = None
     began = time.perf_counter()

@@ -199,9 +199,10 @@ def compute_anchors(
         "eta": np.zeros(n),
     }
     free = np.flatnonzero(~is_root)
-    reach = ANCHOR_REACH_FACTOR * np.abs(query.signed_distance(points[free]).distance) + ANCHOR_REACH_SLACK
-    reach_of = np.zeros(n)
-    reach_of[free] = reach
+    # one closest-point query serves the reach test of every particle and the anchors of
+    # roots and fallback particles
+    surface = query.signed_distance(points)
+    reach_of = ANCHOR_REACH_FACTOR * np.abs(surface.distance) + ANCHOR_REACH_SLACK
     inner_heads, inner_tails = inner_bone_segments(skeleton.heads[bones], skeleton.tails[bones], query)
     _, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
     axes = skeleton.tails[bones] - skeleton.heads[bones]
@@ -232,16 +233,13 @@ def compute_anchors(
     closest_needed = is_root | fallback
     frame_offset = np.zeros((n, 3))
     if closest_needed.any():
-        sd = query.signed_distance(points[closest_needed])
         idx = np.flatnonzero(closest_needed)
-        best["face"][idx] = sd.faces
-        corners = source.vertices[source.faces[sd.faces]]
-        best["barycentric"][idx] = barycentric_coordinates(sd.closest, corners)
+        faces = surface.faces[idx]
+        best["face"][idx] = faces
+        best["barycentric"][idx] = barycentric_coordinates(surface.closest[idx], source.vertices[source.faces[faces]])
         best["bone"][idx] = -1
-        frames, _ = face_frames(source.vertices, source.faces, sd.faces)
-        offsets = points[idx] - interpolate_barycentric(
-            source.vertices, source.faces, sd.faces, best["barycentric"][idx]
-        )
+        frames, _ = face_frames(source.vertices, source.faces, faces)
+        offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
         frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
         frame_offset[np.flatnonzero(is_root)] = 0.0
     return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
