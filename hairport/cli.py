@@ -28,66 +28,158 @@ class StageProgress:
         print(f"[{elapsed:7.2f}s] {stage:<17} {100 * fraction:5.1f}%  {message}", file=sys.stderr, flush=True)
 
 
-def _add_retarget(sub) -> None:
-    from .solver.pipeline import METHODS
-
-    p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
-    p.add_argument("--source", required=True, help="source character mesh (OBJ/PLY/GLB)")
-    p.add_argument("--target", required=True, help="target character mesh, same topology")
-    p.add_argument("--hair", required=True, help="hair file of the source (.data/.hair/.ply/.npz/.obj)")
-    p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
+def _add_source_arguments(p, required: bool) -> None:
+    p.add_argument("--source", required=required, help="source character mesh (OBJ/PLY/GLB)")
+    p.add_argument("--hair", required=required, help="hair file of the source (.data/.hair/.ply/.npz/.obj)")
     p.add_argument("--source-skeleton", help="skeleton JSON of the source (default: <mesh>.skeleton.json, else glTF skin)")
-    p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
-    p.add_argument("--method", default="global",
-                   help=f"one of {', '.join(METHODS)}; baselines accept the suffix +pushout (default: global)")
-    p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
-    p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
+    p.add_argument("--guides", type=int, default=None,
+                   help="guide strands of the multi-scale solve (default 300, or every strand if fewer)")
+    p.add_argument("--k", type=int, default=5, help="inter-strand neighbours per particle (Eq. 8)")
+
+
+def _add_units(p) -> None:
     p.add_argument("--units", default=None, choices=["m", "dm", "cm", "mm"],
                    help="units of the hair and of meshes without a skeleton sidecar (default m); output uses them too")
+
+
+def _add_preprocess(sub) -> None:
+    from .solver.artifact import EXTENSION as ARTIFACT_EXTENSION
+
+    p = sub.add_parser("preprocess", help="compute the adaptable hairstyle of a source groom once (.hpa)")
+    _add_source_arguments(p, required=True)
+    p.add_argument("--out", required=True, help=f"artifact file to write (extension {ARTIFACT_EXTENSION})")
+    _add_units(p)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(run=cmd_preprocess)
+
+
+def _add_retarget(sub) -> None:
+    from .solver.pipeline import METHODS
+    from .solver.strand_solver import QP_BACKENDS
+
+    p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
+    p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
+    _add_source_arguments(p, required=False)
+    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
+    p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
+    p.add_argument("--method", default="multiscale",
+                   help=f"one of {', '.join(METHODS)}; baselines accept the suffix +pushout (default: multiscale)")
+    p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
+    p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
+    _add_units(p)
     p.add_argument("--alpha", type=float, default=3e3, help="inter-strand weight (Eq. 1)")
     p.add_argument("--beta", type=float, default=1e3, help="hair-body weight (Eq. 1)")
     p.add_argument("--eps-c", type=float, default=5e-4, help="clearance to the body in meters (Eq. 13)")
     p.add_argument("--max-iterations", type=int, default=30, help="cap on outer solver iterations")
+    p.add_argument("--workers", type=int, default=None, help="processes for the multi-scale fine level (default: CPUs)")
+    p.add_argument("--qp-backend", default="active-set", choices=QP_BACKENDS,
+                   help="solver of the coupled QPs (default active-set)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_retarget)
+
+
+def _preprocess_options(args: argparse.Namespace):
+    from .solver import pipeline
+    from .solver.guides import DEFAULT_GUIDES
+
+    options = pipeline.PreprocessOptions(k=args.k, guides=DEFAULT_GUIDES if args.guides is None else args.guides)
+    options.validate()
+    return options
+
+
+def _load_source(args: argparse.Namespace, settings, progress):
+    """Source character and hair from --source/--hair, with the configured limits."""
+    from .solver.characterio import load_character
+    from .solver.hairio import ReadLimits, read_hair
+
+    limits = ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
+    progress("load", 0.0, "reading the source")
+    source = load_character(args.source, skeleton_path=args.source_skeleton,
+                            units=_mesh_units(args, args.source, args.source_skeleton), **_mesh_limits(settings))
+    hair = read_hair(args.hair, units=args.units or "m", limits=limits)
+    return source, hair
+
+
+def _mesh_limits(settings) -> dict:
+    return dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
+
+
+def _mesh_units(args: argparse.Namespace, mesh: str, skeleton: str | None) -> str | None:
+    from .solver.characterio import resolve_skeleton_path
+
+    # a skeleton sidecar states its own units; --units is for meshes without one
+    return None if (skeleton is not None or resolve_skeleton_path(mesh) is not None) else args.units
+
+
+def cmd_preprocess(args: argparse.Namespace) -> int:
+    from .outputs import OutputSet
+    from .settings import get_settings
+    from .solver import pipeline
+    from .solver.artifact import EXTENSION as ARTIFACT_EXTENSION
+    from .solver.artifact import save_adaptable
+    from .solver.hairio import format_for_path
+
+    settings = get_settings()
+    progress = StageProgress(args.quiet)
+    if not args.out.endswith(ARTIFACT_EXTENSION):
+        raise InputError(f"the artifact file must end in {ARTIFACT_EXTENSION}", args.out, "unknown_format")
+    format_for_path(args.hair)
+    options = _preprocess_options(args)
+    source, hair = _load_source(args, settings, progress)
+    adaptable = pipeline.preprocess(source, hair, options, progress=progress)
+    with OutputSet() as outputs:
+        outputs.add(args.out, lambda path: save_adaptable(adaptable, path))
+        outputs.commit()
+    print(f"{args.out}: {hair.n_strands} strands, {hair.n_particles} particles, "
+          f"{len(adaptable.multiscale.guides)} guides")
+    return 0
 
 
 def cmd_retarget(args: argparse.Namespace) -> int:
     from .outputs import OutputSet
     from .settings import get_settings
     from .solver import pipeline
-    from .solver.characterio import load_character, resolve_skeleton_path
-    from .solver.hairio import ReadLimits, format_for_path, read_hair, write_hair
+    from .solver.artifact import load_adaptable
+    from .solver.characterio import load_character
+    from .solver.hairio import format_for_path, write_hair
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
     units = args.units or "m"
+    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.guides is not None):
+        raise InputError("give either --adaptable or --source with --hair, not both "
+                         "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
+    if not args.adaptable and not (args.source and args.hair):
+        raise InputError("give --adaptable, or --source with --hair", code="bad_option")
     format_for_path(args.out)  # refuse unknown formats and options before any work
-    format_for_path(args.hair)
-    progress("load", 0.0, "reading inputs")
-    limits = ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
+    if args.hair:
+        format_for_path(args.hair)
     options = pipeline.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
-                                       max_iterations=args.max_iterations)
+                                       max_iterations=args.max_iterations, workers=args.workers,
+                                       qp_backend=args.qp_backend)
     options.validate()
-    load = dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
-
-    def mesh_units(mesh: str, skeleton: str | None) -> str | None:
-        # a skeleton sidecar states its own units; --units is for meshes without one
-        return None if (skeleton is not None or resolve_skeleton_path(mesh) is not None) else args.units
-
-    source = load_character(args.source, skeleton_path=args.source_skeleton,
-                            units=mesh_units(args.source, args.source_skeleton), **load)
-    target = load_character(args.target, skeleton_path=args.target_skeleton,
-                            units=mesh_units(args.target, args.target_skeleton), **load)
-    hair = read_hair(args.hair, units=units, limits=limits)
     began = time.perf_counter()
-    adaptable = pipeline.preprocess(source, hair, progress=progress)
-    preprocess_seconds = time.perf_counter() - began
+    if args.adaptable:
+        progress("load", 0.0, "reading the adaptable hairstyle")
+        adaptable = load_adaptable(args.adaptable)
+        preprocess_seconds = 0.0
+        inputs = {"adaptable": args.adaptable}
+    else:
+        preprocess_options = _preprocess_options(args)
+        source, hair = _load_source(args, settings, progress)
+        began = time.perf_counter()
+        adaptable = pipeline.preprocess(source, hair, preprocess_options, progress=progress)
+        preprocess_seconds = time.perf_counter() - began
+        inputs = {"source": args.source, "hair": args.hair}
+    target = load_character(args.target, skeleton_path=args.target_skeleton,
+                            units=_mesh_units(args, args.target, args.target_skeleton), **_mesh_limits(settings))
     result = pipeline.retarget(adaptable, target, options, progress=progress)
+    hair = adaptable.hair
     report = result.report()
     report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
-    report["inputs"] = {"source": args.source, "target": args.target, "hair": args.hair,
-                        "strands": hair.n_strands, "particles": hair.n_particles, "units": units}
+    report["inputs"] = {**inputs, "target": args.target, "strands": hair.n_strands, "particles": hair.n_particles,
+                        "guides": len(adaptable.multiscale.guides), "units": units}
     with OutputSet() as outputs:
         outputs.add(args.out, lambda path: write_hair(path, result.hair, units=units, format=format_for_path(args.out)))
         if args.report:
@@ -151,6 +243,7 @@ def cmd_assets_fetch(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hairport", description="Retarget strand hairstyles between characters.")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_preprocess(sub)
     _add_retarget(sub)
     _add_demo(sub)
     _add_assets(sub)

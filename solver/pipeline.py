@@ -21,15 +21,33 @@ from .errors import InputError
 from .geometry import MeshQuery, interpolate_barycentric
 from .hair import Hair
 from .metrics import hairstyle_metrics
-from .qp import SolveOptions, SolveReport, solve_shape_adaptation
+from .distance_grid import DistanceGrid
+from .guides import DEFAULT_GUIDES
+from .multiscale import (
+    DEFAULT_CHUNK_PARTICLES,
+    FineSource,
+    MultiscaleModel,
+    MultiscaleReport,
+    build_multiscale_model,
+    coarse_shape_model,
+    default_workers,
+    fine_source,
+    solve_multiscale,
+)
+from .qp import SolveOptions, SolveReport
+from .strand_solver import QP_BACKENDS, StrandSolveReport, solve_hairstyle
 from .skeleton_transfer import ensure_skeleton
 from .transfer import ANCHOR_SIGMA, SMOOTHING_EPS, Anchors, compute_anchors, place_anchors, smooth_strands, strand_laplacian
 
-#: the shape-adaptation solvers (multi-scale arrives with its own module)
-SOLVER_METHODS = ("global",)
+#: the shape-adaptation solvers: guides then independent strands (Sec. 5), or all strands coupled
+SOLVER_METHODS = ("multiscale", "global")
 METHODS = SOLVER_METHODS + BASELINE_METHODS
 
 ProgressFn = Callable[[str, float, str], None]
+
+#: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
+#: particles that leave it are still queried exactly, only without the grid's shortcut
+GRID_REGION_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -38,23 +56,39 @@ class PreprocessOptions:
 
     k: int = 5
     sigma: float = ANCHOR_SIGMA
+    guides: int = DEFAULT_GUIDES
+    guide_seed: int = 0
+
+    def validate(self) -> None:
+        if self.k < 1:
+            raise InputError(f"option k must be >= 1, got {self.k}", code="bad_option")
+        if self.guides < 1:
+            raise InputError(f"option guides must be >= 1, got {self.guides}", code="bad_option")
+        if not np.isfinite(self.sigma) or self.sigma < 0:
+            raise InputError(f"option sigma must be a finite non-negative number, got {self.sigma}", code="bad_option")
 
 
 @dataclass(frozen=True)
 class RetargetOptions:
     """Target-side parameters (Table 1, meters) and the method.
 
-    ``method`` is ``global`` (Eq. 1 over all strands) or a baseline name, optionally with the
-    ``+pushout`` suffix.
+    ``method`` is ``multiscale`` (Sec. 5), ``global`` (Eq. 1 over all strands coupled) or a
+    baseline name, optionally with the ``+pushout`` suffix. ``workers`` processes share the
+    multi-scale fine level (``None``: the CPUs available), in chunks of ``chunk_particles``.
+    ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
+    active-set method of :mod:`.strand_solver` or OSQP.
     """
 
-    method: str = "global"
+    method: str = "multiscale"
     alpha: float = 3e3
     beta: float = 1e3
     eps_c: float = 5e-4
     eps_s: float = SMOOTHING_EPS
     max_iterations: int = 30
     step_tolerance: float = 1e-5
+    workers: int | None = None
+    chunk_particles: int = DEFAULT_CHUNK_PARTICLES
+    qp_backend: str = "active-set"
 
     def validate(self) -> None:
         if self.method not in SOLVER_METHODS:
@@ -72,6 +106,14 @@ class RetargetOptions:
                 raise InputError(f"option {name} must be a finite non-negative number, got {value}", code="bad_option")
         if self.max_iterations < 1:
             raise InputError("option max_iterations must be >= 1", code="bad_option")
+        if self.qp_backend not in QP_BACKENDS:
+            raise InputError(
+                f"unknown QP backend {self.qp_backend!r}; expected one of {', '.join(QP_BACKENDS)}", code="bad_option"
+            )
+        if self.workers is not None and self.workers < 1:
+            raise InputError("option workers must be >= 1", code="bad_option")
+        if self.chunk_particles < 1:
+            raise InputError("option chunk_particles must be >= 1", code="bad_option")
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,13 +123,28 @@ class AdaptableHairstyle:
     source: Character
     hair: Hair
     anchors: Anchors
-    neighbours: Neighbours
+    multiscale: MultiscaleModel
     options: PreprocessOptions
     bone_names: tuple[str, ...]
     timings: dict = field(default_factory=dict)
 
     # derived from the source only: built once, reused by every retarget of this hairstyle
     # (cached_property writes the instance __dict__ directly, which a frozen dataclass allows)
+    @cached_property
+    def neighbours(self) -> Neighbours:
+        """Eq. 8-9 over all strands (the coupled ``global`` solve only)."""
+        return knn_other_strands(self.hair.points, self.hair.strand_of, self.options.k)
+
+    @cached_property
+    def coarse_model(self) -> ShapeModel:
+        """Eq. 7/10 operators of the guide hairstyle."""
+        return coarse_shape_model(self.hair, self.multiscale)
+
+    @cached_property
+    def fine_source(self) -> FineSource:
+        """Source-only arrays of the fine level."""
+        return fine_source(self.hair, self.multiscale)
+
     @cached_property
     def shape_model(self) -> ShapeModel:
         """Eq. 7/10 operators of the whole hairstyle."""
@@ -109,7 +166,7 @@ class RetargetResult:
     initial: Hair
     metrics: dict
     timings: dict
-    solve: SolveReport | None = None
+    solve: SolveReport | StrandSolveReport | MultiscaleReport | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -139,6 +196,7 @@ def preprocess(
         The hairstyle made for ``source``.
     """
     progress = progress or _noop
+    options.validate()
     if source.skeleton is None or source.weights is None:
         raise InputError("the source character needs a skeleton with skin weights", source.name, "no_skeleton")
     timings = {}
@@ -148,11 +206,11 @@ def preprocess(
     anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma)
     timings["anchors"] = time.perf_counter() - began
     began = time.perf_counter()
-    progress("neighbours", 0.5, "finding inter-strand neighbours")
-    neighbours = knn_other_strands(hair.points, hair.strand_of, options.k)
-    timings["neighbours"] = time.perf_counter() - began
+    progress("guides", 0.5, "selecting guides and inter-strand neighbours")
+    multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
+    timings["guides"] = time.perf_counter() - began
     progress("preprocess", 1.0, "done")
-    return AdaptableHairstyle(source, hair, anchors, neighbours, options, source.skeleton.names, timings)
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings)
 
 
 def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Character:
@@ -241,19 +299,33 @@ def retarget(
     weights = EnergyWeights(options.alpha, options.beta)
     solve_report = None
     began = time.perf_counter()
+    solve_options = SolveOptions(
+        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance
+    )
+
+    def solver_progress(fraction: float, message: str) -> None:
+        progress("solve", 0.1 + 0.85 * fraction, message)
+
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")
-        solve_options = SolveOptions(
-            eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance
+        points, solve_report = solve_hairstyle(
+            model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options,
+            backend=options.qp_backend, progress=solver_progress, should_stop=should_stop,
         )
-
-        def solver_progress(fraction: float, message: str) -> None:
-            progress("solve", 0.1 + 0.85 * fraction, message)
-
-        points, solve_report = solve_shape_adaptation(
-            model, initial, hair.is_root, target_query, weights, solve_options,
+        timings["solve"] = time.perf_counter() - began
+    elif options.method == "multiscale":
+        progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
+        reach = (initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN)
+        grid = DistanceGrid.build(target_query, region=reach)
+        timings["distance_grid"] = time.perf_counter() - began
+        points, solve_report = solve_multiscale(
+            hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
+            weights, solve_options, workers=options.workers or default_workers(),
+            chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
             progress=solver_progress, should_stop=should_stop,
         )
+        timings["coarse_solve"] = solve_report.coarse_seconds
+        timings["fine_solve"] = solve_report.fine_seconds
         timings["solve"] = time.perf_counter() - began
     else:
         progress("baseline", 0.1, f"baseline {options.method}")

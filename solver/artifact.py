@@ -1,0 +1,188 @@
+"""The adaptable-hairstyle artifact (``.hpa``): everything ``preprocess`` computed, on disk.
+
+One uncompressed ``.npz`` (a zip of ``.npy`` arrays, read without pickle) holding the
+source character (mesh, skeleton, skin weights), the hairstyle, the anchors (Eq. 2-3), the
+guides and both kNN sets (Eq. 8-9, Eq. 14), and a ``meta`` JSON record: the format name
+and version, the hairport version that wrote it, the preprocessing options, and a SHA-256
+digest of every array's dtype, shape and bytes. Loading checks the format, the version
+and the digest before anything is used, so an artifact of another format version, a
+truncated or an altered one is refused with an :class:`.errors.InputError`.
+
+Everything else retargeting needs (Eq. 5/7/10 operators, the fine level's source arrays)
+is rebuilt from these arrays deterministically, so a retarget from a loaded artifact equals
+one from memory bit for bit.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from .character import Character, Skeleton
+from .energies import Neighbours
+from .errors import InputError
+from .hair import Hair
+from .multiscale import MultiscaleModel
+from .transfer import Anchors
+
+FORMAT_NAME = "hairport-adaptable-hairstyle"
+#: bump when the arrays or their meaning change; older artifacts are then refused
+FORMAT_VERSION = 1
+EXTENSION = ".hpa"
+
+
+def _arrays(adaptable) -> dict[str, np.ndarray]:
+    source, hair, anchors, ms = adaptable.source, adaptable.hair, adaptable.anchors, adaptable.multiscale
+    weights = sp.csr_matrix(source.weights)
+    arrays = {
+        "source_vertices": source.vertices,
+        "source_faces": source.faces,
+        "skeleton_parents": source.skeleton.parents,
+        "skeleton_heads": source.skeleton.heads,
+        "skeleton_tails": source.skeleton.tails,
+        "weights_data": weights.data,
+        "weights_indices": weights.indices.astype(np.int64),
+        "weights_indptr": weights.indptr.astype(np.int64),
+        "hair_points": hair.points,
+        "hair_offsets": hair.offsets,
+        "anchor_bone": anchors.bone,
+        "anchor_face": anchors.face,
+        "anchor_barycentric": anchors.barycentric,
+        "anchor_eta": anchors.eta,
+        "anchor_frame_offset": anchors.frame_offset,
+        "anchor_fallback": anchors.fallback,
+        "guides": ms.guides,
+        "guide_neighbour_index": ms.guide_neighbours.index,
+        "guide_neighbour_weight": ms.guide_neighbours.weight,
+        "fine_neighbour_index": ms.fine_neighbours.index,
+        "fine_neighbour_weight": ms.fine_neighbours.weight,
+    }
+    if hair.thickness is not None:
+        arrays["hair_thickness"] = hair.thickness
+    if hair.color is not None:
+        arrays["hair_color"] = hair.color
+    return {name: np.ascontiguousarray(value) for name, value in arrays.items()}
+
+
+def _digest(arrays: dict[str, np.ndarray]) -> str:
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        value = arrays[name]
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
+        digest.update(memoryview(value).cast("B"))
+    return digest.hexdigest()
+
+
+def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
+    """Write ``adaptable`` (a :class:`.pipeline.AdaptableHairstyle`) to ``path`` atomically.
+
+    Returns
+    -------
+    path : Path
+    """
+    from hairport import __version__
+
+    path = Path(path)
+    arrays = _arrays(adaptable)
+    meta = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "hairport_version": __version__,
+        "options": {
+            "k": adaptable.options.k,
+            "sigma": adaptable.options.sigma,
+            "guides": adaptable.options.guides,
+            "guide_seed": adaptable.options.guide_seed,
+        },
+        "bone_names": list(adaptable.source.skeleton.names),
+        "source_name": adaptable.source.name,
+        "timings": adaptable.timings,
+        "digest": _digest(arrays),
+    }
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(handle, "wb") as out:
+            np.savez(out, **arrays)
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load_adaptable(path: str | os.PathLike):
+    """Read an artifact written by :func:`save_adaptable`.
+
+    Raises
+    ------
+    InputError
+        ``code="bad_artifact"`` for a file that is not a readable artifact (truncated,
+        altered, another format), ``code="artifact_version"`` for another format version.
+    FileNotFoundError
+    """
+    from .pipeline import AdaptableHairstyle, PreprocessOptions
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such artifact")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as error:
+        raise InputError(f"not a readable adaptable hairstyle ({error})", str(path), "bad_artifact") from None
+    try:
+        meta = json.loads(arrays.pop("meta").tobytes().decode())
+    except (KeyError, ValueError, UnicodeDecodeError):
+        raise InputError("not an adaptable hairstyle: no readable meta record", str(path), "bad_artifact") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        raise InputError("not an adaptable hairstyle (unknown format)", str(path), "bad_artifact")
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise InputError(
+            f"adaptable hairstyle of format version {meta.get('format_version')}, this hairport reads version "
+            f"{FORMAT_VERSION}; run `hairport preprocess` again",
+            str(path),
+            "artifact_version",
+        )
+    if _digest(arrays) != meta.get("digest"):
+        raise InputError("adaptable hairstyle is corrupted (digest mismatch)", str(path), "bad_artifact")
+    try:
+        skeleton = Skeleton(
+            tuple(meta["bone_names"]), arrays["skeleton_parents"], arrays["skeleton_heads"], arrays["skeleton_tails"]
+        )
+        n_vertices = len(arrays["source_vertices"])
+        weights = sp.csr_matrix(
+            (arrays["weights_data"], arrays["weights_indices"], arrays["weights_indptr"]),
+            shape=(n_vertices, skeleton.n_bones),
+        )
+        source = Character(
+            arrays["source_vertices"], arrays["source_faces"], skeleton, weights, meta.get("source_name", "source")
+        )
+        hair = Hair(
+            arrays["hair_points"], arrays["hair_offsets"], arrays.get("hair_thickness"), arrays.get("hair_color")
+        )
+        anchors = Anchors(
+            arrays["anchor_bone"], arrays["anchor_face"], arrays["anchor_barycentric"], arrays["anchor_eta"],
+            arrays["anchor_frame_offset"], arrays["anchor_fallback"],
+        )
+        multiscale = MultiscaleModel(
+            arrays["guides"],
+            Neighbours(arrays["guide_neighbour_index"], arrays["guide_neighbour_weight"]),
+            Neighbours(arrays["fine_neighbour_index"], arrays["fine_neighbour_weight"]),
+        )
+        options = PreprocessOptions(**meta["options"])
+    except KeyError as error:
+        raise InputError(f"adaptable hairstyle lacks {error}", str(path), "bad_artifact") from None
+    n = hair.n_particles
+    if any(len(a) != n for a in (anchors.bone, anchors.face, anchors.barycentric, anchors.eta, anchors.fallback)):
+        raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, skeleton.names, dict(meta.get("timings", {})))

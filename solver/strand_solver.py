@@ -1,0 +1,605 @@
+"""Eq. 1 under Eq. 12-13 by sequential QPs, solved with strand-banded factorisations.
+
+The Newton Hessian of Eq. 1 is ``S + 2 alpha K^T G K + 2 beta G`` (``G = diag(gamma)``):
+``S``, Eq. 7's per-segment 3x3 blocks (:func:`.energies.shape_blocks`), is block-tridiagonal
+along each strand; ``K`` (Eq. 10) couples a particle with its kNN on other strands. Each
+outer iteration solves the QP
+
+    min  1/2 d^T H d + g^T d   s.t.  <n_i, d_i> >= eps_c - s_i  (particles near the body),  d_i = 0 (roots)
+
+by a primal-dual active-set method (Hintermueller, Ito & Kunisch 2002): after rotating each
+constrained particle into its ``(n, t1, t2)`` frame a constraint bounds one unknown, and
+each active-set round is a linear solve with those unknowns pinned. The linear solve is a
+conjugate-gradient method preconditioned by the strand-banded part of ``H`` (``S``, the
+diagonal terms and the diagonal of ``K^T G K``), factorised by banded Cholesky
+(:mod:`.banded`): exact, in one step, when ``K`` is diagonal (Eq. 14's fine level, whose
+neighbours are fixed guides), a few dozen steps when strands are coupled.
+
+When no entry of ``K`` links two strands every strand is its own problem: each gets its own
+backtracking line search, damping and convergence test, and leaves the loop when done.
+Coupled problems take one step length for all.
+
+Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``),
+vectors particle-major.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+
+from . import banded
+from .energies import NEGATIVE_CURVATURE_SHARE, EnergyWeights, ShapeModel, unit_rows
+from .geometry import MeshQuery, push_out
+from .qp import (
+    DAMPING_FACTOR,
+    INITIAL_RADIAL_DAMPING,
+    MAX_BACKTRACKS,
+    MAX_RADIAL_DAMPING,
+    MERIT_PENALTY_FACTOR,
+    MIN_RADIAL_DAMPING,
+    Cancelled,
+    SolveOptions,
+)
+
+#: active-set rounds per QP before the last iterate is taken (they converge in a few)
+MAX_ACTIVE_SET_ROUNDS = 50
+#: conjugate gradients stop at this residual relative to the right-hand side ...
+CG_RELATIVE_TOLERANCE = 1e-10
+#: ... or after this many steps
+CG_MAX_STEPS = 1000
+
+ProgressFn = Callable[[float, str], None]
+
+
+@dataclass(frozen=True, eq=False)
+class StrandProblem:
+    """Eq. 1 over a set of strands: ``sum_seg ||u - d||^2 + alpha sum_i gamma_i ||(K p)_i - f_i||^2 + beta sum_i gamma_i ||p_i - p-hat_i||^2``.
+
+    Attributes
+    ----------
+    offsets : (S+1,) int64
+        CSR strand layout.
+    source_directions : (N, 3) float64
+        Unit source direction of the segment starting at each particle (tip rows unused).
+    initial : (N, 3) float64
+        ``p-hat`` (Eq. 11).
+    coupling : (N, N) csr_matrix
+        ``K`` of Eq. 10 over these particles; diagonal for Eq. 14's fine level.
+    features : (N, 3) float64
+        ``f``: the source features ``L-bar`` (plus the fixed neighbours' share for Eq. 14).
+    gamma : (N,) float64
+        Eq. 21's weights.
+    fixed : (N,) bool
+        Particles that do not move (roots).
+    """
+
+    offsets: np.ndarray
+    source_directions: np.ndarray
+    initial: np.ndarray
+    coupling: sp.csr_matrix
+    features: np.ndarray
+    gamma: np.ndarray
+    fixed: np.ndarray
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.initial)
+
+    @property
+    def n_strands(self) -> int:
+        return len(self.offsets) - 1
+
+    @cached_property
+    def strand_of(self) -> np.ndarray:
+        """(N,) int64."""
+        return np.repeat(np.arange(self.n_strands), np.diff(self.offsets))
+
+    @cached_property
+    def segment_starts(self) -> np.ndarray:
+        """(M,) int64 particles that start a segment (all but strand tips)."""
+        starts = np.ones(self.n_particles, dtype=bool)
+        starts[self.offsets[1:] - 1] = False
+        return np.flatnonzero(starts)
+
+    @cached_property
+    def coupled(self) -> bool:
+        """Whether ``K`` links particles of different strands."""
+        K = self.coupling.tocoo()
+        return bool(np.any(self.strand_of[K.row] != self.strand_of[K.col]))
+
+    def subset(self, strands: np.ndarray) -> tuple["StrandProblem", np.ndarray]:
+        """The problem over some strands ``(s,) int64`` (ascending) and their particle indices.
+
+        Only meaningful for an uncoupled problem (couplings to other strands are dropped).
+        """
+        counts = np.diff(self.offsets)[strands]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        index = np.repeat(self.offsets[strands] - offsets[:-1], counts) + np.arange(offsets[-1])
+        return (
+            StrandProblem(
+                offsets,
+                self.source_directions[index],
+                self.initial[index],
+                self.coupling[index][:, index].tocsr(),
+                self.features[index],
+                self.gamma[index],
+                self.fixed[index],
+            ),
+            index,
+        )
+
+
+def problem_from_shape_model(
+    model: ShapeModel, offsets: np.ndarray, initial: np.ndarray, fixed: np.ndarray, gamma: np.ndarray | None = None
+) -> StrandProblem:
+    """The :class:`StrandProblem` of a whole hairstyle's :class:`.energies.ShapeModel`."""
+    n = len(initial)
+    directions = np.zeros((n, 3))
+    directions[model.segments[:, 0]] = model.source_directions
+    return StrandProblem(
+        np.asarray(offsets, dtype=np.int64), directions, np.asarray(initial, dtype=np.float64), model.K,
+        model.source_features, np.ones(n) if gamma is None else np.asarray(gamma, dtype=np.float64),
+        np.asarray(fixed, dtype=bool),
+    )
+
+
+@dataclass
+class StrandSolveReport:
+    """What the loop did."""
+
+    iterations: int = 0
+    converged: bool = False
+    groups: int = 0
+    converged_groups: int = 0
+    max_step: list[float] = field(default_factory=list)
+    min_clearance: list[float] = field(default_factory=list)
+    open_groups: list[int] = field(default_factory=list)
+    active_set_rounds: list[int] = field(default_factory=list)
+    cg_steps: list[int] = field(default_factory=list)
+    merit: list[float] = field(default_factory=list)
+    step_fractions: list[float] = field(default_factory=list)
+    pushed_out: int = 0
+    seconds: float = 0.0
+
+
+def group_energies(
+    problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, group: np.ndarray, n_groups: int,
+    penalty: float = 0.0, distance: np.ndarray | None = None, eps_c: float = 0.0,
+) -> np.ndarray:
+    """Eq. 1 summed per group ``(n_groups,)`` of particles (``group (N,)``), plus ``penalty``
+    times the clearance short of ``eps_c`` when ``distance (N,)`` is given."""
+    seg = problem.segment_starts
+    _, unit = unit_rows(points[seg + 1] - points[seg])
+    per_particle = np.zeros(problem.n_particles)
+    per_particle[seg] = np.sum((unit - problem.source_directions[seg]) ** 2, axis=1)
+    residual = problem.coupling @ points - problem.features
+    per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
+    per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
+    if distance is not None and penalty > 0:
+        per_particle += penalty * np.where(problem.fixed, 0.0, np.maximum(eps_c - distance, 0.0))
+    return np.bincount(group, per_particle, minlength=n_groups)
+
+
+@dataclass(frozen=True, eq=False)
+class NewtonSystem:
+    """Gradient and Hessian of Eq. 1 at an iterate.
+
+    Attributes
+    ----------
+    gradient : (N, 3) float64
+    diagonal, upper : (N, 3, 3) float64
+        The strand-banded part (exact Hessian when ``K`` is diagonal), :mod:`.banded` layout.
+    coupling : (N, N) csr_matrix or None
+        ``2 alpha K^T G K`` minus its diagonal, when strands are coupled through it.
+    """
+
+    gradient: np.ndarray
+    diagonal: np.ndarray
+    upper: np.ndarray
+    coupling: sp.csr_matrix | None
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """``H x`` for ``x (N, 3)``."""
+        y = banded.matvec(self.diagonal, self.upper, x)
+        if self.coupling is not None:
+            y += self.coupling @ x
+        return y
+
+
+def newton_system(
+    problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, radial_damping: np.ndarray
+) -> NewtonSystem:
+    """Projected-Newton model of Eq. 1 at ``points`` (see :func:`.energies.shape_blocks`).
+
+    Parameters
+    ----------
+    radial_damping : (N,) float64
+        Levenberg-Marquardt damping along the segment starting at each particle.
+    """
+    n = problem.n_particles
+    seg = problem.segment_starts
+    length, unit = unit_rows(points[seg + 1] - points[seg])
+    d = problem.source_directions[seg]
+    cosine = np.einsum("ij,ij->i", unit, d)
+    outer_ud = unit[:, :, None] * d[:, None, :]
+    exact = outer_ud + np.transpose(outer_ud, (0, 2, 1)) + cosine[:, None, None] * (
+        np.eye(3)[None] - 3.0 * unit[:, :, None] * unit[:, None, :]
+    )
+    values, vectors = np.linalg.eigh(exact)
+    g = problem.gamma
+    floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[seg], g[seg + 1]) * length**2
+    projected = np.einsum("mij,mj,mkj->mik", vectors, np.maximum(values, -floor[:, None]), vectors)
+    mu = radial_damping[seg]
+    blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
+
+    K = problem.coupling
+    KtGK = (K.T @ sp.diags(g) @ K).tocsr()
+    kdiag = KtGK.diagonal()
+    diagonal = np.zeros((n, 3, 3))
+    diagonal[seg] += blocks
+    diagonal[seg + 1] += blocks
+    diagonal += (2.0 * weights.alpha * kdiag + 2.0 * weights.beta * g)[:, None, None] * np.eye(3)[None]
+    upper = np.zeros((n, 3, 3))
+    upper[seg] = -blocks
+    off_diagonal = KtGK - sp.diags(kdiag)
+    off_diagonal.eliminate_zeros()
+    coupling = 2.0 * weights.alpha * off_diagonal.tocsr() if off_diagonal.nnz else None
+
+    shape_residual = (unit * cosine[:, None] - d) / length[:, None]
+    gradient = np.zeros((n, 3))
+    gradient[seg] -= 2.0 * shape_residual
+    gradient[seg + 1] += 2.0 * shape_residual
+    gradient += 2.0 * weights.alpha * (K.T @ (g[:, None] * (K @ points - problem.features)))
+    gradient += 2.0 * weights.beta * g[:, None] * (points - problem.initial)
+    return NewtonSystem(gradient, diagonal, upper, coupling)
+
+
+def normal_frames(normals: np.ndarray) -> np.ndarray:
+    """Orthonormal frames ``(N, 3, 3)`` whose first column is each unit normal ``(N, 3)``."""
+    axis = np.zeros_like(normals)
+    axis[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    return np.stack([normals, t1, t2], axis=2)
+
+
+def _rotate_blocks(frames: np.ndarray, diagonal: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    rotated_diagonal = np.einsum("nji,njk,nkl->nil", frames, diagonal, frames)
+    rotated_upper = np.zeros_like(upper)
+    rotated_upper[:-1] = np.einsum("nji,njk,nkl->nil", frames[:-1], upper[:-1], frames[1:])
+    return rotated_diagonal, rotated_upper
+
+
+def _pinned_solve(system: NewtonSystem, frames, rotated_diagonal, rotated_upper, rhs, pinned, values) -> tuple[np.ndarray, int]:
+    """Solve ``H' y = rhs`` (``H' = R^T H R``) for the free unknowns with ``y[pinned] = values[pinned]``."""
+    start = np.where(pinned, values, 0.0)
+
+    def rotated_matvec(y: np.ndarray) -> np.ndarray:
+        x = np.einsum("nij,nj->ni", frames, y)
+        return np.einsum("nji,nj->ni", frames, system.matvec(x))
+
+    residual = rhs - rotated_matvec(start)
+    residual[pinned] = 0.0
+    ab = banded.with_fixed_unknowns(banded.to_bands(rotated_diagonal, rotated_upper), pinned.ravel())
+    factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+
+    def precondition(r: np.ndarray) -> np.ndarray:
+        z = scipy.linalg.cho_solve_banded((factor, False), r.ravel(), check_finite=False).reshape(-1, 3)
+        z[pinned] = 0.0
+        return z
+
+    if system.coupling is None:
+        return start + precondition(residual), 1
+    # conjugate gradients on the free unknowns
+    x = np.zeros_like(residual)
+    z = precondition(residual)
+    direction = z.copy()
+    rz = float(np.sum(residual * z))
+    target = CG_RELATIVE_TOLERANCE * float(np.linalg.norm(residual))
+    steps = 0
+    for steps in range(1, CG_MAX_STEPS + 1):
+        if float(np.linalg.norm(residual)) <= target or rz <= 0:
+            break
+        q = rotated_matvec(direction)
+        q[pinned] = 0.0
+        step = rz / float(np.sum(direction * q))
+        x += step * direction
+        residual -= step * q
+        z = precondition(residual)
+        rz_next = float(np.sum(residual * z))
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return start + x, steps
+
+
+def solve_qp(
+    system: NewtonSystem,
+    fixed: np.ndarray,
+    constrained: np.ndarray,
+    normals: np.ndarray,
+    lower: np.ndarray,
+    active: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """``min 1/2 d^T H d + g^T d  s.t. <n_i, d_i> >= l_i (i constrained), d_i = 0 (i fixed)``.
+
+    Parameters
+    ----------
+    system : NewtonSystem
+        Positive definite ``H`` and ``g``.
+    fixed, constrained : (N,) bool
+    normals : (N, 3) float64
+        Unit normals (rows of unconstrained particles unused).
+    lower : (N,) float64
+    active : (N,) bool
+        Initial guess of the active constraints (e.g. the previous QP's).
+
+    Returns
+    -------
+    step : (N, 3) float64
+    multipliers : (N,) float64
+        Zero off the active set.
+    active : (N,) bool
+    rounds, cg_steps : int
+    """
+    n = len(system.gradient)
+    frames = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    frames[constrained] = normal_frames(normals[constrained])
+    rotated_diagonal, rotated_upper = _rotate_blocks(frames, system.diagonal, system.upper)
+    rotated_gradient = np.einsum("nji,nj->ni", frames, system.gradient)
+    curvature = rotated_diagonal[:, 0, 0]
+    active = active & constrained & ~fixed
+    pinned = np.zeros((n, 3), dtype=bool)
+    pinned[fixed] = True
+    values = np.zeros((n, 3))
+    values[:, 0] = np.where(constrained, lower, 0.0)
+    rounds = cg_steps = 0
+    y = np.zeros((n, 3))
+    multipliers = np.zeros(n)
+    for rounds in range(1, MAX_ACTIVE_SET_ROUNDS + 1):
+        pinned[:, 0] = fixed | active
+        y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values)
+        cg_steps += steps
+        x = np.einsum("nij,nj->ni", frames, y)
+        residual = np.einsum("nji,nj->ni", frames, system.matvec(x)) + rotated_gradient
+        multipliers = np.where(active, residual[:, 0], 0.0)
+        next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)
+        if np.array_equal(next_active, active):
+            break
+        active = next_active
+    return np.einsum("nij,nj->ni", frames, y), multipliers, active, rounds, cg_steps
+
+
+class BodyDistance:
+    """Signed distance to the target for the particles that can be near it.
+
+    Without a broad phase every particle gets an exact query. With one (a function giving a
+    lower bound of ``|distance|`` per point), particles whose bound exceeds ``band`` get that
+    bound as their distance, a zero normal and no constraint.
+    """
+
+    def __init__(self, query: MeshQuery, band: float = np.inf, broad_phase: Callable[[np.ndarray], np.ndarray] | None = None):
+        self.query = query
+        self.band = band
+        self.broad_phase = broad_phase
+
+    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``points (N, 3)`` -> distance ``(N,)``, normal ``(N, 3)``, near ``(N,) bool``."""
+        n = len(points)
+        if self.broad_phase is None:
+            sd = self.query.signed_distance(points)
+            return sd.distance, sd.normal, np.ones(n, dtype=bool)
+        near = self.broad_phase(points) < self.band
+        distance = np.full(n, np.inf)
+        normal = np.zeros((n, 3))
+        if near.any():
+            sd = self.query.signed_distance(points[near])
+            distance[near] = sd.distance
+            normal[near] = sd.normal
+        return distance, normal, near
+
+
+def _adapt_damping(damping: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """Per-group Levenberg-Marquardt update from actual/predicted decrease (as :func:`.qp._adapt_damping`)."""
+    return np.where(
+        ratio < 0.25,
+        np.minimum(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR),
+        np.where(ratio > 0.75, np.maximum(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR), damping),
+    )
+
+
+def solve_strands(
+    problem: StrandProblem,
+    distance: BodyDistance,
+    weights: EnergyWeights = EnergyWeights(),
+    options: SolveOptions = SolveOptions(),
+    start: np.ndarray | None = None,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray, StrandSolveReport]:
+    """Minimise Eq. 1 under Eq. 12-13 by sequential QPs (Sec. 4.6).
+
+    Each outer iteration: the projected-Newton QP (:func:`solve_qp`), then backtracking on
+    Eq. 1 plus an l1 penalty on clearance short of ``eps_c``, with a second-order correction
+    (particles a step leaves short of ``eps_c`` are projected back out along the normal:
+    the linearised half-spaces ignore the body's curvature, and without it the loop zig-zags
+    along the surface). Uncoupled strands each run this loop on their own.
+
+    Parameters
+    ----------
+    problem : StrandProblem
+    distance : BodyDistance
+        Over the target body.
+    weights : EnergyWeights
+    options : SolveOptions
+        ``eps_c``, ``max_iterations``, ``step_tolerance``, ``clearance_tolerance``.
+    start : (N, 3) float64, optional
+        First iterate (``problem.initial`` by default).
+    progress : callable(fraction, message), optional
+    should_stop : callable() -> bool, optional
+        Polled once per outer iteration; True raises :class:`.qp.Cancelled`.
+
+    Returns
+    -------
+    points : (N, 3) float64
+    report : StrandSolveReport
+    """
+    began = time.perf_counter()
+    points = np.array(problem.initial if start is None else start, dtype=np.float64)
+    coupled = problem.coupled
+    n_groups = 1 if coupled else problem.n_strands
+    report = StrandSolveReport(groups=n_groups)
+    # the damping is per strand even when strands share one step length: one strand that
+    # turns far must not stiffen every other strand's segments
+    damping = np.full(problem.n_strands, INITIAL_RADIAL_DAMPING)
+    active_set = np.zeros(problem.n_particles, dtype=bool)
+    open_groups = np.arange(n_groups)
+    dist_all, normal_all, near_all = distance(points)
+    penalty = 0.0
+    for iteration in range(options.max_iterations):
+        if len(open_groups) == 0:
+            break
+        if should_stop is not None and should_stop():
+            raise Cancelled("solve cancelled")
+        if coupled:
+            sub, index = problem, np.arange(problem.n_particles)
+            group = np.zeros(problem.n_particles, dtype=np.int64)
+        else:
+            sub, index = problem.subset(open_groups)
+            group = sub.strand_of
+        k = len(open_groups)
+        p = points[index]
+        dist, normal, near = dist_all[index], normal_all[index], near_all[index]
+        strands = np.arange(problem.n_strands) if coupled else open_groups
+        system = newton_system(sub, p, weights, damping[strands][sub.strand_of])
+        constrained = near & ~sub.fixed
+        step, multipliers, active, rounds, cg_steps = solve_qp(
+            system, sub.fixed, constrained, normal, options.eps_c - dist, active_set[index]
+        )
+        active_set[index] = active
+        report.active_set_rounds.append(rounds)
+        report.cg_steps.append(cg_steps)
+        report.open_groups.append(k)
+        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(multipliers), initial=0.0)))
+        merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
+        model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
+        predicted = np.bincount(group, model_change, minlength=k)
+        strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
+        strand_merit_now = group_energies(sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
+
+        fraction = np.ones(k)
+        accepted = np.zeros(k, dtype=bool)
+        trial = p.copy()
+        trial_dist, trial_normal, trial_near = dist.copy(), normal.copy(), near.copy()
+        for attempt in range(MAX_BACKTRACKS):
+            todo = ~accepted[group]
+            moved = p[todo] + fraction[group][todo, None] * step[todo]
+            d, nrm, nr = distance(moved)
+            short = nr & (d < options.eps_c) & ~sub.fixed[todo]
+            if short.any():
+                moved[short] += (options.eps_c - d[short])[:, None] * nrm[short]
+                d2, nrm2, nr2 = distance(moved[short])
+                d[short], nrm[short], nr[short] = d2, nrm2, nr2
+            trial[todo] = moved
+            trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
+            merit_trial = group_energies(sub, trial, weights, group, k, penalty, trial_dist, options.eps_c)
+            if attempt == 0:
+                actual = group_energies(
+                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c
+                ) - strand_merit_now
+                safe = np.where(strand_predicted < 0, strand_predicted, -1.0)
+                ratio = np.where(strand_predicted < 0, actual / safe, 0.0)
+                damping[strands] = _adapt_damping(damping[strands], ratio)
+            accepted |= merit_trial <= merit_now
+            if accepted.all() or attempt == MAX_BACKTRACKS - 1:
+                break
+            fraction = np.where(accepted, fraction, 0.5 * fraction)
+        report.merit.append(float(merit_trial.sum()))
+        report.step_fractions.append(float(fraction.min(initial=1.0)))
+        points[index] = trial
+        dist_all[index], normal_all[index], near_all[index] = trial_dist, trial_normal, trial_near
+        moved_by = np.linalg.norm(trial - p, axis=1)
+        max_step = np.zeros(k)
+        np.maximum.at(max_step, group, moved_by)
+        shortfall = np.full(k, -np.inf)
+        np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
+        done = (max_step < options.step_tolerance) & (shortfall <= options.clearance_tolerance)
+        report.converged_groups += int(done.sum())
+        report.max_step.append(float(max_step.max(initial=0.0)))
+        report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))
+        open_groups = open_groups[~done]
+        report.iterations = iteration + 1
+        if progress is not None:
+            progress(
+                (iteration + 1) / options.max_iterations,
+                f"iteration {iteration + 1}: max step {report.max_step[-1]:.2e} m, {len(open_groups)} open",
+            )
+    report.converged = len(open_groups) == 0
+    if not report.converged:
+        # stopped by the iteration cap, possibly with some particle short of its clearance:
+        # the result must never break Eq. 13
+        short = (dist_all < options.eps_c - options.clearance_tolerance) & ~problem.fixed
+        report.pushed_out = int(short.sum())
+        if report.pushed_out:
+            points = push_out(points, problem.fixed, distance.query, options.eps_c)
+    report.seconds = time.perf_counter() - began
+    return points, report
+
+
+#: how the coupled QPs are solved: this module's active-set method, or OSQP (:mod:`.qp`)
+QP_BACKENDS = ("active-set", "osqp")
+
+
+def solve_hairstyle(
+    model: ShapeModel,
+    offsets: np.ndarray,
+    initial: np.ndarray,
+    fixed: np.ndarray,
+    target: MeshQuery,
+    weights: EnergyWeights = EnergyWeights(),
+    options: SolveOptions = SolveOptions(),
+    gamma: np.ndarray | None = None,
+    backend: str = "active-set",
+    broad_phase: Callable[[np.ndarray], np.ndarray] | None = None,
+    band: float = np.inf,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+):
+    """Eq. 1 over a whole (coupled) hairstyle with the chosen QP backend.
+
+    Parameters
+    ----------
+    model : ShapeModel
+    offsets : (S+1,) int64
+    initial : (N, 3) float64
+    fixed : (N,) bool
+    target : MeshQuery
+    backend : str
+        One of :data:`QP_BACKENDS`.
+    broad_phase, band
+        See :class:`BodyDistance` (active-set backend only).
+
+    Returns
+    -------
+    points : (N, 3) float64
+    report : StrandSolveReport or .qp.SolveReport
+    """
+    if backend == "osqp":
+        from .qp import solve_shape_adaptation
+
+        return solve_shape_adaptation(
+            model, initial, fixed, target, weights, options, gamma=gamma, progress=progress, should_stop=should_stop
+        )
+    if backend != "active-set":
+        raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
+    problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
+    return solve_strands(
+        problem, BodyDistance(target, band, broad_phase), weights, options, progress=progress, should_stop=should_stop
+    )

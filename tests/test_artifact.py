@@ -1,0 +1,110 @@
+"""The adaptable-hairstyle artifact (.hpa): bit-for-bit round trip, refusal of foreign or damaged files."""
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from hairport.solver import artifact, pipeline
+from hairport.solver.errors import InputError
+from hairport.solver.groom import generate_groom
+from hairport.solver.makehuman import PRESETS, build_character
+
+
+@pytest.fixture(scope="module")
+def case():
+    source = build_character(PRESETS["average-female"])
+    target = build_character(PRESETS["slim-tall-female"])
+    hair = generate_groom(source, "short", 40, 12, seed=3)
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=12))
+    return source, target, hair, adaptable
+
+
+@pytest.fixture(scope="module")
+def saved(case, tmp_path_factory):
+    path = tmp_path_factory.mktemp("artifact") / "groom.hpa"
+    artifact.save_adaptable(case[3], path)
+    return path
+
+
+def test_retarget_from_saved_artifact_equals_retarget_from_memory_bit_for_bit(case, saved):
+    _, target, hair, adaptable = case
+    options = pipeline.RetargetOptions(max_iterations=8, workers=1)
+    from_memory = pipeline.retarget(adaptable, target, options)
+    loaded = artifact.load_adaptable(saved)
+    from_disk = pipeline.retarget(loaded, target, options)
+    assert np.array_equal(from_memory.hair.points, from_disk.hair.points)
+    assert np.array_equal(loaded.hair.points, hair.points) and np.array_equal(loaded.hair.offsets, hair.offsets)
+    assert np.array_equal(loaded.multiscale.guides, adaptable.multiscale.guides)
+    assert len(loaded.multiscale.guides) == 12
+    assert loaded.options == adaptable.options
+    assert from_memory.metrics == from_disk.metrics
+
+
+def test_saving_leaves_no_temporary_file(saved):
+    assert sorted(p.name for p in saved.parent.iterdir()) == ["groom.hpa"]
+
+
+def rewrite_meta(src, dst, change):
+    with np.load(src) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    meta = json.loads(arrays["meta"].tobytes().decode())
+    change(meta, arrays)
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    with open(dst, "wb") as out:
+        np.savez(out, **arrays)
+
+
+def test_other_format_version_is_refused(saved, tmp_path):
+    other = tmp_path / "old.hpa"
+    rewrite_meta(saved, other, lambda meta, arrays: meta.update(format_version=artifact.FORMAT_VERSION + 1))
+    with pytest.raises(InputError, match="format version 2.*reads version 1") as caught:
+        artifact.load_adaptable(other)
+    assert caught.value.code == "artifact_version"
+
+
+def test_altered_arrays_are_refused(saved, tmp_path):
+    altered = tmp_path / "altered.hpa"
+
+    def nudge(meta, arrays):
+        arrays["hair_points"] = arrays["hair_points"] + 1e-3
+
+    rewrite_meta(saved, altered, nudge)
+    with pytest.raises(InputError, match="corrupted") as caught:
+        artifact.load_adaptable(altered)
+    assert caught.value.code == "bad_artifact"
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip", "empty", "not-a-zip", "foreign-npz"])
+def test_damaged_files_are_refused(saved, tmp_path, damage):
+    data = saved.read_bytes()
+    bad = tmp_path / f"{damage}.hpa"
+    if damage == "truncate":
+        bad.write_bytes(data[: len(data) // 2])
+    elif damage == "flip":
+        middle = bytearray(data)
+        middle[len(data) // 2] ^= 0xFF
+        bad.write_bytes(bytes(middle))
+    elif damage == "empty":
+        bad.write_bytes(b"")
+    elif damage == "not-a-zip":
+        bad.write_text("hello")
+    else:
+        with open(bad, "wb") as out:
+            np.savez(out, points=np.zeros((3, 3)))
+    with pytest.raises(InputError) as caught:
+        artifact.load_adaptable(bad)
+    assert caught.value.code == "bad_artifact"
+    assert str(bad) in str(caught.value)
+
+
+def test_missing_artifact_is_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        artifact.load_adaptable(tmp_path / "nothing.hpa")
+
+
+def test_artifact_is_a_plain_zip_of_arrays(saved):
+    with zipfile.ZipFile(saved) as archive:
+        names = set(archive.namelist())
+    assert {"meta.npy", "hair_points.npy", "guides.npy", "fine_neighbour_index.npy"} <= names

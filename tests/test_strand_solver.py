@@ -1,0 +1,194 @@
+"""The active-set strand solver (solver/strand_solver.py): QPs, derivatives, and agreement with OSQP."""
+
+import numpy as np
+import osqp
+import pytest
+import scipy.sparse as sp
+
+from hairport.solver.energies import EnergyWeights, ShapeModel, segment_operator, unit_rows
+from hairport.solver.geometry import MeshQuery
+from hairport.solver.qp import Cancelled, SolveOptions, solve_shape_adaptation
+from hairport.solver.strand_solver import (
+    BodyDistance,
+    StrandProblem,
+    group_energies,
+    newton_system,
+    problem_from_shape_model,
+    solve_qp,
+    solve_strands,
+)
+from tests.test_qp import model_of, tilt_into_surface
+from tests.test_transfer import outward_strands, sphere_character
+
+#: both loops converge linearly once particles slide along the faceted surface (the half-spaces
+#: carry no curvature); 1e-7 m steps are reached in < 100 iterations by both
+TIGHT = SolveOptions(max_iterations=200, step_tolerance=1e-7, osqp_eps_abs=1e-10, osqp_eps_rel=1e-10)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    source = sphere_character()
+    return source, MeshQuery(source.vertices, source.faces)
+
+
+def fine_problem(hair, start, pull_weight, pull_target, fixed=None):
+    """A decoupled problem (Eq. 14 form: K diagonal) over ``hair``'s strands."""
+    directions = np.zeros_like(hair.points)
+    _, unit = unit_rows(hair.points[1:] - hair.points[:-1])
+    directions[:-1] = unit
+    return StrandProblem(
+        hair.offsets, directions, start, sp.diags(pull_weight, format="csr"), pull_target,
+        np.ones(hair.n_particles), hair.is_root if fixed is None else fixed,
+    )
+
+
+def shape_model_of(problem, source_points):
+    """The same energy as a :class:`ShapeModel` for the OSQP reference."""
+    seg = problem.segment_starts
+    segments = np.stack([seg, seg + 1], axis=1)
+    return ShapeModel(segments, segment_operator(segments, problem.n_particles), problem.source_directions[seg],
+                      problem.coupling, problem.features)
+
+
+def test_qp_solution_satisfies_kkt_and_matches_osqp():
+    rng = np.random.default_rng(0)
+    n = 12
+    offsets = np.array([0, 5, 12])
+    source = np.cumsum(rng.normal(scale=0.004, size=(n, 3)), axis=0)
+    problem = StrandProblem(offsets, np.tile([0.0, 0.0, 1.0], (n, 1)), source + 0.001,
+                            sp.diags(np.ones(n), format="csr"), source, np.ones(n), np.isin(np.arange(n), [0, 5]))
+    system = newton_system(problem, source, EnergyWeights(), np.ones(n))
+    normals = rng.normal(size=(n, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    lower = rng.normal(scale=1e-3, size=n)
+    constrained = ~problem.fixed
+    step, multipliers, active, _, _ = solve_qp(system, problem.fixed, constrained, normals, lower, np.zeros(n, bool))
+    # KKT: H d + g = sum lambda_i n_i e_i, lambda >= 0, complementarity, feasibility
+    residual = system.matvec(step) + system.gradient
+    free = ~problem.fixed
+    np.testing.assert_allclose(residual[free], multipliers[free, None] * normals[free], atol=1e-7)
+    assert multipliers.min() >= -1e-9
+    slack = np.einsum("ij,ij->i", normals, step) - lower
+    assert slack[constrained].min() >= -1e-12
+    assert np.abs(multipliers * slack)[constrained].max() < 1e-9
+    assert np.array_equal(step[problem.fixed], np.zeros((2, 3)))
+    # the same QP through OSQP
+    idx = np.flatnonzero(free)
+    H = np.zeros((3 * n, 3 * n))
+    for j in range(3 * n):
+        e = np.zeros((n, 3))
+        e.ravel()[j] = 1.0
+        H[:, j] = system.matvec(e).ravel()
+    cols = (3 * idx[:, None] + np.arange(3)).ravel()
+    A = sp.lil_matrix((len(idx), len(cols)))
+    for row, i in enumerate(idx):
+        A[row, 3 * row:3 * row + 3] = normals[i]
+    solver = osqp.OSQP()
+    solver.setup(sp.csc_matrix(np.triu(H[np.ix_(cols, cols)])), system.gradient[idx].ravel(), A.tocsc(), lower[idx],
+                 np.full(len(idx), np.inf), verbose=False, eps_abs=1e-12, eps_rel=1e-12, max_iter=200000, polishing=True)
+    reference = solver.solve(raise_error=False).x.reshape(-1, 3)
+    np.testing.assert_allclose(step[idx], reference, atol=1e-9)
+
+
+def test_gradient_matches_finite_differences():
+    rng = np.random.default_rng(1)
+    source_hair = outward_strands(sphere_character(), n_strands=4, n_points=6)
+    points = source_hair.points + rng.normal(scale=1e-3, size=source_hair.points.shape)
+    n = source_hair.n_particles
+    K = sp.random(n, n, density=0.2, random_state=2, format="csr") + sp.identity(n, format="csr")
+    problem = StrandProblem(source_hair.offsets, fine_problem(source_hair, points, np.ones(n), points).source_directions,
+                            source_hair.points, K.tocsr(), rng.normal(scale=1e-3, size=(n, 3)), rng.random(n) + 0.5,
+                            source_hair.is_root)
+    weights = EnergyWeights()
+    gradient = newton_system(problem, points, weights, np.zeros(n)).gradient
+    group = np.zeros(n, dtype=np.int64)
+    h = 1e-7
+    numeric = np.zeros_like(points)
+    for i in range(n):
+        for c in range(3):
+            plus, minus = points.copy(), points.copy()
+            plus[i, c] += h
+            minus[i, c] -= h
+            numeric[i, c] = (group_energies(problem, plus, weights, group, 1)[0]
+                             - group_energies(problem, minus, weights, group, 1)[0]) / (2 * h)
+    np.testing.assert_allclose(gradient, numeric, rtol=1e-5, atol=1e-4)
+
+
+def test_hessian_matches_finite_differences_of_the_gradient_where_convex():
+    """Near the source no negative curvature is clamped: with no damping the model is the exact Hessian."""
+    rng = np.random.default_rng(3)
+    hair = outward_strands(sphere_character(), n_strands=3, n_points=5)
+    points = hair.points + rng.normal(scale=1e-5, size=hair.points.shape)
+    n = hair.n_particles
+    problem = fine_problem(hair, hair.points, np.ones(n), hair.points)
+    weights = EnergyWeights()
+    system = newton_system(problem, points, weights, np.zeros(n))
+    h = 1e-8
+    for j in rng.choice(3 * n, size=10, replace=False):
+        e = np.zeros((n, 3))
+        e.ravel()[j] = 1.0
+        numeric = (newton_system(problem, points + h * e, weights, np.zeros(n)).gradient
+                   - newton_system(problem, points - h * e, weights, np.zeros(n)).gradient) / (2 * h)
+        np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
+
+
+def test_source_is_a_fixed_point(sphere):
+    source, query = sphere
+    hair = outward_strands(source, n_strands=20, n_points=8)
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root)
+    points, report = solve_strands(problem, BodyDistance(query))
+    assert report.converged and report.iterations == 1
+    assert np.abs(points - hair.points).max() < 1e-12
+
+
+def test_penetrating_start_is_pushed_out_with_clearance_and_roots_stay(sphere):
+    source, query = sphere
+    hair = outward_strands(source, n_strands=40, n_points=10)
+    start = tilt_into_surface(hair, query, np.radians(95.0))
+    assert (query.signed_distance(start[~hair.is_root]).distance < 0).sum() > 50
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, start, hair.is_root)
+    points, report = solve_strands(problem, BodyDistance(query), options=SolveOptions(eps_c=5e-4))
+    assert query.signed_distance(points[~hair.is_root]).distance.min() >= 5e-4 - 1e-5
+    np.testing.assert_array_equal(points[hair.is_root], start[hair.is_root])
+
+
+def test_fine_solve_matches_osqp_reference_on_single_strands(sphere):
+    """Issue 3: a few strands with fixed neighbours (Eq. 14), each solved alone by the OSQP loop."""
+    source, query = sphere
+    hair = outward_strands(source, n_strands=4, n_points=12, seed=5)
+    start = tilt_into_surface(hair, query, np.radians(92.0))  # strands dip into the sphere
+    assert (query.signed_distance(start[~hair.is_root]).distance < 5e-4).sum() >= 4
+    rng = np.random.default_rng(0)
+    pull_weight = np.ones(hair.n_particles)
+    pull_target = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)  # guides' pull, elsewhere
+    problem = fine_problem(hair, start, pull_weight, pull_target)
+    together, report = solve_strands(problem, BodyDistance(query), options=TIGHT)
+    assert report.converged
+    for s in range(hair.n_strands):
+        single, index = problem.subset(np.array([s]))
+        reference, ref_report = solve_shape_adaptation(
+            shape_model_of(single, hair.points[index]), single.initial, single.fixed, query, options=TIGHT
+        )
+        assert ref_report.converged
+        assert np.abs(together[index] - reference).max() <= 1e-6, s
+    assert query.signed_distance(together[~hair.is_root]).distance.min() >= 5e-4 - 1e-5
+
+
+def test_decoupled_strands_solve_alone_as_together(sphere):
+    source, query = sphere
+    hair = outward_strands(source, n_strands=6, n_points=10, seed=7)
+    start = tilt_into_surface(hair, query, np.radians(93.0))
+    problem = fine_problem(hair, start, np.full(hair.n_particles, 1.0), hair.points)
+    together, _ = solve_strands(problem, BodyDistance(query))
+    for s in range(hair.n_strands):
+        single, index = problem.subset(np.array([s]))
+        alone, _ = solve_strands(single, BodyDistance(query))
+        np.testing.assert_allclose(together[index], alone, rtol=0, atol=1e-12)
+
+
+def test_cancel_stops_the_loop(sphere):
+    source, query = sphere
+    hair = outward_strands(source, n_strands=5, n_points=6)
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root)
+    with pytest.raises(Cancelled):
+        solve_strands(problem, BodyDistance(query), should_stop=lambda: True)
