@@ -48,6 +48,9 @@ ProgressFn = Callable[[str, float, str], None]
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
 GRID_REGION_MARGIN = 0.05
+#: the solvers stop a strand (or the coupled guides) once an iteration lowers Eq. 1 by less
+#: than this fraction (see SolveOptions.energy_tolerance)
+ENERGY_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -86,6 +89,7 @@ class RetargetOptions:
     eps_s: float = SMOOTHING_EPS
     max_iterations: int = 30
     step_tolerance: float = 1e-5
+    energy_tolerance: float = ENERGY_TOLERANCE
     workers: int | None = None
     chunk_particles: int = DEFAULT_CHUNK_PARTICLES
     qp_backend: str = "active-set"
@@ -100,7 +104,7 @@ class RetargetOptions:
                     "(a baseline may carry the suffix +pushout)",
                     code="unknown_method",
                 ) from None
-        for name in ("alpha", "beta", "eps_c", "eps_s", "step_tolerance"):
+        for name in ("alpha", "beta", "eps_c", "eps_s", "step_tolerance", "energy_tolerance"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"option {name} must be a finite non-negative number, got {value}", code="bad_option")
@@ -300,7 +304,8 @@ def retarget(
     solve_report = None
     began = time.perf_counter()
     solve_options = SolveOptions(
-        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance
+        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance,
+        energy_tolerance=options.energy_tolerance,
     )
 
     def solver_progress(fraction: float, message: str) -> None:

@@ -68,6 +68,11 @@ class SolveOptions:
         Converged when no particle moves more than this (m) in an iteration ...
     clearance_tolerance : float
         ... and no free particle is closer than ``eps_c - clearance_tolerance`` (m).
+    energy_tolerance : float
+        The active-set solver (:mod:`.strand_solver`) also stops a strand (or the coupled
+        hairstyle) whose Eq. 1 merit fell by less than this fraction in an iteration, with
+        the clearance kept: the tail of the nonconvex loop creeps by micrometres per
+        iteration without visible change. 0 disables the test.
     osqp_eps_abs, osqp_eps_rel : float
         OSQP's stopping tolerances (meters for the constraints).
     osqp_max_iter : int
@@ -77,6 +82,7 @@ class SolveOptions:
     max_iterations: int = 30
     step_tolerance: float = 1e-5
     clearance_tolerance: float = 1e-5
+    energy_tolerance: float = 0.0
     osqp_eps_abs: float = 1e-7
     osqp_eps_rel: float = 1e-7
     osqp_max_iter: int = 50_000

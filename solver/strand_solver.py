@@ -35,7 +35,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from . import banded
-from .energies import NEGATIVE_CURVATURE_SHARE, EnergyWeights, ShapeModel, unit_rows
+from .energies import NEGATIVE_CURVATURE_SHARE, EnergyWeights, ShapeModel, clamped_direction_hessians, unit_rows
 from .geometry import MeshQuery, push_out
 from .qp import (
     DAMPING_FACTOR,
@@ -51,7 +51,7 @@ from .qp import (
 #: active-set rounds per QP before the last iterate is taken (they converge in a few)
 MAX_ACTIVE_SET_ROUNDS = 50
 #: conjugate gradients stop at this residual relative to the right-hand side ...
-CG_RELATIVE_TOLERANCE = 1e-10
+CG_RELATIVE_TOLERANCE = 1e-6
 #: ... or after this many steps
 CG_MAX_STEPS = 1000
 
@@ -107,6 +107,12 @@ class StrandProblem:
         starts = np.ones(self.n_particles, dtype=bool)
         starts[self.offsets[1:] - 1] = False
         return np.flatnonzero(starts)
+
+    @cached_property
+    def gram(self) -> sp.csr_matrix:
+        """``K^T diag(gamma) K`` (constant over a solve)."""
+        K = self.coupling
+        return (K.T @ sp.diags(self.gamma) @ K).tocsr()
 
     @cached_property
     def coupled(self) -> bool:
@@ -228,19 +234,14 @@ def newton_system(
     length, unit = unit_rows(points[seg + 1] - points[seg])
     d = problem.source_directions[seg]
     cosine = np.einsum("ij,ij->i", unit, d)
-    outer_ud = unit[:, :, None] * d[:, None, :]
-    exact = outer_ud + np.transpose(outer_ud, (0, 2, 1)) + cosine[:, None, None] * (
-        np.eye(3)[None] - 3.0 * unit[:, :, None] * unit[:, None, :]
-    )
-    values, vectors = np.linalg.eigh(exact)
     g = problem.gamma
     floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[seg], g[seg + 1]) * length**2
-    projected = np.einsum("mij,mj,mkj->mik", vectors, np.maximum(values, -floor[:, None]), vectors)
+    projected = clamped_direction_hessians(unit, d, floor)
     mu = radial_damping[seg]
     blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
 
     K = problem.coupling
-    KtGK = (K.T @ sp.diags(g) @ K).tocsr()
+    KtGK = problem.gram
     kdiag = KtGK.diagonal()
     diagonal = np.zeros((n, 3, 3))
     diagonal[seg] += blocks
@@ -271,20 +272,66 @@ def normal_frames(normals: np.ndarray) -> np.ndarray:
     return np.stack([normals, t1, t2], axis=2)
 
 
-def _rotate_blocks(frames: np.ndarray, diagonal: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rotated_diagonal = np.einsum("nji,njk,nkl->nil", frames, diagonal, frames)
-    rotated_upper = np.zeros_like(upper)
-    rotated_upper[:-1] = np.einsum("nji,njk,nkl->nil", frames[:-1], upper[:-1], frames[1:])
-    return rotated_diagonal, rotated_upper
+class Frames:
+    """Per-particle rotations ``R_i`` (identity except at ``rows``), applied to ``(N, 3)`` arrays."""
+
+    def __init__(self, n: int, rows: np.ndarray, normals: np.ndarray):
+        self.n = n
+        # near the body most particles are constrained: rotate all rows then (identity
+        # elsewhere), which is cheaper than gathering and scattering a large subset
+        self.dense = len(rows) > n // 2
+        if self.dense:
+            all_normals = np.zeros((n, 3))
+            all_normals[rows] = normals
+            R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+            R[rows] = normal_frames(normals)
+            self.rows = np.arange(n)
+        else:
+            R = normal_frames(normals)
+            self.rows = rows
+        self.R = R
+        self.RT = np.ascontiguousarray(np.transpose(R, (0, 2, 1)))
+
+    def to_local(self, x: np.ndarray) -> np.ndarray:
+        """``R_i^T x_i``."""
+        if self.dense:
+            return np.einsum("nij,nj->ni", self.RT, x)
+        y = x.copy()
+        y[self.rows] = np.einsum("nij,nj->ni", self.RT, x[self.rows])
+        return y
+
+    def to_world(self, y: np.ndarray) -> np.ndarray:
+        """``R_i y_i``."""
+        if self.dense:
+            return np.einsum("nij,nj->ni", self.R, y)
+        x = y.copy()
+        x[self.rows] = np.einsum("nij,nj->ni", self.R, y[self.rows])
+        return x
+
+    def rotate_blocks(self, diagonal: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Blocks of ``R^T H R``."""
+        if self.dense:
+            rotated_upper = np.zeros_like(upper)
+            rotated_upper[:-1] = np.matmul(np.matmul(self.RT[:-1], upper[:-1]), self.R[1:])
+            return np.matmul(np.matmul(self.RT, diagonal), self.R), rotated_upper
+        rotated_diagonal = diagonal.copy()
+        rotated_diagonal[self.rows] = np.matmul(np.matmul(self.RT, diagonal[self.rows]), self.R)
+        rotated_upper = upper.copy()
+        rotated = np.zeros(self.n, dtype=np.int64) - 1
+        rotated[self.rows] = np.arange(len(self.rows))
+        left = self.rows[self.rows < self.n - 1]  # block (i, i+1) gets R_i^T on the left
+        rotated_upper[left] = np.matmul(self.RT[rotated[left]], rotated_upper[left])
+        right = self.rows[self.rows > 0] - 1  # ... and R_{i+1} on the right
+        rotated_upper[right] = np.matmul(rotated_upper[right], self.R[rotated[right + 1]])
+        return rotated_diagonal, rotated_upper
 
 
-def _pinned_solve(system: NewtonSystem, frames, rotated_diagonal, rotated_upper, rhs, pinned, values) -> tuple[np.ndarray, int]:
+def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values) -> tuple[np.ndarray, int]:
     """Solve ``H' y = rhs`` (``H' = R^T H R``) for the free unknowns with ``y[pinned] = values[pinned]``."""
     start = np.where(pinned, values, 0.0)
 
     def rotated_matvec(y: np.ndarray) -> np.ndarray:
-        x = np.einsum("nij,nj->ni", frames, y)
-        return np.einsum("nji,nj->ni", frames, system.matvec(x))
+        return frames.to_local(system.matvec(frames.to_world(y)))
 
     residual = rhs - rotated_matvec(start)
     residual[pinned] = 0.0
@@ -350,10 +397,9 @@ def solve_qp(
     rounds, cg_steps : int
     """
     n = len(system.gradient)
-    frames = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-    frames[constrained] = normal_frames(normals[constrained])
-    rotated_diagonal, rotated_upper = _rotate_blocks(frames, system.diagonal, system.upper)
-    rotated_gradient = np.einsum("nji,nj->ni", frames, system.gradient)
+    frames = Frames(n, np.flatnonzero(constrained), normals[constrained])
+    rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
+    rotated_gradient = frames.to_local(system.gradient)
     curvature = rotated_diagonal[:, 0, 0]
     active = active & constrained & ~fixed
     pinned = np.zeros((n, 3), dtype=bool)
@@ -367,14 +413,13 @@ def solve_qp(
         pinned[:, 0] = fixed | active
         y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values)
         cg_steps += steps
-        x = np.einsum("nij,nj->ni", frames, y)
-        residual = np.einsum("nji,nj->ni", frames, system.matvec(x)) + rotated_gradient
+        residual = frames.to_local(system.matvec(frames.to_world(y))) + rotated_gradient
         multipliers = np.where(active, residual[:, 0], 0.0)
         next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)
         if np.array_equal(next_active, active):
             break
         active = next_active
-    return np.einsum("nij,nj->ni", frames, y), multipliers, active, rounds, cg_steps
+    return frames.to_world(y), multipliers, active, rounds, cg_steps
 
 
 class BodyDistance:
@@ -530,7 +575,9 @@ def solve_strands(
         np.maximum.at(max_step, group, moved_by)
         shortfall = np.full(k, -np.inf)
         np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
-        done = (max_step < options.step_tolerance) & (shortfall <= options.clearance_tolerance)
+        decrease = merit_now - merit_trial
+        stalled = (decrease >= 0) & (decrease < options.energy_tolerance * np.abs(merit_now))
+        done = ((max_step < options.step_tolerance) | stalled) & (shortfall <= options.clearance_tolerance)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))

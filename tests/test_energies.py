@@ -137,3 +137,22 @@ def test_hessian_is_exact_where_directions_match_the_source():
     dense = H.toarray()
     np.testing.assert_allclose(dense, dense.T, atol=1e-9)
     assert np.linalg.eigvalsh(dense).min() > 0
+
+
+def test_closed_form_clamped_hessians_match_an_eigensolver():
+    from hairport.solver.energies import clamped_direction_hessians
+
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(500, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    d = rng.normal(size=(500, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[:5], d[5:10] = u[:5], -u[5:10]  # parallel and opposite: the degenerate cases
+    floor = rng.random(500) * 0.5
+    c = np.sum(u * d, axis=1)
+    outer = u[:, :, None] * d[:, None, :]
+    exact = outer + outer.transpose(0, 2, 1) + c[:, None, None] * (np.eye(3) - 3 * u[:, :, None] * u[:, None, :])
+    values, vectors = np.linalg.eigh(exact)
+    reference = np.einsum("mij,mj,mkj->mik", vectors, np.maximum(values, -floor[:, None]), vectors)
+    np.testing.assert_allclose(clamped_direction_hessians(u, d, floor), reference, rtol=0, atol=1e-13)
+    assert np.linalg.eigvalsh(clamped_direction_hessians(u, d, floor)).min() >= -floor.max() - 1e-13

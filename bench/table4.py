@@ -1,0 +1,243 @@
+"""The paper's Table 4 on this machine: multi-scale vs full solve on large grooms.
+
+For each groom size, a fresh process (so peak memory is that size's alone) builds the
+MakeHuman pair (average female -> heavy male) and a "long" groom, then measures:
+
+* preprocess (anchors, guides, kNN sets) once;
+* initial transfer and the multi-scale solve, median of ``--runs`` retargets;
+* every baseline of ``solver.baselines`` once, in the same process (their time);
+* peak memory of the retarget: the process's resident high-water mark during it (reset
+  before it through ``/proc/self/clear_refs``) plus the largest fine-level worker process.
+
+The full (coupled, ``global``) solve runs in its own process with a wall-clock limit
+(``--full-limit``, default 20 minutes); beyond it the table prints n/a. Where it finishes,
+the mean distance between its result and the multi-scale one is printed, and both
+results' penetration counts.
+
+    python bench/table4.py [--sizes 1e5 1e6 3e6] [--runs 3] [--full-limit 1200] [--guides 300]
+
+Prints a table; not a test. Times are wall-clock seconds on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: particles per strand of the benchmark grooms (the paper's grooms have ~100)
+PARTICLES_PER_STRAND = 100
+#: below this size, strands get fewer particles so that there are still >= 1000 strands
+SMALL_GROOM = 200_000
+STYLE = "long"
+SOURCE, TARGET = "average-female", "heavy-male"
+
+
+def groom_shape(particles: int) -> tuple[int, int]:
+    per_strand = 50 if particles < SMALL_GROOM else PARTICLES_PER_STRAND
+    return max(1, round(particles / per_strand)), per_strand
+
+
+def _peak_rss_bytes() -> int:
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _current_rss_bytes() -> int:
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _reset_peak() -> bool:
+    try:
+        with open("/proc/self/clear_refs", "w") as handle:
+            handle.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def measure_size(args) -> dict:
+    """One size, in this process: preprocess, multi-scale retargets, baselines."""
+    from hairport.solver import pipeline
+    from hairport.solver.baselines import BASELINE_METHODS
+    from hairport.solver.groom import generate_groom
+    from hairport.solver.makehuman import PRESETS, build_character
+
+    strands, per_strand = groom_shape(int(float(args.one)))
+    source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
+    hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
+    began = time.perf_counter()
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=args.guides))
+    adaptable.coarse_model, adaptable.fine_source  # noqa: B018 - source-only, part of preprocessing
+    preprocess = time.perf_counter() - began
+
+    options = pipeline.RetargetOptions(method="multiscale", workers=args.workers)
+    runs, result = [], None
+    base_rss = _current_rss_bytes()
+    can_reset = _reset_peak()
+    for _ in range(args.runs):
+        began = time.perf_counter()
+        result = pipeline.retarget(adaptable, target, options)
+        runs.append({"total": time.perf_counter() - began, **result.timings})
+    peak = _peak_rss_bytes()
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    np.save(args.save, result.hair.points)
+
+    baselines = {}
+    for method in BASELINE_METHODS:
+        began = time.perf_counter()
+        pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=f"{method}+pushout"))
+        baselines[method] = time.perf_counter() - began
+
+    def median(key: str) -> float:
+        return statistics.median(run.get(key, 0.0) for run in runs)
+
+    return {
+        "strands": hair.n_strands,
+        "particles": hair.n_particles,
+        "guides": len(adaptable.multiscale.guides),
+        "preprocess": preprocess,
+        "initial_transfer": median("initial_transfer"),
+        "solve": median("solve"),
+        "coarse": median("coarse_solve"),
+        "fine": median("fine_solve"),
+        "metrics": median("metrics"),
+        "total": median("initial_transfer") + median("solve"),
+        "runs": len(runs),
+        "peak_rss": peak if can_reset else None,
+        "base_rss": base_rss,
+        "worker_peak_rss": children if result.solve.workers > 1 else 0,
+        "workers": result.solve.workers,
+        "penetrating": result.metrics["penetrating_particles"],
+        "iterations": result.solve.iterations,
+        "baselines": baselines,
+    }
+
+
+def measure_full(args) -> dict:
+    """The coupled solve of one size, in this process."""
+    from hairport.solver import pipeline
+    from hairport.solver.groom import generate_groom
+    from hairport.solver.makehuman import PRESETS, build_character
+
+    strands, per_strand = groom_shape(int(float(args.full)))
+    source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
+    hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=args.guides))
+    began = time.perf_counter()
+    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method="global"))
+    seconds = time.perf_counter() - began - result.timings.get("metrics", 0.0)
+    multiscale = np.load(args.compare)
+    return {
+        "full": seconds,
+        "distance": float(np.linalg.norm(result.hair.points - multiscale, axis=1).mean()),
+        "penetrating": result.metrics["penetrating_particles"],
+    }
+
+
+def _child(argv: list[str], timeout: float | None) -> dict | None:
+    try:
+        done = subprocess.run([sys.executable, __file__, *argv], capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None
+    if done.returncode != 0:
+        print(done.stderr[-3000:], file=sys.stderr)
+        return None
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _fmt(value, digits=1) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", nargs="+", default=["1e5", "1e6", "3e6"], help="particles per groom")
+    parser.add_argument("--runs", type=int, default=3, help="multi-scale retargets per size (median)")
+    parser.add_argument("--full-limit", type=float, default=1200.0, help="seconds allowed to the full solve")
+    parser.add_argument("--full-up-to", type=float, default=1e6,
+                        help="skip the full solve above this many particles (printed n/a)")
+    parser.add_argument("--guides", type=int, default=300)
+    parser.add_argument("--workers", type=int, default=None, help="fine-level processes (default: CPUs)")
+    parser.add_argument("--one", help=argparse.SUPPRESS)
+    parser.add_argument("--full", help=argparse.SUPPRESS)
+    parser.add_argument("--save", help=argparse.SUPPRESS)
+    parser.add_argument("--compare", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print(json.dumps(measure_size(args)))
+        return
+    if args.full:
+        print(json.dumps(measure_full(args)))
+        return
+
+    rows = []
+    with tempfile.TemporaryDirectory() as scratch:
+        for size in args.sizes:
+            saved = str(Path(scratch) / f"multiscale-{size}.npy")
+            common = ["--guides", str(args.guides)] + (["--workers", str(args.workers)] if args.workers else [])
+            row = _child(["--one", size, "--runs", str(args.runs), "--save", saved] + common, None)
+            if row is None:
+                print(f"size {size}: failed", file=sys.stderr)
+                continue
+            full = None
+            if float(size) <= args.full_up_to:
+                full = _child(["--full", size, "--compare", saved, "--guides", str(args.guides)], args.full_limit)
+            row["full_solve"] = full
+            rows.append(row)
+            print(f"measured {size}: {json.dumps(row)}", file=sys.stderr, flush=True)
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    print(f"MakeHuman {SOURCE} -> {TARGET}, '{STYLE}' grooms, {cpus} CPUs, median of {args.runs} retargets;"
+          " times in seconds, us/p = microseconds per particle")
+    header = (f"{'strands':>8} {'particles':>10} {'guides':>6} {'preproc':>8} {'(us/p)':>7} {'transfer':>8} "
+              f"{'(us/p)':>7} {'ms solve':>8} {'(us/p)':>7} {'total':>7} {'(us/p)':>7} {'full':>7} {'speedup':>7} "
+              f"{'peak MB':>8} {'B/p':>6}")
+    print(header)
+    print("-" * len(header))
+    for r in rows:
+        n = r["particles"]
+        full = r["full_solve"]
+        # the retarget's process plus each fine-level worker at the largest one's peak
+        peak = None if r["peak_rss"] is None else r["peak_rss"] + r["worker_peak_rss"] * r["workers"]
+        full_time = full["full"] if full else None
+        speedup = full_time / r["total"] if full_time else None
+        print(f"{r['strands']:>8} {n:>10} {r['guides']:>6} {r['preprocess']:>8.1f} {1e6 * r['preprocess'] / n:>7.1f} "
+              f"{r['initial_transfer']:>8.2f} {1e6 * r['initial_transfer'] / n:>7.1f} {r['solve']:>8.1f} "
+              f"{1e6 * r['solve'] / n:>7.1f} {r['total']:>7.1f} {1e6 * r['total'] / n:>7.1f} {_fmt(full_time):>7} "
+              f"{_fmt(speedup):>7} {_fmt(peak / 1e6 if peak else None, 0):>8} {_fmt(peak / n if peak else None, 0):>6}")
+    print()
+    print("multi-scale solve split (s): coarse (guides) / fine (all other strands); outer iterations; penetrations")
+    for r in rows:
+        full = r["full_solve"]
+        extra = ""
+        if full:
+            extra = (f"; full solve: {full['penetrating']} penetrating, mean distance to multi-scale "
+                     f"{1e3 * full['distance']:.2f} mm")
+        print(f"  {r['particles']:>10}: {r['coarse']:.1f} / {r['fine']:.1f}; {r['iterations']} iterations; "
+              f"{r['penetrating']} penetrating{extra}")
+    print()
+    names = sorted(rows[0]["baselines"]) if rows else []
+    print("baselines (+pushout), seconds in the same process: " + ", ".join(names))
+    for r in rows:
+        print(f"  {r['particles']:>10}: " + "  ".join(f"{r['baselines'][m]:.1f}" for m in names))
+
+
+if __name__ == "__main__":
+    main()
