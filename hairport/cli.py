@@ -240,6 +240,78 @@ def cmd_assets_fetch(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_serve(sub) -> None:
+    p = sub.add_parser("serve", help="run the HTTP API (uvicorn)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--embedded", action="store_true",
+                   help="run a worker inside the server on an in-memory queue (no Redis; for a laptop)")
+    p.set_defaults(run=cmd_serve)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from .service.app import create_app
+
+    if args.embedded:
+        from .worker.embedded import start_embedded_worker
+
+        thread = start_embedded_worker()
+        app = create_app(readiness=lambda: {"redis": True, "worker": thread.is_alive()}, queue_depths=lambda: {})
+    else:
+        app = create_app()
+    uvicorn.run(app, host=args.host, port=args.port)
+    return 0
+
+
+def _add_worker(sub) -> None:
+    p = sub.add_parser("worker", help="run a Celery worker against HAIRPORT_REDIS_URL")
+    p.add_argument("--queues", default="preprocess,retarget", help="comma-separated queues to consume")
+    p.add_argument("--concurrency", type=int, default=1, help="jobs run at once (processes)")
+    p.add_argument("--loglevel", default="INFO")
+    p.add_argument("--hostname", default="hairport@%h", help="worker name (%%h: host name)")
+    p.set_defaults(run=cmd_worker)
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    from .worker.app import celery_app
+
+    celery_app.worker_main(["worker", "-Q", args.queues, "-c", str(args.concurrency), "--loglevel", args.loglevel,
+                            "-n", args.hostname])
+    return 0
+
+
+def _add_openapi(sub) -> None:
+    p = sub.add_parser("openapi", help="print or write the OpenAPI contract of the HTTP API (YAML)")
+    p.add_argument("--out", help="write here instead of standard output")
+    p.set_defaults(run=cmd_openapi)
+
+
+def openapi_yaml() -> str:
+    """The API's OpenAPI document as YAML (what openapi.yaml holds)."""
+    import yaml
+
+    from .service.app import create_app
+    from .settings import Settings
+
+    app = create_app(Settings(insecure_dev=True), readiness=lambda: {}, queue_depths=lambda: {})
+    return yaml.safe_dump(app.openapi(), sort_keys=False, allow_unicode=True)
+
+
+def cmd_openapi(args: argparse.Namespace) -> int:
+    text = openapi_yaml()
+    if args.out:
+        from .outputs import OutputSet
+
+        with OutputSet() as outputs:
+            outputs.add(args.out, lambda path: path.write_text(text))
+            outputs.commit()
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hairport", description="Retarget strand hairstyles between characters.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -247,6 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_retarget(sub)
     _add_demo(sub)
     _add_assets(sub)
+    _add_serve(sub)
+    _add_worker(sub)
+    _add_openapi(sub)
     return parser
 
 

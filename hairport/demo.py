@@ -51,7 +51,7 @@ def run_demo(args: argparse.Namespace) -> int:
     hair = generate_groom(source, args.style, args.strands, args.particles, seed=args.seed)
 
     adaptable = pipeline.preprocess(source, hair, progress=progress)
-    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method="global"), progress=progress)
+    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(), progress=progress)
 
     progress("baselines", 0.0, "running the baselines for comparison")
     baselines = {}
@@ -81,7 +81,7 @@ def run_demo(args: argparse.Namespace) -> int:
         outputs.add_json(out / "report.json", report)
         outputs.add(out / "preview.png", lambda p: render_preview(p, [
             (hair, source, None, f"source ({args.source_preset})"),
-            (result.hair, target, pipeline.penetrating_mask(result.hair, target), "hairport (global)"),
+            (result.hair, target, pipeline.penetrating_mask(result.hair, target), f"hairport ({result.metrics['method']})"),
             (best.hair, target, pipeline.penetrating_mask(best.hair, target), f"best baseline: {best_name}"),
         ]))
         outputs.commit()

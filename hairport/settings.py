@@ -22,6 +22,29 @@ class Settings(BaseSettings):
     max_faces: int = Field(10_000_000, description="Largest face count a character mesh may have.")
     max_file_bytes: int = Field(4 * 1024**3, description="Largest input file read from disk (bytes).")
 
+    # service and worker
+    redis_url: str = Field("redis://127.0.0.1:6379/0", description="Redis: Celery broker and readiness check.")
+    storage_dir: Path = Field(Path("hairport-data"),
+                              description="Uploads, artifacts, results and records (a volume shared by API and workers).")
+    api_keys: str = Field("", description="Comma-separated API keys; each key owns what it creates.")
+    insecure_dev: bool = Field(False, description="Accept requests without a key (owner 'dev'); never in production.")
+    max_upload_bytes: int = Field(512 * 1024**2, description="Largest accepted upload (bytes); larger gets 413.")
+    retention_days: float = Field(30.0, description="Results, uploads and records older than this are purged.")
+    cors_origins: str = Field("", description="Comma-separated origins allowed by CORS ('*' for any).")
+    task_time_limit: int = Field(3600, description="Hard time limit of one job (s); the worker child is killed.")
+    task_soft_time_limit: int = Field(3300, description="Soft time limit of one job (s): the job fails cleanly.")
+    visibility_timeout: int = Field(3900, description="Seconds before a job whose worker died is delivered again.")
+    solver_workers: int = Field(1, description="Processes a worker job uses for the multi-scale fine level.")
+    max_targets_per_request: int = Field(64, description="Largest target_character_ids list of one retarget request.")
+
+    @property
+    def api_key_list(self) -> list[str]:
+        return [key.strip() for key in self.api_keys.split(",") if key.strip()]
+
+    @property
+    def cors_origin_list(self) -> list[str]:
+        return [origin.strip() for origin in self.cors_origins.split(",") if origin.strip()]
+
 
 @lru_cache(maxsize=1)
 def get_settings() -> Settings:

@@ -17,7 +17,11 @@ import numpy as np
 from .baselines import BASELINE_METHODS, parse_method, retarget_baseline
 from .character import Character, Skeleton, check_same_topology
 from .energies import EnergyWeights, Neighbours, ShapeModel, knn_other_strands, laplacian_operator
+from .artifact import FORMAT_VERSION, load_adaptable, save_adaptable
+from .characterio import MESH_EXTENSIONS as CHARACTER_MESH_EXTENSIONS
+from .characterio import load_character
 from .errors import InputError
+from .hairio import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
 from .geometry import MeshQuery, interpolate_barycentric
 from .hair import Hair
 from .metrics import hairstyle_metrics
@@ -34,7 +38,7 @@ from .multiscale import (
     fine_source,
     solve_multiscale,
 )
-from .qp import SolveOptions, SolveReport
+from .qp import Cancelled, SolveOptions, SolveReport
 from .strand_solver import QP_BACKENDS, StrandSolveReport, solve_hairstyle
 from .skeleton_transfer import ensure_skeleton
 from .transfer import ANCHOR_SIGMA, SMOOTHING_EPS, Anchors, compute_anchors, place_anchors, smooth_strands, strand_laplacian
@@ -361,3 +365,54 @@ def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = No
     free = ~hair.is_root
     mask[free] = query.signed_distance(hair.points[free]).distance < 0.0
     return mask
+
+
+# --------------------------------------------------------------------------------------
+# files: the entry points the service and the worker use (they import nothing else)
+# --------------------------------------------------------------------------------------
+
+#: hair file formats read and written (file extensions without the dot)
+HAIR_FORMATS = SUPPORTED_FORMATS
+#: character mesh extensions read
+MESH_EXTENSIONS = CHARACTER_MESH_EXTENSIONS
+ARTIFACT_FORMAT_VERSION = FORMAT_VERSION
+
+
+def load_character_file(
+    mesh_path, skeleton_path=None, units: str | None = None, *, max_vertices: int, max_faces: int, max_bytes: int
+) -> Character:
+    """A character from a mesh file and an optional skeleton JSON (see :mod:`.characterio`)."""
+    return load_character(
+        mesh_path, skeleton_path=skeleton_path, units=units, max_vertices=max_vertices, max_faces=max_faces,
+        max_bytes=max_bytes,
+    )
+
+
+def read_hair_file(path, units: str = "m", *, max_strands: int, max_particles: int, max_bytes: int) -> Hair:
+    """A hairstyle from a file, validated against the limits (see :mod:`.hairio`)."""
+    return read_hair(path, units=units, limits=ReadLimits(max_strands, max_particles, max_bytes))
+
+
+def write_hair_file(path, hair: Hair, format: str, units: str = "m") -> None:
+    """Write ``hair`` in ``format`` (one of :data:`HAIR_FORMATS`)."""
+    write_hair(path, hair, units=units, format=format)
+
+
+def save_adaptable_file(adaptable: AdaptableHairstyle, path) -> None:
+    """Write the adaptable hairstyle artifact (see :mod:`.artifact`)."""
+    save_adaptable(adaptable, path)
+
+
+def load_adaptable_file(path) -> AdaptableHairstyle:
+    """Read an adaptable hairstyle artifact; refuses other versions and damaged files."""
+    return load_adaptable(path)
+
+
+def write_preview(path, adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> None:
+    """PNG: the source hairstyle next to the result, penetrating particles highlighted."""
+    from .preview import render_preview
+
+    render_preview(path, [
+        (adaptable.hair, adaptable.source, None, "source"),
+        (result.hair, target, penetrating_mask(result.hair, target), f"result ({result.metrics['method']})"),
+    ])

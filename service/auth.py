@@ -1,0 +1,55 @@
+"""API keys: ``Authorization: Bearer <key>`` or ``X-API-Key: <key>``.
+
+Keys come from ``HAIRPORT_API_KEYS`` (comma-separated). Each key owns what it creates; the
+owner recorded is a hash of the key, never the key. ``HAIRPORT_INSECURE_DEV=true`` accepts
+requests without a key as owner ``dev`` (for a laptop only).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from typing import Annotated
+
+from fastapi import Depends, Header
+
+from hairport.settings import Settings
+
+from .deps import SettingsDep
+from .errors import Problem
+
+DEV_OWNER = "dev"
+
+
+def owner_of(key: str) -> str:
+    return "k" + hashlib.sha256(key.encode()).hexdigest()[:24]
+
+
+def current_owner(
+    settings: SettingsDep,
+    authorization: Annotated[str | None, Header()] = None,
+    x_api_key: Annotated[str | None, Header()] = None,
+) -> str:
+    """The owner of the request's key; 401 without a valid one."""
+    key = x_api_key
+    if authorization:
+        scheme, _, token = authorization.partition(" ")
+        if scheme.lower() == "bearer" and token.strip():
+            key = token.strip()
+    if not key:
+        if settings.insecure_dev:
+            return DEV_OWNER
+        raise Problem(401, "unauthorized", "an API key is required (Authorization: Bearer <key> or X-API-Key)",
+                      headers={"WWW-Authenticate": "Bearer"})
+    if not any(hmac.compare_digest(key.encode(), known.encode()) for known in settings.api_key_list):
+        raise Problem(401, "unauthorized", "unknown API key", headers={"WWW-Authenticate": "Bearer"})
+    return owner_of(key)
+
+
+Owner = Annotated[str, Depends(current_owner)]
+
+
+def check_configuration(settings: Settings) -> None:
+    """Refuse to start without keys unless the insecure dev mode is explicit."""
+    if not settings.api_key_list and not settings.insecure_dev:
+        raise RuntimeError("no API keys configured: set HAIRPORT_API_KEYS, or HAIRPORT_INSECURE_DEV=true for a laptop")

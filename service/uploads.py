@@ -1,0 +1,48 @@
+"""Streaming uploads into the storage, and validation through ``solver.pipeline``."""
+
+from __future__ import annotations
+
+from pathlib import PurePosixPath
+
+from fastapi import UploadFile
+from starlette.concurrency import run_in_threadpool
+
+from hairport.settings import Settings
+from hairport.solver import pipeline
+from hairport.worker.storage import LocalStorage, UploadTooLarge, iter_upload
+
+from .errors import Problem
+
+
+def extension_of(upload: UploadFile, allowed: tuple[str, ...], field: str) -> str:
+    """The lower-case extension of the upload's file name, if allowed (the name is used for nothing else)."""
+    suffix = PurePosixPath(upload.filename or "").suffix.lower()
+    if suffix not in allowed:
+        raise Problem(415, "unknown_format",
+                      f"{field}: file name must end in one of {', '.join(allowed)} (got {suffix or 'no extension'!r})")
+    return suffix
+
+
+async def store_upload(storage: LocalStorage, upload: UploadFile, settings: Settings, suffix: str, field: str):
+    """Stream an upload into the blob store; 413 above ``max_upload_bytes``."""
+    try:
+        return await storage.save_stream(iter_upload(upload), settings.max_upload_bytes, suffix)
+    except UploadTooLarge as error:
+        raise Problem(413, "upload_too_large",
+                      f"{field}: upload larger than the limit of {error.limit:,} bytes") from None
+
+
+def input_problem(error: pipeline.InputError, field: str) -> Problem:
+    """413 for inputs above the configured limits, 422 for every other bad input.
+
+    The detail names the request field, never a storage path."""
+    status = 413 if error.code == "too_large" else 422
+    return Problem(status, error.code or "bad_input", f"{field}: {error.problem}")
+
+
+async def validated(call, field: str, *args, **kwargs):
+    """Run a loader in a thread; bad input becomes a problem response."""
+    try:
+        return await run_in_threadpool(call, *args, **kwargs)
+    except pipeline.InputError as error:
+        raise input_problem(error, field) from None

@@ -1,0 +1,1 @@
+"""The job queue (Celery over Redis): tasks that orchestrate solver.pipeline, and the shared storage."""
