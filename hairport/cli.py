@@ -185,7 +185,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
         if args.report:
             outputs.add_json(args.report, report)
         if args.preview:
-            outputs.add(args.preview, lambda path: _preview(path, adaptable, result, target))
+            outputs.add(args.preview, lambda path: pipeline.write_preview(path, adaptable, result, target))
         written = outputs.commit()
     m = result.metrics
     progress("done", 1.0, f"wrote {', '.join(str(p) for p in written)}")
@@ -193,16 +193,6 @@ def cmd_retarget(args: argparse.Namespace) -> int:
           f"{m['mean_segment_angle_rad']:.4f} rad, inter-strand error {m['interstrand_error_m']:.2e} m, "
           f"max root error {m['root_to_target_max']:.1e} m")
     return 0
-
-
-def _preview(path: Path, adaptable, result, target) -> None:
-    from .solver.pipeline import penetrating_mask
-    from .solver.preview import render_preview
-
-    render_preview(path, [
-        (adaptable.hair, adaptable.source, None, "source"),
-        (result.hair, target, penetrating_mask(result.hair, target), f"result ({result.metrics['method']})"),
-    ])
 
 
 def _add_demo(sub) -> None:
@@ -282,6 +272,21 @@ def cmd_worker(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_purge(sub) -> None:
+    p = sub.add_parser("purge", help="delete stored files and records older than HAIRPORT_RETENTION_DAYS")
+    p.set_defaults(run=cmd_purge)
+
+
+def cmd_purge(args: argparse.Namespace) -> int:
+    from .settings import get_settings
+    from .worker.jobs import get_storage
+
+    settings = get_settings()
+    removed = get_storage(settings).purge(settings.retention_days * 86400.0)
+    print(f"removed {removed} files older than {settings.retention_days:g} days from {settings.storage_dir}")
+    return 0
+
+
 def _add_openapi(sub) -> None:
     p = sub.add_parser("openapi", help="print or write the OpenAPI contract of the HTTP API (YAML)")
     p.add_argument("--out", help="write here instead of standard output")
@@ -321,6 +326,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_assets(sub)
     _add_serve(sub)
     _add_worker(sub)
+    _add_purge(sub)
     _add_openapi(sub)
     return parser
 

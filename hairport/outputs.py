@@ -28,7 +28,7 @@ class OutputSet:
         write(temporary)
 
     def add_json(self, final: str | os.PathLike, document: dict) -> None:
-        self.add(final, lambda path: path.write_text(json.dumps(document, indent=2, default=_json_default) + "\n"))
+        self.add(final, lambda path: path.write_text(json.dumps(document, indent=2, default=json_default) + "\n"))
 
     def commit(self) -> list[Path]:
         for temporary, final in self._pending:
@@ -50,7 +50,8 @@ class OutputSet:
             self.abort()
 
 
-def _json_default(value):
+def json_default(value):
+    """``json.dumps`` fallback for numpy scalars and arrays."""
     import numpy as np
 
     if isinstance(value, np.generic):

@@ -76,7 +76,8 @@ def _digest(arrays: dict[str, np.ndarray]) -> str:
     for name in sorted(arrays):
         value = arrays[name]
         digest.update(f"{name}|{value.dtype.str}|{value.shape}|".encode())
-        digest.update(memoryview(value).cast("B"))
+        if value.size:  # memoryview cannot cast an empty array (e.g. no fine level: every strand a guide)
+            digest.update(memoryview(value).cast("B"))
     return digest.hexdigest()
 
 

@@ -38,7 +38,7 @@ from .multiscale import (
     fine_source,
     solve_multiscale,
 )
-from .qp import Cancelled, SolveOptions, SolveReport
+from .qp import Cancelled, SolveOptions, SolveReport  # noqa: F401 - Cancelled is part of this module's interface
 from .strand_solver import QP_BACKENDS, StrandSolveReport, solve_hairstyle
 from .skeleton_transfer import ensure_skeleton
 from .transfer import ANCHOR_SIGMA, SMOOTHING_EPS, Anchors, compute_anchors, place_anchors, smooth_strands, strand_laplacian

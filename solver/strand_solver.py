@@ -535,7 +535,6 @@ def solve_strands(
         penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(multipliers), initial=0.0)))
         merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
         model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
-        predicted = np.bincount(group, model_change, minlength=k)
         strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
         strand_merit_now = group_energies(sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
 

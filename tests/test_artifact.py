@@ -108,3 +108,13 @@ def test_artifact_is_a_plain_zip_of_arrays(saved):
     with zipfile.ZipFile(saved) as archive:
         names = set(archive.namelist())
     assert {"meta.npy", "hair_points.npy", "guides.npy", "fine_neighbour_index.npy"} <= names
+
+
+def test_artifact_without_a_fine_level_round_trips(case, tmp_path):
+    """Every strand a guide: the fine-level arrays are empty."""
+    source, target, hair, _ = case
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=1000))
+    assert adaptable.multiscale.fine_neighbours.index.shape == (0, 5)
+    artifact.save_adaptable(adaptable, tmp_path / "all-guides.hpa")
+    loaded = artifact.load_adaptable(tmp_path / "all-guides.hpa")
+    assert np.array_equal(loaded.multiscale.guides, np.arange(hair.n_strands))

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hairport.solver.energies import EnergyWeights, ShapeModel, energy_terms, knn_other_strands, laplacian_operator
+from hairport.solver.energies import EnergyWeights, ShapeModel, knn_other_strands, laplacian_operator
 from hairport.solver.geometry import MeshQuery
 from hairport.solver.qp import Cancelled, SolveOptions, solve_shape_adaptation
 from tests.test_transfer import outward_strands, sphere_character

@@ -4,7 +4,6 @@ Average female -> heavy male: a much larger head, neck and shoulders, where the 
 transfers penetrate the body by thousands of particles. Grooms with 3-5 mm segments.
 """
 
-import numpy as np
 import pytest
 
 from hairport.solver import pipeline

@@ -7,8 +7,6 @@ small toy characters and a 60-strand groom, so each job takes a few seconds.
 
 from __future__ import annotations
 
-import io
-import json
 import os
 import signal
 import subprocess

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from celery.exceptions import SoftTimeLimitExceeded
 
+from hairport.outputs import json_default
 from hairport.settings import get_settings
 from hairport.solver import pipeline
 
@@ -29,6 +30,8 @@ PREPROCESS_POLL_SECONDS = 2.0
 PREPROCESS_POLL_LIMIT = 1800
 #: a running job writes its progress at most this often (s)
 PROGRESS_INTERVAL_SECONDS = 0.5
+#: a worker purges expired files at most this often (s), after a job
+PURGE_INTERVAL_SECONDS = 3600.0
 #: retries of transient errors (exponential backoff, capped at RETRY_BACKOFF_MAX seconds)
 MAX_RETRIES = 5
 RETRY_BACKOFF_MAX = 60
@@ -78,10 +81,12 @@ def _error(error: BaseException) -> dict:
     return {"code": "internal", "message": f"{type(error).__name__}: {error}"}
 
 
-@celery_app.task(
-    bind=True, name="hairport.preprocess", autoretry_for=TRANSIENT_ERRORS, retry_backoff=True,
-    retry_backoff_max=RETRY_BACKOFF_MAX, max_retries=MAX_RETRIES,
-)
+#: every job task: retried with exponential backoff on transient errors only
+JOB_TASK_OPTIONS = dict(bind=True, autoretry_for=TRANSIENT_ERRORS, retry_backoff=True,
+                        retry_backoff_max=RETRY_BACKOFF_MAX, max_retries=MAX_RETRIES)
+
+
+@celery_app.task(name="hairport.preprocess", **JOB_TASK_OPTIONS)
 def preprocess_task(self, hairstyle_id: str) -> None:
     """Compute (once) the adaptable hairstyle of a hairstyle record."""
     storage = jobs.get_storage()
@@ -153,10 +158,7 @@ class _Progress:
         return self.cancelled
 
 
-@celery_app.task(
-    bind=True, name="hairport.retarget", autoretry_for=TRANSIENT_ERRORS, retry_backoff=True,
-    retry_backoff_max=RETRY_BACKOFF_MAX, max_retries=MAX_RETRIES,
-)
+@celery_app.task(name="hairport.retarget", **JOB_TASK_OPTIONS)
 def retarget_task(self, job_id: str) -> None:
     """Retarget one hairstyle onto one target character (one job record)."""
     storage = jobs.get_storage()
@@ -204,7 +206,7 @@ def retarget_task(self, job_id: str) -> None:
                 pipeline.write_hair_file(path, result.hair, fmt)
                 outputs[fmt] = _stored(storage.save_file(path, f".{fmt}"), f".{fmt}")
             path = work / "report.json"
-            path.write_text(json.dumps(report, indent=2, default=_json_default) + "\n")
+            path.write_text(json.dumps(report, indent=2, default=json_default) + "\n")
             outputs["report"] = _stored(storage.save_file(path, ".json"), ".json")
             path = work / "preview.png"
             pipeline.write_preview(path, adaptable, result, target)
@@ -212,6 +214,7 @@ def retarget_task(self, job_id: str) -> None:
         timings = {**result.timings, "job": time.perf_counter() - began}
         jobs.set_job(storage, job_id, state=jobs.SUCCEEDED, stage="done", progress=1.0, message="done",
                      finished_at=jobs.now(), metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
+        purge_if_due(storage)
     except pipeline.Cancelled:
         jobs.set_job(storage, job_id, state=jobs.CANCELLED, stage="cancelled", finished_at=jobs.now())
     except TRANSIENT_ERRORS:
@@ -222,19 +225,34 @@ def retarget_task(self, job_id: str) -> None:
             traceback.print_exc()
 
 
+def purge_if_due(storage) -> int:
+    """Apply the retention setting at most every PURGE_INTERVAL_SECONDS (shared by all workers)."""
+    settings = get_settings()
+    due = {"run": False}
+
+    def claim(record: dict) -> dict | None:
+        if jobs.now() - record.get("last_purge", 0.0) < PURGE_INTERVAL_SECONDS:
+            return None
+        due["run"] = True
+        return {**record, "last_purge": jobs.now()}
+
+    if storage.get_record("maintenance", "purge") is None:
+        storage.put_record("maintenance", "purge", {"last_purge": 0.0})
+    storage.update_record("maintenance", "purge", claim)
+    if not due["run"]:
+        return 0
+    return storage.purge(settings.retention_days * 86400.0)
+
+
+@celery_app.task(name="hairport.purge")
+def purge_task() -> int:
+    """Delete what is older than the retention period (also run by workers after jobs)."""
+    return jobs.get_storage().purge(get_settings().retention_days * 86400.0)
+
+
 def _stored(blob, suffix: str) -> dict:
     return {"sha256": blob.sha256, "suffix": suffix, "size": blob.size}
 
 
-def _json_default(value):
-    import numpy as np
-
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
 def _jsonable(document: dict) -> dict:
-    return json.loads(json.dumps(document, default=_json_default))
+    return json.loads(json.dumps(document, default=json_default))

@@ -10,7 +10,7 @@ from hairport.solver import pipeline
 from hairport.worker import jobs
 
 from ..auth import Owner
-from ..deps import SettingsDep, StorageDep
+from ..deps import SettingsDep, StorageDep, owned_record
 from ..errors import Problem
 from ..schemas import CharacterOut
 from ..uploads import extension_of, store_upload, validated
@@ -28,14 +28,7 @@ def character_out(record: dict) -> CharacterOut:
 
 
 def owned_character(storage, owner: str, character_id: str) -> dict:
-    record = storage.get_record("characters", character_id) if _valid_id(character_id) else None
-    if record is None or record["owner"] != owner:
-        raise Problem(404, "not_found", f"no character {character_id}")
-    return record
-
-
-def _valid_id(value: str) -> bool:
-    return 0 < len(value) <= 64 and all(c in "0123456789abcdef" for c in value)
+    return owned_record(storage, "characters", owner, character_id, "character")
 
 
 @router.post("", status_code=201, response_model=CharacterOut, summary="Upload a character")

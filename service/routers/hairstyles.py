@@ -10,7 +10,7 @@ from hairport.solver import pipeline
 from hairport.worker import jobs
 
 from ..auth import Owner
-from ..deps import SettingsDep, StorageDep
+from ..deps import SettingsDep, StorageDep, owned_record
 from ..errors import Problem
 from ..schemas import HairstyleOut
 from ..uploads import extension_of, input_problem, store_upload, validated
@@ -29,14 +29,7 @@ def hairstyle_out(storage, record: dict) -> HairstyleOut:
 
 
 def owned_hairstyle(storage, owner: str, hairstyle_id: str) -> dict:
-    record = storage.get_record("hairstyles", hairstyle_id) if _hex(hairstyle_id) else None
-    if record is None or record["owner"] != owner:
-        raise Problem(404, "not_found", f"no hairstyle {hairstyle_id}")
-    return record
-
-
-def _hex(value: str) -> bool:
-    return 0 < len(value) <= 64 and all(c in "0123456789abcdef" for c in value)
+    return owned_record(storage, "hairstyles", owner, hairstyle_id, "hairstyle")
 
 
 @router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle")

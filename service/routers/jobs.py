@@ -12,7 +12,7 @@ from hairport.solver import pipeline
 from hairport.worker import jobs
 
 from ..auth import Owner
-from ..deps import StorageDep
+from ..deps import StorageDep, owned_record
 from ..errors import Problem
 from ..schemas import HairFormat, JobOut, JobPage, JobState
 
@@ -33,11 +33,7 @@ def job_out(record: dict) -> JobOut:
 
 
 def owned_job(storage, owner: str, job_id: str) -> dict:
-    valid = 0 < len(job_id) <= 64 and all(c in "0123456789abcdef" for c in job_id)
-    record = storage.get_record("jobs", job_id) if valid else None
-    if record is None or record["owner"] != owner:
-        raise Problem(404, "not_found", f"no job {job_id}")
-    return record
+    return owned_record(storage, "jobs", owner, job_id, "job")
 
 
 def _finished(record: dict) -> dict:
