@@ -23,6 +23,29 @@ results. Every error is `application/problem+json` with a stable `code`. Authent
 """
 
 
+#: multipart framing allowed on top of the upload limit (boundaries, part headers, small fields)
+MULTIPART_OVERHEAD_BYTES = 64 * 1024
+
+
+class ContentLengthLimit:
+    """Refuse a request whose declared body is over the upload limit before reading any of it
+    (bodies without a Content-Length are counted while they stream into the storage)."""
+
+    def __init__(self, app, limit: int):
+        self.app, self.limit = app, limit
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] == "http":
+            declared = dict(scope.get("headers") or []).get(b"content-length")
+            if declared is not None and declared.isdigit() and int(declared) > self.limit + MULTIPART_OVERHEAD_BYTES:
+                response = errors.problem_response(
+                    413, "upload_too_large", f"request body of {int(declared):,} bytes is over the upload limit of "
+                    f"{self.limit:,} bytes")
+                await response(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+
 def create_app(settings: Settings | None = None, readiness=None, queue_depths=None) -> FastAPI:
     """The API. ``readiness``/``queue_depths`` default to checks against the Redis broker."""
     settings = settings or get_settings()
@@ -36,6 +59,7 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     app.state.readiness = readiness
     app.state.queue_depths = queue_depths
     errors.install(app)
+    app.add_middleware(ContentLengthLimit, limit=settings.max_upload_bytes)
     if settings.cors_origin_list:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origin_list, allow_methods=["*"],
                            allow_headers=["*"], expose_headers=["Location"])

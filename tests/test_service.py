@@ -213,6 +213,10 @@ def test_oversized_upload_is_413_and_stores_nothing(service, files):
     body = assert_problem(response, 413, "upload_too_large")
     assert "10,000" in body["detail"]
     assert sorted((service["storage"] / "blobs").rglob("*")) == blobs_before
+    # a declared length far over the limit is refused before the body is read
+    big = small.post("/v1/characters", headers=AUTH, files={"mesh": ("body.obj", b"v 0 0 0\n" * 50_000)})
+    assert_problem(big, 413, "upload_too_large")
+    assert "over the upload limit" in big.json()["detail"]
 
 
 def test_bad_hair_uploads(service, files, uploaded):
