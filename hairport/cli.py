@@ -244,6 +244,14 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     from .service.app import create_app
 
+    from .service.auth import check_configuration
+    from .settings import get_settings
+
+    try:
+        check_configuration(get_settings())
+    except RuntimeError as error:
+        print(f"hairport: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if args.embedded:
         from .worker.embedded import start_embedded_worker
 

@@ -536,7 +536,9 @@ def solve_strands(
         merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
         model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
         strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
-        strand_merit_now = group_energies(sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
+        # uncoupled, a group is a strand: the per-strand merits are the group merits
+        strand_merit_now = merit_now if not coupled else group_energies(
+            sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
 
         fraction = np.ones(k)
         accepted = np.zeros(k, dtype=bool)
@@ -555,9 +557,9 @@ def solve_strands(
             trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
             merit_trial = group_energies(sub, trial, weights, group, k, penalty, trial_dist, options.eps_c)
             if attempt == 0:
-                actual = group_energies(
-                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c
-                ) - strand_merit_now
+                strand_merit_trial = merit_trial if not coupled else group_energies(
+                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c)
+                actual = strand_merit_trial - strand_merit_now
                 safe = np.where(strand_predicted < 0, strand_predicted, -1.0)
                 ratio = np.where(strand_predicted < 0, actual / safe, 0.0)
                 damping[strands] = _adapt_damping(damping[strands], ratio)

@@ -86,3 +86,12 @@ def test_cors_preflight_allows_the_configured_origin_only(server):
     other = httpx.options(f"{server}/v1/jobs", headers={"Origin": "https://evil.example",
                                                         "Access-Control-Request-Method": "GET"})
     assert "access-control-allow-origin" not in other.headers
+
+
+def test_serve_without_keys_or_dev_mode_refuses_to_start(tmp_path):
+    env = {**os.environ, "HAIRPORT_API_KEYS": "", "HAIRPORT_INSECURE_DEV": "false", "HAIRPORT_STORAGE_DIR": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-m", "hairport.cli", "serve", "--port", str(free_port())], env=env,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "hairport: error: no API keys configured: set HAIRPORT_API_KEYS, or HAIRPORT_INSECURE_DEV=true for a laptop"]

@@ -16,6 +16,7 @@ import json
 import time
 import uuid
 from functools import lru_cache
+from pathlib import Path
 
 from hairport.settings import Settings, get_settings
 
@@ -30,7 +31,7 @@ PREPROCESS_STATES = (QUEUED, RUNNING, "ready", FAILED)
 
 @lru_cache(maxsize=4)
 def _storage_at(root: str) -> LocalStorage:
-    return LocalStorage(__import__("pathlib").Path(root))
+    return LocalStorage(Path(root))
 
 
 def get_storage(settings: Settings | None = None) -> LocalStorage:
