@@ -46,11 +46,14 @@ class HairstyleOut(BaseModel):
 
 
 class RetargetOptionsIn(BaseModel):
-    """Solver options (Table 1, meters); guides and k are fixed when the hairstyle is uploaded."""
+    """Solver options (Table 1, meters). ``guides`` and ``k`` default to the hairstyle's; other
+    values preprocess the hairstyle again (once per combination, cached)."""
 
     model_config = ConfigDict(extra="forbid")
 
     method: str = "multiscale"
+    guides: int | None = Field(None, ge=1, description="guide strands of the multi-scale solve")
+    k: int | None = Field(None, ge=1, description="inter-strand neighbours per particle (Eq. 8)")
     alpha: float = 3e3
     beta: float = 1e3
     eps_c: float = 5e-4

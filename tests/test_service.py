@@ -299,6 +299,25 @@ def test_retarget_onto_two_targets(service, files, uploaded):
     assert client.get("/v1/jobs", headers=OTHER, params={"state": "succeeded"}).json()["total"] == 0
 
 
+def test_other_guide_count_preprocesses_a_cached_variant(service, uploaded):
+    client, storage = service["client"], service["storage"]
+    before = len(list((storage / "blobs").rglob("*.hpa")))
+    request = {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": [uploaded["target"]],
+               "options": {"guides": 10, "max_iterations": 3}}
+    first = client.post("/v1/retargets", headers=AUTH, json=request).json()["jobs"][0]
+    done = wait_for(client, f"/v1/jobs/{first['id']}", lambda b: b["state"] in ("succeeded", "failed"))
+    assert done["state"] == "succeeded", done
+    report = client.get(f"/v1/jobs/{first['id']}/report", headers=AUTH).json()
+    assert report["solver"]["guides"] == 10
+    assert len(list((storage / "blobs").rglob("*.hpa"))) == before + 1
+    second = client.post("/v1/retargets", headers=AUTH, json=request).json()["jobs"][0]
+    assert wait_for(client, f"/v1/jobs/{second['id']}", lambda b: b["state"] in ("succeeded", "failed"))["state"] == \
+        "succeeded"
+    assert len(list((storage / "blobs").rglob("*.hpa"))) == before + 1
+    assert_problem(client.post("/v1/retargets", headers=AUTH, json={**request, "options": {"guides": 0}}), 422,
+                   "invalid_request")
+
+
 def test_idempotency_key_replays_and_refuses_changes(service, uploaded):
     client = service["client"]
     request = {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": [uploaded["target"]],

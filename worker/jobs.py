@@ -66,9 +66,16 @@ def artifact_key(character: dict, hair_sha256: str, units: str, options: dict, f
     )
 
 
-def preprocessing_status(storage: LocalStorage, hairstyle: dict) -> dict:
-    """``{"state", "error"}`` of a hairstyle's preprocessing, shared by every hairstyle of the same inputs."""
-    key = hairstyle["artifact_key"]
+def variant_key(storage: LocalStorage, hairstyle: dict, options: dict, format_version: int) -> str:
+    """The artifact key of a hairstyle preprocessed with other options (e.g. another guide count)."""
+    character = storage.get_record("characters", hairstyle["source_character_id"])
+    return artifact_key(character, hairstyle["hair"]["sha256"], hairstyle["units"], options, format_version)
+
+
+def preprocessing_status(storage: LocalStorage, hairstyle: dict, key: str | None = None) -> dict:
+    """``{"state", "error"}`` of a hairstyle's preprocessing (its own, or the variant ``key``),
+    shared by every hairstyle of the same inputs."""
+    key = key or hairstyle["artifact_key"]
     if storage.get_record("artifacts", key) is not None:
         return {"state": "ready", "error": None}
     status = storage.get_record("preprocessing", key)
@@ -77,10 +84,12 @@ def preprocessing_status(storage: LocalStorage, hairstyle: dict) -> dict:
     return {"state": status["state"], "error": status.get("error")}
 
 
-def start_preprocessing(storage: LocalStorage, hairstyle: dict) -> bool:
-    """Enqueue preprocessing unless its artifact exists or a run for the same inputs is under way
-    (a failed one is tried again). Returns whether a task was sent."""
-    key = hairstyle["artifact_key"]
+def start_preprocessing(storage: LocalStorage, hairstyle: dict, options: dict | None = None,
+                        key: str | None = None) -> bool:
+    """Enqueue preprocessing (with the hairstyle's options, or ``options`` of the variant ``key``)
+    unless its artifact exists or a run for the same inputs is under way (a failed one is tried
+    again). Returns whether a task was sent."""
+    key = key or hairstyle["artifact_key"]
     started = {"sent": False}
 
     def claim(status: dict) -> dict | None:
@@ -95,7 +104,7 @@ def start_preprocessing(storage: LocalStorage, hairstyle: dict) -> bool:
         storage.put_record("preprocessing", key, {"key": key, "state": FAILED, "error": None, "updated_at": 0.0})
     storage.update_record("preprocessing", key, lambda status: claim(status) or status)
     if started["sent"]:
-        enqueue_preprocess(hairstyle["id"])
+        enqueue_preprocess(hairstyle["id"], options)
     return started["sent"]
 
 
@@ -116,10 +125,10 @@ def set_job(storage: LocalStorage, job_id: str, **fields) -> dict | None:
     return storage.update_record("jobs", job_id, change)
 
 
-def enqueue_preprocess(hairstyle_id: str) -> None:
+def enqueue_preprocess(hairstyle_id: str, options: dict | None = None) -> None:
     from .tasks import preprocess_task
 
-    preprocess_task.delay(hairstyle_id)
+    preprocess_task.delay(hairstyle_id, options)
 
 
 def enqueue_retarget(job_id: str) -> str:

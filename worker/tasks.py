@@ -87,13 +87,16 @@ JOB_TASK_OPTIONS = dict(bind=True, autoretry_for=TRANSIENT_ERRORS, retry_backoff
 
 
 @celery_app.task(name="hairport.preprocess", **JOB_TASK_OPTIONS)
-def preprocess_task(self, hairstyle_id: str) -> None:
-    """Compute (once) the adaptable hairstyle of a hairstyle record."""
+def preprocess_task(self, hairstyle_id: str, options: dict | None = None) -> None:
+    """Compute (once) the adaptable hairstyle of a hairstyle record (with its options, or ``options``)."""
     storage = jobs.get_storage()
     hairstyle = storage.get_record("hairstyles", hairstyle_id)
     if hairstyle is None:
         return
-    key = hairstyle["artifact_key"]
+    if options is None:
+        options, key = hairstyle["options"], hairstyle["artifact_key"]
+    else:
+        key = jobs.variant_key(storage, hairstyle, options, pipeline.ARTIFACT_FORMAT_VERSION)
     if storage.get_record("artifacts", key) is not None:
         _set_preprocessing(storage, key, "ready")
         return
@@ -106,8 +109,7 @@ def preprocess_task(self, hairstyle_id: str) -> None:
             _blob_path(storage, hairstyle["hair"]), hairstyle["units"], max_strands=settings.max_strands,
             max_particles=settings.max_particles, max_bytes=settings.max_file_bytes,
         )
-        options = pipeline.PreprocessOptions(**hairstyle["options"])
-        adaptable = pipeline.preprocess(source, hair, options)
+        adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(**options))
         with storage.work_dir() as work:
             path = work / "adaptable.hpa"
             pipeline.save_adaptable_file(adaptable, path)
@@ -169,9 +171,10 @@ def retarget_task(self, job_id: str) -> None:
         jobs.set_job(storage, job_id, state=jobs.CANCELLED, finished_at=jobs.now())
         return
     hairstyle = storage.get_record("hairstyles", job["hairstyle_id"])
-    artifact = storage.get_record("artifacts", hairstyle["artifact_key"]) if hairstyle else None
+    key = job.get("artifact_key") or (hairstyle or {}).get("artifact_key")
+    artifact = storage.get_record("artifacts", key) if hairstyle else None
     if artifact is None:
-        status = jobs.preprocessing_status(storage, hairstyle) if hairstyle else {"state": jobs.FAILED, "error": None}
+        status = jobs.preprocessing_status(storage, hairstyle, key) if hairstyle else {"state": jobs.FAILED, "error": None}
         if status["state"] == jobs.FAILED:
             error = status.get("error") or {}
             jobs.set_job(storage, job_id, state=jobs.FAILED, finished_at=jobs.now(), error={

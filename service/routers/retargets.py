@@ -51,25 +51,32 @@ def create_retargets(
     hairstyle = owned_hairstyle(storage, owner, request.hairstyle_id)
     targets = [owned_character(storage, owner, target_id) for target_id in request.target_character_ids]
     options = request.options.model_dump()
+    preprocess_options = {"k": options.pop("k") or hairstyle["options"]["k"],
+                          "guides": options.pop("guides") or hairstyle["options"]["guides"]}
     try:
         pipeline.RetargetOptions(**options).validate()
+        pipeline.PreprocessOptions(**preprocess_options).validate()
     except pipeline.InputError as error:
         raise input_problem(error, "options") from None
+    key = hairstyle["artifact_key"]
+    if preprocess_options != hairstyle["options"]:
+        key = jobs.variant_key(storage, hairstyle, preprocess_options, pipeline.ARTIFACT_FORMAT_VERSION)
     created = []
     for target in targets:
         job_id = jobs.new_job_id()
         storage.put_record("jobs", job_id, {
             "id": job_id, "owner": owner, "kind": "retarget", "state": jobs.QUEUED, "stage": "queued",
             "progress": 0.0, "hairstyle_id": hairstyle["id"], "target_character_id": target["id"],
-            "options": options, "output_format": request.output_format, "attempts": 0,
+            "options": options, "preprocess_options": preprocess_options, "artifact_key": key,
+            "output_format": request.output_format, "attempts": 0,
             "created_at": jobs.now(), "updated_at": jobs.now(),
         })
         created.append(job_id)
     if replay_id is not None:
         storage.put_record("idempotency", replay_id, {"request": jobs.digest(body), "jobs": created,
                                                        "created_at": jobs.now()})
-    if jobs.preprocessing_status(storage, hairstyle)["state"] == jobs.FAILED:
-        jobs.start_preprocessing(storage, hairstyle)
+    if jobs.preprocessing_status(storage, hairstyle, key)["state"] in (jobs.QUEUED, jobs.FAILED):
+        jobs.start_preprocessing(storage, hairstyle, preprocess_options if key != hairstyle["artifact_key"] else None, key)
     for job_id in created:
         jobs.set_job(storage, job_id, task_id=jobs.enqueue_retarget(job_id))
     return _created(storage, response, created)
