@@ -1,0 +1,170 @@
+"""Head patch and its disk parameterizations (harmonic, LSCM, ARAP) on the MakeHuman head."""
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from hairport.solver.errors import InputError
+from hairport.solver.geometry import MeshQuery
+from hairport.solver.groom import generate_groom, head_frame
+from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.parameterization import (
+    DEFAULT_MARGIN_RINGS,
+    PARAMETERIZATIONS,
+    _segments_cross,
+    check_injective,
+    head_patch,
+    parameterize,
+    signed_areas,
+)
+from hairport.solver.scalp import boundary_loops, euler_characteristic, extract_scalp, refine_scalp
+
+
+@pytest.fixture(scope="module")
+def character():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="module")
+def frame(character):
+    return head_frame(character)
+
+
+@pytest.fixture(scope="module")
+def scalp(character, frame):
+    hair = generate_groom(character, "short", 300, 8, seed=0)
+    faces = MeshQuery(character.vertices, character.faces).signed_distance(hair.points[hair.roots]).faces
+    return extract_scalp(character, faces, frame)
+
+
+@pytest.fixture(scope="module")
+def patch(character, scalp, frame):
+    return head_patch(character, scalp, frame=frame)
+
+
+def test_head_patch_is_a_disk_around_the_scalp(character, frame, scalp, patch):
+    vertices, triangles, faces = patch
+    assert (len(vertices), len(triangles)) == (448, 804)  # margin 3 around a 466-face scalp
+    assert np.array_equal(character.faces[faces], vertices[triangles])
+    assert np.isin(scalp.faces, faces).all()
+    assert euler_characteristic(triangles) == 1 and len(boundary_loops(triangles)) == 1
+    extra = np.setdiff1d(faces, scalp.faces)
+    assert frame.head_vertices[character.faces[extra]].all()
+    # margin 0 is the scalp itself; more rings, more faces
+    v0, t0, f0 = head_patch(character, scalp, 0, frame)
+    assert np.array_equal(f0, scalp.faces) and np.array_equal(v0, scalp.vertices)
+    assert len(head_patch(character, scalp, DEFAULT_MARGIN_RINGS + 1, frame)[2]) > len(faces)
+    with pytest.raises(InputError, match="margin_rings"):
+        head_patch(character, scalp, -1, frame)
+
+
+@pytest.mark.parametrize("method", PARAMETERIZATIONS)
+def test_parameterizations_of_the_head_patch_are_injective_in_the_unit_disk(character, patch, method):
+    vertices, triangles, _ = patch
+    uv = parameterize(character.vertices[vertices], triangles, method)
+    assert uv.shape == (len(vertices), 2)
+    radius = np.linalg.norm(uv, axis=1)
+    assert radius.max() <= 1.0 + 1e-9
+    assert abs(radius.max() - 1.0) < 1e-9  # fitted to the disk, not just inside it
+    assert (signed_areas(uv, triangles) > 0).all()
+    if method == "harmonic":
+        loop = boundary_loops(triangles)[0]
+        assert np.abs(radius[loop] - 1.0).max() < 1e-12
+        interior = np.setdiff1d(np.arange(len(vertices)), loop)
+        assert radius[interior].max() < 1.0
+
+
+@pytest.mark.parametrize("method", PARAMETERIZATIONS)
+def test_parameterizations_of_the_refined_scalp(character, scalp, method):
+    vertices, triangles, boundary = refine_scalp(character, scalp)
+    uv = parameterize(vertices, triangles, method)
+    assert (signed_areas(uv, triangles) > 0).all()
+    assert np.linalg.norm(uv, axis=1).max() <= 1.0 + 1e-9
+
+
+def flat_disk(rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A planar disk of radius 5 cm in 3D: 40 boundary points equally spaced on the circle,
+    jittered interior points, Delaunay triangles (counter-clockwise in the disk's plane)."""
+    rng = np.random.default_rng(3)
+    angle = 2 * np.pi * np.arange(40) / 40
+    boundary = 0.05 * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    inner = []
+    for r, count in ((0.035, 28), (0.02, 16), (0.008, 6)):
+        a = 2 * np.pi * (np.arange(count) + rng.uniform(-0.3, 0.3, count)) / count
+        inner.append(r * rng.uniform(0.9, 1.1, (count, 1)) * np.stack([np.cos(a), np.sin(a)], axis=1))
+    xy = np.concatenate([boundary] + inner + [np.zeros((1, 2))])
+    triangles = Delaunay(xy).simplices.astype(np.int64)
+    area = signed_areas(xy, triangles)
+    triangles[area < 0] = triangles[area < 0][:, ::-1]
+    points = np.column_stack([xy, np.zeros(len(xy))]) @ rotation.T + np.array([0.3, 1.6, -0.2])
+    return xy, points, triangles
+
+
+def test_harmonic_map_of_a_flat_disk_is_a_similarity():
+    c, s = np.cos(0.7), np.sin(0.7)
+    rotation = np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    xy, points, triangles = flat_disk(rotation)
+    uv = parameterize(points, triangles, "harmonic")
+    # fit uv = a z + b over complex numbers (rotation + uniform scale + translation)
+    z, w = xy[:, 0] + 1j * xy[:, 1], uv[:, 0] + 1j * uv[:, 1]
+    design = np.column_stack([z, np.ones_like(z)])
+    (a, b), *_ = np.linalg.lstsq(design, w, rcond=None)
+    assert np.abs(design @ np.array([a, b]) - w).max() < 1e-12
+    assert abs(abs(a) - 1 / 0.05) < 1e-9 and abs(b) < 1e-12
+    # the free-boundary maps of a flat disk are similarities too (conformal and rigid)
+    for method in ("lscm", "arap"):
+        uv = parameterize(points, triangles, method)
+        w = uv[:, 0] + 1j * uv[:, 1]
+        (a, b), *_ = np.linalg.lstsq(design, w, rcond=None)
+        assert np.abs(design @ np.array([a, b]) - w).max() < 1e-6, method
+
+
+def test_not_a_disk_is_refused():
+    xy, points, triangles = flat_disk(np.eye(3))
+    # an annulus: drop the triangles around the centre
+    centre = len(points) - 1
+    annulus = triangles[~(triangles == centre).any(axis=1)]
+    used = np.unique(annulus)
+    renumber = np.full(len(points), -1)
+    renumber[used] = np.arange(len(used))
+    with pytest.raises(InputError, match="not a disk: 2 boundary loops"):
+        parameterize(points[used], renumber[annulus], "harmonic")
+    # two separate triangles
+    two = np.array([[0, 1, 2], [3, 4, 5]])
+    with pytest.raises(InputError, match="not a disk"):
+        parameterize(np.random.default_rng(0).random((6, 3)), two, "lscm")
+    # a closed surface has no boundary
+    tetra = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    with pytest.raises(InputError, match="0 boundary loops"):
+        parameterize(np.eye(4, 3), tetra, "arap")
+
+
+def test_bad_arguments_are_refused():
+    xy, points, triangles = flat_disk(np.eye(3))
+    with pytest.raises(InputError, match="unknown parameterization"):
+        parameterize(points, triangles, "tutte")
+    with pytest.raises(InputError, match="used by no triangle"):
+        parameterize(np.vstack([points, [[9.0, 9, 9]]]), triangles)
+    with pytest.raises(InputError, match="out of range"):
+        parameterize(points, triangles + 1)
+
+
+def test_flipped_maps_are_detected():
+    xy, points, triangles = flat_disk(np.eye(3))
+    loop = boundary_loops(triangles)[0]
+    check_injective(xy, triangles, loop)
+    folded = xy.copy()
+    folded[len(xy) - 1] = [0.045, 0.0]  # drag the centre vertex over its neighbours
+    with pytest.raises(InputError, match="flips or collapses"):
+        check_injective(folded, triangles, loop, "harmonic")
+    crossed = xy.copy()
+    crossed[loop[0]] = [-0.06, 0.0]  # boundary across the disk: flips and crossings
+    with pytest.raises(InputError, match="flips|crosses"):
+        check_injective(crossed, triangles, loop)
+
+
+def test_boundary_crossings():
+    square = np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]])
+    bowtie = square[[0, 1, 3, 2]]
+    assert not _segments_cross(square)
+    assert _segments_cross(bowtie)

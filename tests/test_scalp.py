@@ -1,0 +1,195 @@
+"""Scalp extraction, hairline split and refinement on the MakeHuman head (paper Section 6.1)."""
+
+import numpy as np
+import pytest
+
+from hairport.solver.errors import InputError
+from hairport.solver.geometry import MeshQuery
+from hairport.solver.groom import generate_groom, head_frame
+from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.scalp import (
+    DEFAULT_MIN_TRIANGLES,
+    Scalp,
+    ScalpWarning,
+    boundary_loops,
+    euler_characteristic,
+    extract_scalp,
+    face_adjacency,
+    fill_holes,
+    refine_scalp,
+    turning_points,
+)
+
+#: roots dropped within this distance (m) of the crown make a hole no closing can fill
+HOLE_RADIUS_M = 0.04
+
+
+@pytest.fixture(scope="module")
+def character():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="module")
+def frame(character):
+    return head_frame(character)
+
+
+@pytest.fixture(scope="module")
+def query(character):
+    return MeshQuery(character.vertices, character.faces)
+
+
+@pytest.fixture(scope="module")
+def roots(character, query):
+    """(S, 3) root positions and (S,) faces holding them."""
+    hair = generate_groom(character, "short", 300, 8, seed=0)
+    points = hair.points[hair.roots]
+    return points, query.signed_distance(points).faces
+
+
+@pytest.fixture(scope="module")
+def scalp(character, roots, frame):
+    return extract_scalp(character, roots[1], frame)
+
+
+def assert_disk_scalp(scalp: Scalp, character, frame) -> None:
+    n, k = len(scalp.vertices), len(scalp.faces)
+    assert scalp.triangles.shape == (k, 3)
+    assert np.array_equal(character.faces[scalp.faces], scalp.vertices[scalp.triangles])
+    assert np.array_equal(np.unique(scalp.triangles), np.arange(n))
+    # one disk: V - E + F == 1 and exactly one boundary loop, the hairline
+    assert euler_characteristic(scalp.triangles) == 1
+    loops = boundary_loops(scalp.triangles)
+    assert len(loops) == 1
+    b = scalp.boundary
+    assert len(np.unique(b)) == len(b) == len(loops[0])
+    # closed and ordered: consecutive loop vertices (and last -> first) are boundary edges
+    start = int(np.argmax(loops[0] == b[0]))
+    assert np.array_equal(np.roll(loops[0], -start), b)
+    # counter-clockwise seen from above: positive area in the (forward, side) plane
+    local = frame.local(character.vertices[scalp.vertices[b]])
+    x, y = local[:, 1], local[:, 2]
+    assert 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) > 0
+    # front and back partition the loop, front first
+    f = len(scalp.front)
+    assert np.array_equal(np.concatenate([scalp.front, scalp.back]), b)
+    assert 2 <= f < len(b)
+    front = frame.local(character.vertices[scalp.vertices[scalp.front]])
+    back = frame.local(character.vertices[scalp.vertices[scalp.back]])
+    assert front[:, 1].mean() > 0 > back[:, 1].mean()
+    # split at the ears: the front runs from the right ear (side < 0) to the left (side > 0)
+    assert front[0, 2] < 0 < front[-1, 2]
+    assert abs(front[0, 2]) > 0.8 * frame.half_width and abs(front[-1, 2]) > 0.8 * frame.half_width
+    tp = scalp.turning_points
+    assert tp[0] == 0 and tp[-1] == f - 1 and np.all(np.diff(tp) > 0)
+
+
+def test_scalp_of_a_groom_is_a_disk_with_a_hairline_split_at_the_ears(character, frame, roots, scalp):
+    assert_disk_scalp(scalp, character, frame)
+    assert np.isin(roots[1], scalp.faces).all()
+    assert len(scalp.strays) == 0
+    # 300 roots hit 211 of the 518 scalp faces in 72 pieces; one closing ring joins them
+    assert len(np.unique(roots[1])) == 211
+    assert scalp.closing_rings == 1
+    assert (len(scalp.faces), len(scalp.vertices), len(scalp.boundary), len(scalp.front)) == (466, 264, 60, 33)
+    # the groom's plane-cut hairline is a smooth arch: no corner besides the ends
+    assert scalp.turning_points.tolist() == [0, len(scalp.front) - 1]
+
+
+def test_dense_roots_need_no_closing(character, frame, scalp):
+    # every face of the scalp holds a root: the scalp is those faces, as in the paper
+    again = extract_scalp(character, np.repeat(scalp.faces, 2), frame)
+    assert again.closing_rings == 0
+    assert np.array_equal(again.faces, scalp.faces)
+    assert np.array_equal(again.boundary, scalp.boundary)
+
+
+def test_a_hole_in_the_roots_comes_back_filled(character, frame, roots):
+    points, faces = roots
+    crown = frame.world(frame.crown, 0.5 * (frame.front + frame.back))
+    dropped = np.linalg.norm(points - crown, axis=1) < HOLE_RADIUS_M
+    assert 10 < dropped.sum() < len(points) - 100
+    kept = faces[~dropped]
+    holed = extract_scalp(character, kept, frame)
+    assert_disk_scalp(holed, character, frame)
+    assert np.isin(kept, holed.faces).all()
+    # the centre of the hole, far from every kept root, is in the scalp
+    centres = character.vertices[character.faces[holed.faces]].mean(axis=1)
+    gap = np.min(np.linalg.norm(centres[:, None] - points[~dropped][None], axis=2), axis=1)
+    assert gap.max() > 0.5 * HOLE_RADIUS_M
+    assert np.isin(faces[dropped], holed.faces).mean() > 0.9
+
+
+def test_fill_holes_on_a_hand_made_hole(character, scalp):
+    adjacency = face_adjacency(character.faces)
+    region = np.zeros(character.n_faces, dtype=bool)
+    region[scalp.faces] = True
+    interior = scalp.faces[~np.isin(scalp.triangles, scalp.boundary).any(axis=1)]
+    holed = region.copy()
+    holed[interior[:5]] = False
+    assert np.array_equal(fill_holes(holed, adjacency), region)
+    assert np.array_equal(fill_holes(region, adjacency), region)
+
+
+def test_stray_roots_are_reported_and_left_out(character, frame, roots, scalp):
+    foot = int(np.argmin(character.vertices[character.faces].mean(axis=1)[:, 1]))
+    with pytest.warns(ScalpWarning, match="1 roots on 1 faces"):
+        strayed = extract_scalp(character, np.append(roots[1], foot), frame)
+    assert strayed.strays.tolist() == [foot]
+    assert np.array_equal(strayed.faces, scalp.faces)
+
+
+def test_turning_points_of_a_hand_made_arch(frame):
+    # seen from the front: up the right temple, across the forehead, down the left temple
+    up = np.linspace(0.05, 0.11, 13)
+    across = np.linspace(-0.05, 0.05, 21)
+    side = np.concatenate([np.full(12, -0.05), across, np.full(12, 0.05)])
+    height = np.concatenate([up[:-1], np.full(21, 0.11), up[::-1][1:]])
+    corners = turning_points(frame.world(height, 0.08, side), frame)
+    assert corners.tolist() == [0, 12, 32, 44]
+
+
+def test_refine_scalp_keeps_the_surface_and_the_hairline(character, scalp, query):
+    vertices, triangles, boundary = refine_scalp(character, scalp, query=query)
+    assert len(triangles) >= DEFAULT_MIN_TRIANGLES
+    assert (len(vertices), len(triangles), len(boundary)) == (3849, 7456, 240)
+    assert np.abs(query.signed_distance(vertices).distance).max() < 1e-9
+    assert np.array_equal(vertices[: len(scalp.vertices)], character.vertices[scalp.vertices])
+    # still a disk whose loop is the refined boundary, in order, from the same first vertex
+    assert euler_characteristic(triangles) == 1
+    loops = boundary_loops(triangles)
+    assert len(loops) == 1 and len(np.unique(boundary)) == len(boundary)
+    start = int(np.argmax(loops[0] == boundary[0]))
+    assert np.array_equal(np.roll(loops[0], -start), boundary)
+    assert boundary[0] == scalp.boundary[0]
+    assert np.array_equal(boundary[::4], scalp.boundary)
+    # one round: the old loop at every second place
+    few = refine_scalp(character, scalp, min_triangles=len(scalp.faces) + 1, query=query)
+    assert len(few[1]) == 4 * len(scalp.faces)
+    assert np.array_equal(few[2][::2], scalp.boundary)
+
+
+def test_refine_scalp_with_enough_triangles_is_a_copy(character, scalp):
+    vertices, triangles, boundary = refine_scalp(character, scalp, min_triangles=len(scalp.faces))
+    assert np.array_equal(triangles, scalp.triangles) and np.array_equal(boundary, scalp.boundary)
+
+
+@pytest.mark.parametrize(
+    "faces, message",
+    [
+        (np.zeros(0, np.int64), "roots lie on 0 faces"),
+        (np.array([7, 7, 7]), "roots lie on 1 faces"),
+        (np.array([-1, 2, 3]), "root face ids must lie in"),
+        (np.array([0.5, 1.5, 2.5]), "integer face ids"),
+    ],
+)
+def test_bad_root_faces_are_refused(character, frame, faces, message):
+    with pytest.raises(InputError, match=message):
+        extract_scalp(character, faces, frame)
+
+
+def test_roots_that_do_not_reach_the_ears_are_refused(character, frame, scalp):
+    # the front half of the scalp only: its hairline never crosses the ear plane
+    front = frame.local(character.vertices[character.faces[scalp.faces]].mean(axis=1))[:, 1] > 0.03
+    with pytest.raises(InputError, match="ear plane"):
+        extract_scalp(character, scalp.faces[front], frame)
