@@ -1,0 +1,184 @@
+"""Hairline edits: the user's new front hairline, and the adaptive weights of Eq. 20-21.
+
+Convention: points ``(N, 3) float64`` in meters; strands in CSR layout (:mod:`.hair`). A
+hairline curve is a polyline over the front of the head, from one ear to the other, with
+optional *turning points* (indices of its corners) matched to the corners of the current
+hairline (:mod:`.scalp`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .hair import Hair
+from .units import unit_scale
+
+#: sigma of Eq. 20 (unitless; Table 1)
+GAMMA_SIGMA = 0.2
+#: a drawn hairline needs at least this many points
+MIN_CURVE_POINTS = 3
+#: largest hairline file read (bytes): a curve is a few hundred points
+MAX_CURVE_FILE_BYTES = 10 * 1024 * 1024
+#: a curve point farther than this from the head surface is "off the head" (m)
+MAX_DISTANCE_TO_HEAD = 0.02
+
+
+def adaptive_weights(hair: Hair, root_travel: np.ndarray, sigma: float = GAMMA_SIGMA) -> np.ndarray:
+    """Eq. 20: ``gamma_i = 1 - exp(-sigma (s_i / r_i)^2)``.
+
+    ``s_i`` is the arc length (m) from particle ``i`` to its root along the source strand and
+    ``r_i`` how far (m) that strand's root moved in the relocation. ``gamma`` is 0 at a
+    root that moved and tends to 1 along the strand: it relaxes the inter-strand and
+    hair-body terms near relocated roots (DESIGN.md on Eq. 20). Strands whose root did not
+    move (``r = 0``) keep weight 1 everywhere, roots included.
+
+    Parameters
+    ----------
+    hair : Hair
+        The source hairstyle (arc lengths are measured on it).
+    root_travel : (S,) float64
+        Distance each strand's root moved (m), >= 0.
+    sigma : float
+
+    Returns
+    -------
+    gamma : (N,) float64
+    """
+    root_travel = np.asarray(root_travel, dtype=np.float64)
+    if root_travel.shape != (hair.n_strands,):
+        raise ValueError(f"root_travel has shape {root_travel.shape}, expected ({hair.n_strands},)")
+    segment = np.linalg.norm(np.diff(hair.points, axis=0), axis=1)
+    steps = np.concatenate([[0.0], segment])
+    steps[hair.roots] = 0.0  # no length across strand boundaries
+    cumulative = np.cumsum(steps)
+    arc = cumulative - np.repeat(cumulative[hair.roots], hair.counts)
+    travel = np.repeat(root_travel, hair.counts)
+    moved = travel > 0
+    gamma = np.ones(hair.n_particles)
+    ratio = np.divide(arc, travel, out=np.zeros_like(arc), where=moved)
+    gamma[moved] = 1.0 - np.exp(-sigma * ratio[moved] ** 2)
+    return gamma
+
+
+@dataclass(frozen=True)
+class HairlineCurve:
+    """A drawn front hairline.
+
+    Attributes
+    ----------
+    points : (P, 3) float64
+        Meters, ordered from one end to the other.
+    turning_points : (T,) int64
+        Ascending indices into ``points`` of its corners (may be empty).
+    """
+
+    points: np.ndarray
+    turning_points: np.ndarray
+
+
+def parse_hairline_curve(document: object, source: str = "hairline curve") -> HairlineCurve:
+    """Validate ``{"units": "m", "points": [[x, y, z], ...], "turning_points": [i, ...]}``.
+
+    Raises
+    ------
+    InputError
+        Not an object, unknown units, fewer than :data:`MIN_CURVE_POINTS` points, points that
+        are not finite 3-vectors, repeated consecutive points, turning points out of range or
+        not strictly increasing.
+    """
+    if not isinstance(document, dict):
+        raise InputError("a hairline curve must be a JSON object with 'points'", source, "bad_curve")
+    units = document.get("units", "m")
+    try:
+        scale = unit_scale(units)
+    except (InputError, TypeError):
+        raise InputError(f"unknown units {units!r}; expected m, dm, cm or mm", source, "unknown_units") from None
+    try:
+        points = np.asarray(document.get("points"), dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError("'points' must be a list of [x, y, z] numbers", source, "bad_curve") from None
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise InputError("'points' must be a list of [x, y, z] numbers", source, "bad_curve")
+    if len(points) < MIN_CURVE_POINTS:
+        raise InputError(f"a hairline curve needs at least {MIN_CURVE_POINTS} points, got {len(points)}", source,
+                         "too_few_points")
+    if not np.isfinite(points).all():
+        raise InputError("the curve has a non-finite coordinate", source, "non_finite")
+    points = points * scale
+    if (np.linalg.norm(np.diff(points, axis=0), axis=1) == 0).any():
+        raise InputError("the curve repeats a point", source, "bad_curve")
+    turning = np.asarray(document.get("turning_points", []), dtype=np.float64).ravel()
+    if len(turning) and (not np.all(turning == np.round(turning)) or turning.min() < 0 or turning.max() >= len(points)):
+        raise InputError(f"turning points must be indices in 0..{len(points) - 1}", source, "bad_curve")
+    turning = turning.astype(np.int64)
+    if len(turning) > 1 and np.any(np.diff(turning) <= 0):
+        raise InputError("turning points must be strictly increasing", source, "bad_curve")
+    return HairlineCurve(points, turning)
+
+
+def read_hairline_curve(path: str | os.PathLike) -> HairlineCurve:
+    """A hairline curve from a JSON file (see :func:`parse_hairline_curve`)."""
+    source = os.fspath(path)
+    size = os.path.getsize(source)
+    if size > MAX_CURVE_FILE_BYTES:
+        raise InputError(f"file has {size} bytes, more than the limit of {MAX_CURVE_FILE_BYTES}", source, "too_large")
+    try:
+        with open(source, encoding="utf-8") as handle:
+            document = json.load(handle)
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise InputError(f"not valid JSON ({error})", source, "bad_json") from None
+    return parse_hairline_curve(document, source)
+
+
+def check_curve_on_head(curve: HairlineCurve, distance_to_head: np.ndarray, front_view: np.ndarray,
+                        source: str = "hairline curve") -> None:
+    """Refuse curves off the head or crossing themselves.
+
+    Parameters
+    ----------
+    curve : HairlineCurve
+    distance_to_head : (P,) float64
+        Unsigned distance (m) of each curve point to the head surface.
+    front_view : (P, 2) float64
+        The points projected on the head's front view (e.g. side and up coordinates of the
+        head frame), where a hairline must not cross itself.
+    """
+    far = np.flatnonzero(np.abs(distance_to_head) > MAX_DISTANCE_TO_HEAD)
+    if len(far):
+        raise InputError(
+            f"{len(far)} curve points are more than {100 * MAX_DISTANCE_TO_HEAD:g} cm off the head "
+            f"(first: point {far[0]}, {100 * abs(distance_to_head[far[0]]):.1f} cm)", source, "off_head")
+    crossing = first_self_crossing(front_view)
+    if crossing is not None:
+        raise InputError(f"the curve crosses itself (segments {crossing[0]} and {crossing[1]})", source,
+                         "self_intersecting")
+
+
+def first_self_crossing(polyline: np.ndarray) -> tuple[int, int] | None:
+    """The first pair of non-adjacent segments of a 2D polyline ``(P, 2)`` that cross, or None.
+
+    All pairs are tested at once (a drawn hairline has at most a few hundred points).
+    """
+    a, b = polyline[:-1], polyline[1:]
+    m = len(a)
+    if m < 3:
+        return None
+    i, j = np.triu_indices(m, k=2)
+    p, r = a[i], b[i] - a[i]
+    q, s = a[j], b[j] - a[j]
+    cross = r[:, 0] * s[:, 1] - r[:, 1] * s[:, 0]
+    qp = q - p
+    parallel = np.abs(cross) < 1e-300
+    safe = np.where(parallel, 1.0, cross)
+    t = (qp[:, 0] * s[:, 1] - qp[:, 1] * s[:, 0]) / safe
+    u = (qp[:, 0] * r[:, 1] - qp[:, 1] * r[:, 0]) / safe
+    hit = ~parallel & (t >= 0) & (t <= 1) & (u >= 0) & (u <= 1)
+    if not hit.any():
+        return None
+    first = int(np.argmax(hit))
+    return int(i[first]), int(j[first])

@@ -1,0 +1,91 @@
+"""Hairline inputs and the adaptive weights of Eq. 20 (solver/hairline.py)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hairport.solver.errors import InputError
+from hairport.solver.hair import Hair
+from hairport.solver.hairline import (
+    GAMMA_SIGMA,
+    adaptive_weights,
+    check_curve_on_head,
+    first_self_crossing,
+    parse_hairline_curve,
+    read_hairline_curve,
+)
+
+
+def straight_strands():
+    """Two strands of 4 particles, 1 cm apart along z."""
+    strand = np.array([[0, 0, 0], [0, 0, 0.01], [0, 0, 0.02], [0, 0, 0.03]], dtype=float)
+    return Hair.from_strands([strand, strand + [0.1, 0, 0]])
+
+
+def test_weights_are_zero_at_a_moved_root_and_one_for_unmoved_strands():
+    hair = straight_strands()
+    gamma = adaptive_weights(hair, np.array([0.02, 0.0]))
+    assert gamma[0] == 0.0
+    np.testing.assert_array_equal(gamma[4:], 1.0)  # root did not move: r = 0 -> gamma = 1
+    s = np.array([0.0, 0.01, 0.02, 0.03])
+    np.testing.assert_allclose(gamma[:4], 1 - np.exp(-GAMMA_SIGMA * (s / 0.02) ** 2), rtol=0, atol=1e-15)
+    assert np.all(np.diff(gamma[:4]) > 0)  # grows along the strand
+
+
+def test_weights_tend_to_one_far_along_the_strand():
+    long = Hair.from_strands([np.column_stack([np.zeros(50), np.zeros(50), np.linspace(0, 1.0, 50)])])
+    gamma = adaptive_weights(long, np.array([0.01]))
+    assert gamma[-1] > 1 - 1e-12 and gamma[0] == 0
+
+
+def test_weights_refuse_a_wrong_shape():
+    with pytest.raises(ValueError, match=r"expected \(2,\)"):
+        adaptive_weights(straight_strands(), np.zeros(3))
+
+
+def test_curve_parsing_converts_units_and_keeps_turning_points():
+    curve = parse_hairline_curve({"units": "cm", "points": [[0, 0, 0], [1, 0, 0], [2, 1, 0], [3, 1, 0]],
+                                  "turning_points": [0, 2, 3]})
+    np.testing.assert_allclose(curve.points[2], [0.02, 0.01, 0.0])
+    assert curve.turning_points.tolist() == [0, 2, 3]
+
+
+@pytest.mark.parametrize("document, code", [
+    ([1, 2, 3], "bad_curve"),
+    ({"points": [[0, 0, 0], [1, 0, 0]]}, "too_few_points"),
+    ({"points": [[0, 0], [1, 0], [2, 0]]}, "bad_curve"),
+    ({"points": [[0, 0, 0], [1, 0, float("nan")], [2, 0, 0]]}, "non_finite"),
+    ({"points": [[0, 0, 0], [0, 0, 0], [2, 0, 0]]}, "bad_curve"),
+    ({"points": [[0, 0, 0], [1, 0, 0], [2, 0, 0]], "turning_points": [0, 3]}, "bad_curve"),
+    ({"points": [[0, 0, 0], [1, 0, 0], [2, 0, 0]], "turning_points": [2, 1]}, "bad_curve"),
+    ({"points": [[0, 0, 0], [1, 0, 0], [2, 0, 0]], "units": "ft"}, "unknown_units"),
+])
+def test_malformed_curves_are_refused(document, code):
+    with pytest.raises(InputError) as caught:
+        parse_hairline_curve(document, "new-hairline.json")
+    assert caught.value.code == code and "new-hairline.json" in str(caught.value)
+
+
+def test_curve_file_errors_name_the_file(tmp_path):
+    bad = tmp_path / "curve.json"
+    bad.write_text("{not json")
+    with pytest.raises(InputError, match="curve.json: not valid JSON"):
+        read_hairline_curve(bad)
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"points": [[0, 0, 0], [0.01, 0, 0], [0.02, 0.005, 0]]}))
+    assert read_hairline_curve(good).points.shape == (3, 3)
+
+
+def test_self_crossing_and_off_head_curves_are_refused():
+    zigzag = np.array([[0, 0], [2, 0], [2, 1], [1, -1]], dtype=float)  # last segment crosses the first
+    assert first_self_crossing(zigzag) == (0, 2)
+    arch = np.array([[0, 0], [1, 1], [2, 1.2], [3, 1], [4, 0]], dtype=float)
+    assert first_self_crossing(arch) is None
+    curve = parse_hairline_curve({"points": np.column_stack([zigzag, np.zeros(4)]).tolist()})
+    with pytest.raises(InputError) as caught:
+        check_curve_on_head(curve, np.zeros(4), zigzag)
+    assert caught.value.code == "self_intersecting"
+    with pytest.raises(InputError) as caught:
+        check_curve_on_head(curve, np.array([0.0, 0.001, 0.05, 0.0]), arch[:4])
+    assert caught.value.code == "off_head" and "point 2" in str(caught.value) and "5.0 cm" in str(caught.value)
