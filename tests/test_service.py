@@ -343,6 +343,10 @@ def test_bad_retarget_requests(service, uploaded):
     assert_problem(client.post("/v1/retargets", headers=AUTH, json={**base, "target_character_ids": []}), 422,
                    "invalid_request")
     assert_problem(client.post("/v1/retargets", headers=OTHER, json=base), 404, "not_found")
+    body = assert_problem(client.post("/v1/retargets", headers=AUTH,
+                                      json={**base, "hairline": {"preset": "widows-peak", "amount": 0.5}}),
+                          422, "hairline_unavailable")
+    assert "hairline" in body["detail"]
 
 
 def test_bad_target_fails_its_job_and_the_worker_lives_on(service, files, uploaded):
