@@ -23,7 +23,6 @@ Times are wall-clock medians; the CPU column is process time, steadier on a shar
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 
 import numpy as np
@@ -32,28 +31,7 @@ from hairport.solver import distance_grid
 from hairport.solver.distance_grid import DistanceGrid, near_mask
 from hairport.solver.geometry import MeshQuery
 
-
-def timed(fn, runs, warm_up=True):
-    if warm_up:
-        fn()  # lazy structures, caches
-    walls, cpus = [], []
-    for _ in range(runs):
-        w, c = time.perf_counter(), time.process_time()
-        fn()
-        walls.append(time.perf_counter() - w)
-        cpus.append(time.process_time() - c)
-    return statistics.median(walls), statistics.median(cpus)
-
-
-def strand_points(vertices, n, rng, per_strand=100):
-    """Hair-like points that leave the body: strands of ``per_strand`` particles from random
-    vertices, 3 mm apart with a random walk (reaching ~30 cm out), in strand order."""
-    m = n // per_strand
-    roots = vertices[rng.integers(0, len(vertices), m)]
-    heading = rng.normal(size=(m, 3))
-    heading /= np.linalg.norm(heading, axis=1, keepdims=True)
-    steps = heading[:, None] * 0.003 + rng.normal(scale=0.001, size=(m, per_strand, 3))
-    return (roots[:, None] + np.cumsum(steps, axis=1)).reshape(-1, 3)
+from geometry import strand_points, timed  # bench/geometry.py, beside this script
 
 
 def broad_phase(grid, query, band):

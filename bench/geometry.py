@@ -60,8 +60,10 @@ def strand_points(vertices, n, rng, per_strand=100):
     return (roots[:, None] + np.cumsum(steps, axis=1)).reshape(-1, 3)
 
 
-def timed(fn, runs):
-    fn()  # warm-up: lazy structures, caches
+def timed(fn, runs, warm_up=True):
+    """Median wall and CPU seconds of ``runs`` calls (after one warm-up call unless told not to)."""
+    if warm_up:
+        fn()  # lazy structures, caches
     walls, cpus = [], []
     for _ in range(runs):
         w, c = time.perf_counter(), time.process_time()

@@ -47,18 +47,11 @@ def groom_shape(particles: int) -> tuple[int, int]:
     return max(1, round(particles / per_strand)), per_strand
 
 
-def _peak_rss_bytes() -> int:
+def _status_bytes(field: str) -> int:
+    """A memory figure of this process from /proc/self/status (``VmHWM``: peak, ``VmRSS``: now)."""
     with open("/proc/self/status") as status:
         for line in status:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _current_rss_bytes() -> int:
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
+            if line.startswith(f"{field}:"):
                 return int(line.split()[1]) * 1024
     return 0
 
@@ -89,13 +82,13 @@ def measure_size(args) -> dict:
 
     options = pipeline.RetargetOptions(method="multiscale", workers=args.workers)
     runs, result = [], None
-    base_rss = _current_rss_bytes()
+    base_rss = _status_bytes("VmRSS")
     can_reset = _reset_peak()
     for _ in range(args.runs):
         began = time.perf_counter()
         result = pipeline.retarget(adaptable, target, options)
         runs.append({"total": time.perf_counter() - began, **result.timings})
-    peak = _peak_rss_bytes()
+    peak = _status_bytes("VmHWM")
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
     np.save(args.save, result.hair.points)
 

@@ -5,7 +5,7 @@
    the coupled solver of :mod:`.qp`.
 3. Fine level (Eq. 14): every other ("normal") particle takes its kNN from guide particles
    only; with the guides adapted, these neighbours are constants and all normal strands
-   are independent (:mod:`.fine_solve`). They are solved in chunks of whole strands, so
+   are independent (:mod:`.strand_solver`). They are solved in chunks of whole strands, so
    memory stays bounded, optionally in parallel processes.
 
 Convention: particles ``(N, 3) float64`` in meters, CSR strands (:mod:`.hair`); guide
@@ -258,24 +258,31 @@ def solve_multiscale(
         chunks = chunk_strands(counts, chunk_particles)
         report.chunks = len(chunks)
         report.workers = max(1, min(workers, len(chunks)))
-        pieces = [problem.subset(chunk) for chunk in chunks]
-        results: list[tuple[np.ndarray, StrandSolveReport]] = []
+        indices: list[np.ndarray] = []
+
+        def pieces():
+            # one chunk's copy at a time in this process (the pool keeps its own queue)
+            for chunk in chunks:
+                piece, index = problem.subset(chunk)
+                indices.append(index)
+                yield piece
+
+        def store(number: int, solved: np.ndarray, fine_report: StrandSolveReport) -> None:
+            points[fine.particles[indices[number]]] = solved
+            report.fine.append(fine_report)
+            progress(0.5 + 0.5 * (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
+
         if report.workers == 1:
             distance = BodyDistance(target, CONTACT_BAND, None if grid is None else grid.lower_bound)
-            for number, (piece, _) in enumerate(pieces):
-                results.append(solve_strands(piece, distance, weights, options, should_stop=should_stop))
-                progress(0.5 + 0.5 * (number + 1) / len(pieces), f"strands: chunk {number + 1}/{len(pieces)}")
+            for number, piece in enumerate(pieces()):
+                store(number, *solve_strands(piece, distance, weights, options, should_stop=should_stop))
         else:
-            jobs = [(piece, target.vertices, target.faces, grid, weights, options) for piece, _ in pieces]
+            jobs = ((piece, target.vertices, target.faces, grid, weights, options) for piece in pieces())
             with ProcessPoolExecutor(report.workers, mp_context=get_context("spawn")) as pool:
                 for number, result in enumerate(pool.map(_solve_chunk, jobs)):
-                    results.append(result)
-                    progress(0.5 + 0.5 * (number + 1) / len(pieces), f"strands: chunk {number + 1}/{len(pieces)}")
+                    store(number, *result)
                     if should_stop is not None and should_stop():
                         pool.shutdown(cancel_futures=True)
                         raise Cancelled("solve cancelled")
-        for (_, index), (solved, fine_report) in zip(pieces, results):
-            points[fine.particles[index]] = solved
-            report.fine.append(fine_report)
     report.fine_seconds = time.perf_counter() - began
     return points, report
