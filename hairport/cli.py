@@ -75,8 +75,35 @@ def _add_retarget(sub) -> None:
     p.add_argument("--workers", type=int, default=None, help="processes for the multi-scale fine level (default: CPUs)")
     p.add_argument("--qp-backend", default="active-set", choices=QP_BACKENDS,
                    help="solver of the coupled QPs (default active-set)")
+    _add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_retarget)
+
+
+def _add_hairline_arguments(p) -> None:
+    from .solver.parameterization import PARAMETERIZATIONS
+    from .solver.pipeline import HAIRLINE_PRESETS, RELOCATION_METHODS
+
+    edit = p.add_mutually_exclusive_group()
+    edit.add_argument("--hairline", metavar="PRESET[:AMOUNT]",
+                      help=f"edit the front hairline: one of {', '.join(HAIRLINE_PRESETS)}, "
+                           "amount in [0, 1] (default 1)")
+    edit.add_argument("--hairline-curve", metavar="FILE.json",
+                      help='edit the front hairline to a drawn curve: {"units": "m", "points": [[x, y, z], ...], '
+                           '"turning_points": [i, ...]} (see `hairport hairline`)')
+    p.add_argument("--hairline-method", default="membrane", choices=RELOCATION_METHODS,
+                   help="how the roots follow the hairline: the embedded membrane (default) or a baseline")
+    p.add_argument("--parameterization", default="harmonic", choices=PARAMETERIZATIONS,
+                   help="head parameterization the scalp moves in (default harmonic)")
+
+
+def _hairline_edit(args: argparse.Namespace):
+    from .solver import pipeline
+
+    if args.hairline is None and args.hairline_curve is None:
+        return None
+    return pipeline.hairline_edit(preset=args.hairline, curve_path=args.hairline_curve,
+                                  method=args.hairline_method, parameterization=args.parameterization)
 
 
 def _preprocess_options(args: argparse.Namespace):
@@ -157,7 +184,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
         format_for_path(args.hair)
     options = pipeline.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
                                        max_iterations=args.max_iterations, workers=args.workers,
-                                       qp_backend=args.qp_backend)
+                                       qp_backend=args.qp_backend, hairline=_hairline_edit(args))
     options.validate()
     began = time.perf_counter()
     if args.adaptable:
@@ -192,6 +219,11 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     print(f"penetrating particles {m['penetrating_particles']}, mean segment angle "
           f"{m['mean_segment_angle_rad']:.4f} rad, inter-strand error {m['interstrand_error_m']:.2e} m, "
           f"max root error {m['root_to_target_max']:.1e} m")
+    if "hairline" in m:
+        h = m["hairline"]
+        print(f"hairline {h['edit']} ({h['method']}): {h['roots_moved']} roots moved (largest "
+              f"{100 * h['max_travel_m']:.2f} cm), density change L1 {h['density_change_l1']:.3f} "
+              f"Linf {h['density_change_linf']:.3f}, relocation {h['seconds']:.2f} s")
     return 0
 
 
@@ -295,6 +327,56 @@ def cmd_purge(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_hairline(sub) -> None:
+    p = sub.add_parser("hairline", help="write a target's current front hairline (or a preset's edit) as curve JSON")
+    p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
+    _add_source_arguments(p, required=False)
+    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--target-skeleton", help="skeleton JSON of the target")
+    p.add_argument("--preset", metavar="PRESET[:AMOUNT]", help="write this preset's edit instead of the current hairline")
+    p.add_argument("--out", required=True, help="curve JSON to write")
+    _add_units(p)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(run=cmd_hairline)
+
+
+def _adaptable_from_args(args: argparse.Namespace, settings, progress):
+    """The adaptable hairstyle of --adaptable, or preprocessed from --source/--hair."""
+    from .solver import pipeline
+    from .solver.artifact import load_adaptable
+
+    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.guides is not None):
+        raise InputError("give either --adaptable or --source with --hair, not both "
+                         "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
+    if not args.adaptable and not (args.source and args.hair):
+        raise InputError("give --adaptable, or --source with --hair", code="bad_option")
+    if args.adaptable:
+        progress("load", 0.0, "reading the adaptable hairstyle")
+        return load_adaptable(args.adaptable)
+    source, hair = _load_source(args, settings, progress)
+    return pipeline.preprocess(source, hair, _preprocess_options(args), progress=progress)
+
+
+def cmd_hairline(args: argparse.Namespace) -> int:
+    from .outputs import OutputSet
+    from .settings import get_settings
+    from .solver import pipeline
+    from .solver.characterio import load_character
+
+    settings = get_settings()
+    progress = StageProgress(args.quiet)
+    adaptable = _adaptable_from_args(args, settings, progress)
+    target = load_character(args.target, skeleton_path=args.target_skeleton,
+                            units=_mesh_units(args, args.target, args.target_skeleton), **_mesh_limits(settings))
+    document = pipeline.hairline_document(adaptable, target, args.preset)
+    with OutputSet() as outputs:
+        outputs.add_json(args.out, document)
+        outputs.commit()
+    print(f"{args.out}: front hairline of {len(document['points'])} points, turning points "
+          f"{document['turning_points']}")
+    return 0
+
+
 def _add_openapi(sub) -> None:
     p = sub.add_parser("openapi", help="print or write the OpenAPI contract of the HTTP API (YAML)")
     p.add_argument("--out", help="write here instead of standard output")
@@ -336,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_worker(sub)
     _add_purge(sub)
     _add_openapi(sub)
+    _add_hairline(sub)
     return parser
 
 

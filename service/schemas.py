@@ -8,6 +8,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 HairFormat = Literal["data", "hair", "ply", "npz", "obj"]
 JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+HairlinePresetName = Literal["straight", "round", "widows-peak", "m-shape", "bell", "triangular", "sideburns", "receding"]
+#: most points of a drawn hairline accepted in a request
+MAX_CURVE_POINTS = 10_000
 
 
 class ErrorInfo(BaseModel):
@@ -63,15 +66,28 @@ class RetargetOptionsIn(BaseModel):
     qp_backend: Literal["active-set", "osqp"] = "active-set"
 
 
-class HairlinePreset(BaseModel):
+class HairlineCurveIn(BaseModel):
+    """A drawn front hairline, from one ear to the other (``hairport hairline`` writes the
+    current one to start from)."""
+
     model_config = ConfigDict(extra="forbid")
-    preset: str
-    amount: float = Field(0.5, ge=0.0, le=1.0)
+    units: Literal["m", "dm", "cm", "mm"] = "m"
+    points: list[list[float]] = Field(min_length=3, max_length=MAX_CURVE_POINTS,
+                                      description="[x, y, z] points on the target's head")
+    turning_points: list[int] = Field(default_factory=list, max_length=MAX_CURVE_POINTS,
+                                      description="indices of the corners matched to the hairline's, in order")
 
 
-class HairlineCurve(BaseModel):
+class HairlineIn(BaseModel):
+    """A hairline edit (paper Sec. 6): a preset or a drawn curve, exactly one."""
+
     model_config = ConfigDict(extra="forbid")
-    curve: dict
+    preset: HairlinePresetName | None = None
+    amount: float = Field(1.0, ge=0.0, le=1.0, description="strength of the preset (0: no change)")
+    curve: HairlineCurveIn | None = None
+    method: Literal["membrane", "harmonic", "rbf2d", "rbf3d"] = Field(
+        "membrane", description="how the roots follow: the embedded membrane, or a Sec. 7.5 baseline")
+    parameterization: Literal["harmonic", "lscm", "arap"] = "harmonic"
 
 
 class RetargetIn(BaseModel):
@@ -80,7 +96,7 @@ class RetargetIn(BaseModel):
     hairstyle_id: str
     target_character_ids: list[str] = Field(min_length=1)
     options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
-    hairline: HairlinePreset | HairlineCurve | None = None
+    hairline: HairlineIn | None = None
     output_format: HairFormat = "data"
 
 

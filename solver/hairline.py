@@ -26,6 +26,12 @@ MIN_CURVE_POINTS = 3
 MAX_CURVE_FILE_BYTES = 10 * 1024 * 1024
 #: a curve point farther than this from the head surface is "off the head" (m)
 MAX_DISTANCE_TO_HEAD = 0.02
+#: the scalp's hairline follows mesh edges in a staircase a few mm deep; arc lengths along
+#: hairlines and curves are measured on copies smoothed by a Gaussian of this width (m of
+#: arc length), so that a smooth drawn curve is met at even spacing
+ARC_SMOOTHING_M = 0.006
+#: resampling step of the smoothing, as a fraction of ARC_SMOOTHING_M
+SMOOTHING_STEP_SHARE = 0.25
 
 
 def adaptive_weights(hair: Hair, root_travel: np.ndarray, sigma: float = GAMMA_SIGMA) -> np.ndarray:
@@ -145,8 +151,8 @@ def check_curve_on_head(curve: HairlineCurve, distance_to_head: np.ndarray, fron
     distance_to_head : (P,) float64
         Unsigned distance (m) of each curve point to the head surface.
     front_view : (P, 2) float64
-        The points projected on the head's front view (e.g. side and up coordinates of the
-        head frame), where a hairline must not cross itself.
+        The points in a 2D map of the head (e.g. a head parameterization) where a hairline
+        must not cross itself.
     """
     far = np.flatnonzero(np.abs(distance_to_head) > MAX_DISTANCE_TO_HEAD)
     if len(far):
@@ -157,6 +163,49 @@ def check_curve_on_head(curve: HairlineCurve, distance_to_head: np.ndarray, fron
     if crossing is not None:
         raise InputError(f"the curve crosses itself (segments {crossing[0]} and {crossing[1]})", source,
                          "self_intersecting")
+
+
+def smooth_polyline(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.ndarray:
+    """A Gaussian-smoothed copy of a polyline, row for row.
+
+    The polyline is resampled at even arc-length steps, each coordinate is convolved with a
+    Gaussian of standard deviation ``width`` (m of arc length) and read back at the original
+    vertices' arc lengths. The ends stay where they are: the samples are extended past each
+    end by their point reflection through it, which the symmetric kernel averages back to the
+    end. Independent of how densely the polyline is sampled.
+
+    Parameters
+    ----------
+    points : (k, 3) float64
+    width : float
+        > 0 (m).
+
+    Returns
+    -------
+    smoothed : (k, 3) float64
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    points = np.asarray(points, dtype=np.float64)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    step = SMOOTHING_STEP_SHARE * width
+    samples = np.linspace(0.0, arc[-1], max(int(np.ceil(arc[-1] / step)) + 1, 2))
+    resampled = np.column_stack([np.interp(samples, arc, points[:, k]) for k in range(points.shape[1])])
+    sigma = width / (samples[1] - samples[0])
+    pad = min(int(np.ceil(4.0 * sigma)), len(samples) - 1)
+    extended = np.concatenate([
+        2.0 * resampled[0] - resampled[pad:0:-1], resampled, 2.0 * resampled[-1] - resampled[-2:-2 - pad:-1]
+    ])
+    smooth = gaussian_filter1d(extended, sigma, axis=0, mode="nearest", truncate=4.0)[pad:pad + len(samples)]
+    smooth[[0, -1]] = resampled[[0, -1]]
+    return np.column_stack([np.interp(arc, samples, smooth[:, k]) for k in range(points.shape[1])])
+
+
+def smoothed_arc_length(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.ndarray:
+    """(k,) cumulative arc length (m) of a polyline ``(k, 3)`` measured on its smoothed copy
+    (:func:`smooth_polyline`): non-decreasing, 0 at the first vertex."""
+    smooth = smooth_polyline(points, width)
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(smooth, axis=0), axis=1))])
 
 
 def first_self_crossing(polyline: np.ndarray) -> tuple[int, int] | None:

@@ -65,6 +65,12 @@ DEFAULT_STEP_TOLERANCE = 1e-9
 #: stop also when the squared Newton decrement ``-g . d`` falls below this share of
 #: ``mu * (total rest area)`` (dimensionless; near the round-off of the energy itself)
 DECREMENT_TOLERANCE = 1e-15
+#: default relative energy decrease of one accepted step below which a stage has stalled
+#: (converged): on the piecewise-linear head, vertices that reach a head edge make the
+#: step test wait for ever shorter kink-limited steps that no longer change the energy
+DEFAULT_ENERGY_TOLERANCE = 1e-7
+#: the same for the intermediate load stages, whose results only start the next stage
+STAGE_ENERGY_TOLERANCE = 1e-5
 #: default cap on Newton iterations (all load stages together)
 DEFAULT_MAX_ITERATIONS = 100
 #: step halvings tried by the backtracking line search before giving up
@@ -77,6 +83,9 @@ REGULARISATION_SHARE = 1e-10
 #: diagonal shift of the unit-weight graph Laplacian (neighbour counts, ~6) in the
 #: harmonic start, so that scalp pieces with no fixed vertex get zero motion
 HARMONIC_SHIFT = 1e-12
+#: a scalp triangle whose uv area falls below this share of its starting one meets the fold
+#: barrier of :func:`fold_barrier`
+FOLD_THRESHOLD = 0.1
 #: boundary-motion fractions below this are not split further (load stepping, relocate)
 MIN_LOAD_FRACTION = 1.0 / 1024.0
 
@@ -478,23 +487,24 @@ def _position_hessians(F: np.ndarray, B: np.ndarray, areas: np.ndarray, mu: floa
     ``mu (B B^T)_kl d_ij + lam W_ki W_lj + s (B C^-1 B^T)_kl Q_ij - s W_kj W_li``.
     """
     _, (Cinv, G, s) = _first_piola(F, mu, lam)
-    W = np.einsum("tka,tia->tki", B, G)
-    BBt = np.einsum("tka,tla->tkl", B, B)
-    BCB = np.einsum("tka,tab,tlb->tkl", B, Cinv, B)
-    Q = np.eye(3)[None] - np.einsum("tia,tja->tij", F, G)
-    eye = np.eye(3)
-    H = mu * np.einsum("tkl,ij->tkilj", BBt, eye)
-    H += lam * np.einsum("tki,tlj->tkilj", W, W)
-    H += s[:, None, None, None, None] * (np.einsum("tkl,tij->tkilj", BCB, Q) - np.einsum("tkj,tli->tkilj", W, W))
+    W = B @ np.transpose(G, (0, 2, 1))  # (m, k, i)
+    BBt = B @ np.transpose(B, (0, 2, 1))
+    BCB = B @ Cinv @ np.transpose(B, (0, 2, 1))
+    Q = np.eye(3)[None] - F @ np.transpose(G, (0, 2, 1))
+    s5 = s[:, None, None, None, None]
+    # broadcast outer products: [t, k, i, l, j]
+    H = (mu * BBt)[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
+    H = H + lam * W[:, :, :, None, None] * W[:, None, None, :, :]
+    H += s5 * (BCB[:, :, None, :, None] * Q[:, None, :, None, :])
+    H -= s5 * (W[:, :, None, None, :] * np.transpose(W, (0, 2, 1))[:, None, :, :, None])
     return areas[:, None, None, None, None] * H
 
 
 def _project_psd(H: np.ndarray) -> np.ndarray:
-    """Symmetric ``(m, 9, 9)`` blocks with negative eigenvalues set to 0."""
+    """Symmetric ``(m, d, d)`` blocks with negative eigenvalues set to 0."""
     H = 0.5 * (H + np.transpose(H, (0, 2, 1)))
     w, V = np.linalg.eigh(H)
-    return np.einsum("tik,tk,tjk->tij", V, np.maximum(w, 0.0), V)
-
+    return (V * np.maximum(w, 0.0)[:, None, :]) @ np.transpose(V, (0, 2, 1))
 
 
 def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -507,19 +517,33 @@ def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, 
     return F, np.column_stack([np.bincount(flat, gx[:, :, c].ravel(), minlength=n) for c in range(3)])
 
 
-def _assemble_hessian(membrane: Membrane, F: np.ndarray, M: np.ndarray, project: bool) -> sp.csr_matrix:
-    """``(2n, 2n)`` Hessian in u from per-triangle 9x9 blocks in x and per-vertex ``M (n, 3, 2)``."""
+def _parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Exact per-triangle Hessians ``(m, 6, 6)`` in the corners' parameters: ``J^T H_x J``
+    with the block-diagonal ``J (m, 9, 6)`` of the corners' Jacobians ``M (n, 3, 2)``."""
     m = len(membrane.triangles)
     H = _position_hessians(F, _corner_weights(membrane), membrane.areas, membrane.mu, membrane.lam).reshape(m, 9, 9)
-    if project:
-        H = _project_psd(H)
-    Mt = M[membrane.triangles]  # (m, 3 corners, 3, 2)
-    Hu = np.einsum("tkia,tkilj,tljb->tkalb", Mt, H.reshape(m, 3, 3, 3, 3), Mt).reshape(m, 6, 6)
-    dof = (2 * membrane.triangles[:, :, None] + np.arange(2)[None, None, :]).reshape(m, 6)
+    J = np.zeros((m, 3, 3, 3, 2))  # [t, k, i, l, a]: corner k's row i, corner l's column a
+    Mt = M[membrane.triangles]  # (m, 3, 3, 2)
+    for k in range(3):
+        J[:, k, :, k, :] = Mt[:, k]
+    J = J.reshape(m, 9, 6)
+    return np.transpose(J, (0, 2, 1)) @ H @ J
+
+
+def _assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
+    """``(2n, 2n)`` matrix from per-triangle ``(m, 6, 6)`` blocks over the corners' parameters."""
+    m = len(triangles)
+    dof = (2 * triangles[:, :, None] + np.arange(2)[None, None, :]).reshape(m, 6)
     rows = np.repeat(dof, 6, axis=1).ravel()
     cols = np.tile(dof, (1, 6)).ravel()
-    n2 = 2 * len(M)
-    return sp.coo_matrix((Hu.ravel(), (rows, cols)), shape=(n2, n2)).tocsr()
+    return sp.coo_matrix((blocks.ravel(), (rows, cols)), shape=(2 * n, 2 * n)).tocsr()
+
+
+def _assemble_hessian(membrane: Membrane, F: np.ndarray, M: np.ndarray, project: bool) -> sp.csr_matrix:
+    """``(2n, 2n)`` Hessian in u from per-triangle blocks and per-vertex ``M (n, 3, 2)``;
+    ``project`` clamps each triangle's 6x6 block in its corners' parameters to PSD."""
+    blocks = _parameter_blocks(membrane, F, M)
+    return _assemble_blocks(membrane.triangles, _project_psd(blocks) if project else blocks, len(M))
 
 
 def _located(chart: HeadChart, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -565,9 +589,10 @@ def membrane_gradient(membrane: Membrane, chart: HeadChart, u: np.ndarray) -> np
 def membrane_hessian(membrane: Membrane, chart: HeadChart, u: np.ndarray, project: bool = True) -> sp.csr_matrix:
     """``d^2E/du^2 (2n, 2n)``, vertex-major, hosts fixed.
 
-    Each triangle's ``9x9`` Hessian in its corners' 3D positions is (when ``project``)
-    made positive semi-definite by clamping its eigenvalues at 0, then mapped to the
-    corners' parameters by the per-vertex Jacobians (``J^T H J``, ``6x6``) and assembled.
+    Each triangle's ``9x9`` Hessian in its corners' 3D positions is mapped to the corners'
+    parameters by the per-vertex Jacobians (``J^T H J``, ``6x6``), then (when ``project``)
+    made positive semi-definite by clamping its eigenvalues at 0 (the projection acts on
+    the unknowns themselves), and assembled.
 
     Parameters
     ----------
@@ -583,6 +608,78 @@ def membrane_hessian(membrane: Membrane, chart: HeadChart, u: np.ndarray, projec
     """
     host, x = _located(chart, u)
     return _assemble_hessian(membrane, deformation_gradients(membrane, x), chart.jacobians(host), project)
+
+
+#: d(2 * signed uv area) / d u as a constant (6, 6) Hessian over a triangle's corner
+#: parameters (vertex-major): twice the area is ``(u1 - u0) x (u2 - u0)``
+_AREA_HESSIAN = np.zeros((6, 6))
+for _k in range(3):
+    _AREA_HESSIAN[2 * _k, 2 * ((_k + 1) % 3) + 1] = 1.0  # d/du_{k,x} of (u_{k+1,y} - u_{k+2,y})
+    _AREA_HESSIAN[2 * _k, 2 * ((_k + 2) % 3) + 1] = -1.0
+    _AREA_HESSIAN[2 * _k + 1, 2 * ((_k + 2) % 3)] = 1.0  # d/du_{k,y} of (u_{k+2,x} - u_{k+1,x})
+    _AREA_HESSIAN[2 * _k + 1, 2 * ((_k + 1) % 3)] = -1.0
+_AREA_HESSIAN *= 0.5
+
+
+def fold_barrier(
+    triangles: np.ndarray, u: np.ndarray, rest_uv_areas: np.ndarray, weights: np.ndarray,
+    threshold: float = FOLD_THRESHOLD,
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """A barrier against folding the scalp over the head, in the parameterization.
+
+    Eq. 15's ``J`` measures a deformed triangle's 3D area, which a triangle folded across a
+    bend of the piecewise-flat head keeps (its corners are not collinear in 3D even where
+    they are in uv): near a fold the membrane feels little resistance. Each triangle whose
+    uv area ratio ``r = a / a_0`` to its starting one is below ``r^ = threshold`` adds
+    ``w_t b(r)`` with the C2 log barrier ``b(r) = -(r - r^)^2 ln(r / r^)`` (zero with its
+    first two derivatives at ``r^``, infinite at 0). Above the threshold, i.e. away from
+    ten-fold compressions, it is exactly zero and the result is Eq. 15's.
+
+    Parameters
+    ----------
+    triangles : (m, 3) int64
+    u : (n, 2) float64
+    rest_uv_areas : (m,) float64
+        Positive signed uv areas at the start.
+    weights : (m,) float64
+        ``w_t`` (J), e.g. ``mu * A_t``.
+    threshold : float
+
+    Returns
+    -------
+    energy : float
+        ``+inf`` if a triangle has ``r <= 0``.
+    gradient : (n, 2) float64
+    blocks : (m, 6, 6) float64
+        Per-triangle Hessians over the corners' parameters (zero where inactive).
+    """
+    n, m = len(u), len(triangles)
+    ratio = signed_uv_areas(triangles, u) / rest_uv_areas
+    gradient = np.zeros((n, 2))
+    blocks = np.zeros((m, 6, 6))
+    active = np.flatnonzero(ratio < threshold)
+    if len(active) == 0:
+        return 0.0, gradient, blocks
+    r = ratio[active]
+    if (r <= 0).any():
+        return np.inf, gradient, blocks
+    log = np.log(r / threshold)
+    gap = r - threshold
+    energy = float(np.sum(weights[active] * -(gap**2) * log))
+    db = -2.0 * gap * log - gap**2 / r
+    d2b = -2.0 * log - 4.0 * gap / r + gap**2 / r**2
+    U = u[triangles[active]]  # (a, 3, 2)
+    nxt, prv = U[:, [1, 2, 0]], U[:, [2, 0, 1]]
+    # d(signed area)/du_k = 0.5 (u_{k+1,y} - u_{k+2,y}, u_{k+2,x} - u_{k+1,x})
+    d_area = 0.5 * np.stack([nxt[..., 1] - prv[..., 1], prv[..., 0] - nxt[..., 0]], axis=2).reshape(-1, 6)
+    d_ratio = d_area / rest_uv_areas[active, None]
+    w = weights[active]
+    per_corner = ((w * db)[:, None] * d_ratio).reshape(-1, 3, 2)
+    for c in range(2):
+        gradient[:, c] = np.bincount(triangles[active].ravel(), per_corner[..., c].ravel(), minlength=n)
+    blocks[active] = (w * d2b)[:, None, None] * d_ratio[:, :, None] * d_ratio[:, None, :] + (
+        (w * db) / rest_uv_areas[active])[:, None, None] * _AREA_HESSIAN[None]
+    return energy, gradient, blocks
 
 
 def signed_uv_areas(triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -637,6 +734,11 @@ class RelocationReport:
         the energy where both sides go uphill).
     exact_steps : int
         Accepted steps that used the exact instead of the projected Hessian (``polish``).
+    stop : str
+        Why the last stage stopped: ``"step"`` (largest step below the tolerance),
+        ``"decrement"`` (Newton decrement at round-off), ``"energy"`` (a step lowered the
+        energy by less than the relative tolerance), ``"line_search"`` (no admissible
+        descent along the Newton direction) or ``"iterations"``.
     """
 
     iterations: int = 0
@@ -648,6 +750,7 @@ class RelocationReport:
     start: list[str] = field(default_factory=list)
     held: list[int] = field(default_factory=list)
     exact_steps: int = 0
+    stop: str = ""
 
 
 def _uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
@@ -774,6 +877,7 @@ def relocate(
     max_iterations: int = DEFAULT_MAX_ITERATIONS,
     tolerance: float = DEFAULT_STEP_TOLERANCE,
     polish: bool = True,
+    energy_tolerance: float = DEFAULT_ENERGY_TOLERANCE,
 ) -> tuple[np.ndarray, RelocationReport]:
     """Minimise Eq. 15 over the free scalp parameters with the hairline pinned (projected Newton).
 
@@ -782,8 +886,10 @@ def relocate(
     most :data:`MAX_BACKTRACKS`) until the trial point keeps every vertex inside the chart,
     every scalp triangle's signed uv area of its sign in ``u_start``, and satisfies Armijo;
     hosts are located anew at every evaluation. Stops when the largest vertex step
-    ``|d|`` is below ``tolerance`` or the squared Newton decrement ``-g . d`` below
-    :data:`DECREMENT_TOLERANCE` ``* mu * sum A_t``.
+    ``|d|`` is below ``tolerance``, the squared Newton decrement ``-g . d`` below
+    :data:`DECREMENT_TOLERANCE` ``* mu * sum A_t``, or an accepted step lowered the energy
+    by less than ``energy_tolerance`` of it (:data:`STAGE_ENERGY_TOLERANCE` at least for
+    intermediate load stages); :attr:`RelocationReport.stop` says which.
 
     Kinks: ``x(u)`` is only piecewise affine, so ``E(u)`` has kinks along the head's edges
     (in uv). Where the head bends, a stretched membrane's minimiser often puts vertices
@@ -795,6 +901,9 @@ def relocate(
     direction is held there; the others are differentiated in their downhill side. The
     holds are re-decided every iteration, so a converged result is a stationary point of
     the piecewise-smooth energy.
+
+    The energy minimised is Eq. 15 plus :func:`fold_barrier` (zero unless a triangle is
+    compressed ten-fold in uv), which keeps triangles from folding across the head's bends.
 
     The fixed vertices are first set to ``u_fixed``. If that flips a triangle, the boundary
     motion is extended to the free vertices harmonically; if that flips too, the motion is
@@ -815,6 +924,8 @@ def relocate(
         Newton steps, all stages together.
     tolerance : float
         Largest vertex step (uv units) counted as converged.
+    energy_tolerance : float
+        Relative energy decrease of a step counted as converged.
     polish : bool
         After a full projected step, first try the exact Hessian's full step (kept only if
         it is a descent direction, admissible and passes Armijo). Near a minimiser with
@@ -848,6 +959,9 @@ def relocate(
 
     report = RelocationReport()
     free = ~fixed
+    oriented = np.where((orientation < 0)[:, None], membrane.triangles[:, [0, 2, 1]], membrane.triangles)
+    rest_uv = signed_uv_areas(oriented, u_start)
+    barrier_weights = membrane.mu * membrane.areas
     energy_scale = membrane.mu * float(membrane.areas.sum())
     laplacian = None
 
@@ -857,8 +971,35 @@ def relocate(
             return None
         if (signed_uv_areas(membrane.triangles, u) * orientation <= 0).any():
             return None
-        energy = membrane_energy(membrane, chart, u)
+        energy = membrane_energy(membrane, chart, u) + barrier(u)[0]
         return energy if np.isfinite(energy) else None
+
+    def barrier(u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        return fold_barrier(oriented, u, rest_uv, barrier_weights)
+
+    def elastic_start(u: np.ndarray, target: np.ndarray) -> np.ndarray | None:
+        """One Newton step of Eq. 15 with the hairline moved to ``target`` (an inhomogeneous
+        Dirichlet step): the free vertices follow the boundary motion as the linearised
+        membrane does, at the current hosts."""
+        host, barycentric = chart.locate(u)
+        x = np.einsum("nk,nkc->nc", barycentric, chart.vertices[chart.faces[host]])
+        F, gx = _position_gradients(membrane, x)
+        M = chart.jacobians(host)
+        _, fold_gradient, fold_blocks = barrier(u)
+        H = (_assemble_blocks(membrane.triangles, _project_psd(_parameter_blocks(membrane, F, M)), n)
+             + _assemble_blocks(oriented, _project_psd(fold_blocks), n))
+        g = (np.einsum("nia,ni->na", M, gx) + fold_gradient).ravel()
+        free2, fixed2 = np.repeat(free, 2), np.repeat(fixed, 2)
+        H_ff = H[free2][:, free2]
+        shift = REGULARISATION_SHARE * max(float(np.abs(H_ff.diagonal()).max()), np.finfo(float).tiny)
+        rhs = -(g[free2] + H[free2][:, fixed2] @ (target - u[fixed]).ravel())
+        step = spla.spsolve((H_ff + shift * sp.identity(H_ff.shape[0])).tocsc(), rhs)
+        if not np.isfinite(step).all():
+            return None
+        extended = u.copy()
+        extended[fixed] = target
+        extended[free] += step.reshape(-1, 2)
+        return extended
 
     def stage_start(u: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, float, str] | None:
         nonlocal laplacian
@@ -867,6 +1008,10 @@ def relocate(
         energy = admissible(pinned)
         if energy is not None:
             return pinned, energy, "pinned"
+        extended = elastic_start(u, target)
+        energy = None if extended is None else admissible(extended)
+        if energy is not None:
+            return extended, energy, "elastic"
         if laplacian is None:
             laplacian = _uniform_laplacian(membrane.triangles, n)
         # a shift keeps components without a pinned vertex (zero motion) solvable
@@ -904,10 +1049,14 @@ def relocate(
         cols = np.concatenate([first, first + 1] + [2 * len(loose) + np.arange(len(edged))] * 2)
         vals = np.concatenate([np.ones(2 * len(loose)), tangent[edged, 0], tangent[edged, 1]])
         T = sp.csr_matrix((vals, (rows, cols)), shape=(2 * n, 2 * len(loose) + len(edged)))
-        gr = T.T @ np.einsum("nia,ni->na", M, gx).ravel()
-        hessians = [(T.T @ _assemble_hessian(membrane, F, M, project=True) @ T).tocsc()]
+        _, fold_gradient, fold_blocks = barrier(u)
+        gr = T.T @ (np.einsum("nia,ni->na", M, gx) + fold_gradient).ravel()
+        blocks = _parameter_blocks(membrane, F, M)
+        folds = _assemble_blocks(oriented, _project_psd(fold_blocks), n)
+        hessians = [(T.T @ (_assemble_blocks(membrane.triangles, _project_psd(blocks), n) + folds) @ T).tocsc()]
         if exact:
-            hessians.append((T.T @ _assemble_hessian(membrane, F, M, project=False) @ T).tocsc())
+            exact_folds = _assemble_blocks(oriented, fold_blocks, n)
+            hessians.append((T.T @ (_assemble_blocks(membrane.triangles, blocks, n) + exact_folds) @ T).tocsc())
         return u, energy, gr, hessians, T, host, int((free & (mode != FREE)).sum())
 
     def direction(u: np.ndarray, gr: np.ndarray, Hr: sp.csc_matrix, T: sp.csr_matrix, host: np.ndarray):
@@ -925,7 +1074,13 @@ def relocate(
         return d, float(-gr @ z), first_kink
 
     def small(d: np.ndarray, decrement2: float) -> bool:
-        return bool(np.sqrt((d**2).sum(axis=1)).max() < tolerance or decrement2 < DECREMENT_TOLERANCE * energy_scale)
+        if np.sqrt((d**2).sum(axis=1)).max() < tolerance:
+            report.stop = "step"
+            return True
+        if decrement2 < DECREMENT_TOLERANCE * energy_scale:
+            report.stop = "decrement"
+            return True
+        return False
 
     def finish(u: np.ndarray, energy: float, d: np.ndarray) -> tuple[np.ndarray, float]:
         """Take the last step when it is not below the tolerance: the decrement stopped the
@@ -954,7 +1109,10 @@ def relocate(
                 break
             fraction = 0.5 * (reached + fraction)
             if fraction - reached < MIN_LOAD_FRACTION:
-                raise InputError("the hairline motion cannot be reached without flipping scalp triangles", "relocate")
+                raise InputError(
+                    f"the hairline edit is too drastic for this scalp: beyond {100 * reached:.0f} % of the "
+                    "hairline's motion the scalp would fold over itself on the head; use a smaller amount "
+                    "or a curve closer to the current hairline", "relocate", "hairline_too_far")
         u, energy, how = started
         reached = fraction
         report.stages += 1
@@ -962,6 +1120,12 @@ def relocate(
         report.energy.append(energy)
         converged = not free.any()
         full_step = False
+        stall = energy_tolerance if reached >= 1.0 else max(energy_tolerance, STAGE_ENERGY_TOLERANCE)
+        report.stop = "step" if converged else "iterations"
+
+        def stalled(before: float, after: float) -> bool:
+            return before - after <= stall * abs(before)
+
         while not converged and report.iterations < max_iterations:
             exact = polish and full_step
             u, energy, gr, hessians, T, host, held = linearise(u, energy, exact)
@@ -976,11 +1140,14 @@ def relocate(
                         break
                     trial_energy = admissible(u + d)
                     if trial_energy is not None and trial_energy <= energy - ARMIJO * decrement2:
+                        converged = stalled(energy, trial_energy)
                         u, energy = u + d, trial_energy
                         report.iterations += 1
                         report.energy.append(energy)
                         report.step_sizes.append(1.0)
                         report.exact_steps += 1
+                        if converged:
+                            report.stop = "energy"
                         continue
             d, decrement2, first_kink = direction(u, gr, hessians[0], T, host)
             if small(d, decrement2):
@@ -998,7 +1165,11 @@ def relocate(
                 # land on the first kink rather than halving past it
                 alpha = first_kink if 0.5 * alpha <= first_kink < alpha else 0.5 * alpha
             if accepted is None:
+                report.stop = "line_search"
                 break
+            converged = stalled(energy, trial_energy)
+            if converged:
+                report.stop = "energy"
             u, energy = accepted, trial_energy
             full_step = alpha == 1.0
             report.iterations += 1

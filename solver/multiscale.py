@@ -166,10 +166,10 @@ def chunk_strands(counts: np.ndarray, chunk_particles: int) -> list[np.ndarray]:
 
 
 def _solve_chunk(args) -> tuple[np.ndarray, StrandSolveReport]:
-    problem, vertices, faces, grid, weights, options = args
+    problem, start, vertices, faces, grid, weights, options = args
     query = MeshQuery(vertices, faces)
     distance = BodyDistance(query, CONTACT_BAND, None if grid is None else grid.lower_bound)
-    return solve_strands(problem, distance, weights, options)
+    return solve_strands(problem, distance, weights, options, start=start)
 
 
 def solve_multiscale(
@@ -182,6 +182,7 @@ def solve_multiscale(
     weights: EnergyWeights = EnergyWeights(),
     options: SolveOptions = SolveOptions(),
     gamma: np.ndarray | None = None,
+    start: np.ndarray | None = None,
     workers: int = 1,
     chunk_particles: int = DEFAULT_CHUNK_PARTICLES,
     grid: DistanceGrid | None = None,
@@ -207,6 +208,9 @@ def solve_multiscale(
     options : SolveOptions
     gamma : (N,) float64, optional
         Eq. 21's weights.
+    start : (N, 3) float64, optional
+        First iterate (``initial`` by default); the roots stay where it puts them (Eq. 12,
+        relocated roots after a hairline edit).
     workers : int
         Processes for the fine level (1: in this process).
     chunk_particles : int
@@ -224,7 +228,8 @@ def solve_multiscale(
     report = MultiscaleReport(guides=len(model.guides))
     progress = progress or (lambda fraction, message: None)
     gamma_all = np.ones(hair.n_particles) if gamma is None else np.asarray(gamma, dtype=np.float64)
-    points = np.array(initial, dtype=np.float64)
+    first = np.asarray(initial if start is None else start, dtype=np.float64)
+    points = first.copy()
 
     began = time.perf_counter()
     guide_particles = particle_indices(hair.offsets, model.guides)
@@ -237,7 +242,7 @@ def solve_multiscale(
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(
         coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights, options,
-        gamma=gamma_all[guide_particles], backend=backend,
+        gamma=gamma_all[guide_particles], backend=backend, start=first[guide_particles],
         broad_phase=None if grid is None else grid.lower_bound, band=CONTACT_BAND,
         progress=coarse_progress, should_stop=should_stop,
     )
@@ -260,12 +265,14 @@ def solve_multiscale(
         report.workers = max(1, min(workers, len(chunks)))
         indices: list[np.ndarray] = []
 
+        fine_start = first[fine.particles]
+
         def pieces():
             # one chunk's copy at a time in this process (the pool keeps its own queue)
             for chunk in chunks:
                 piece, index = problem.subset(chunk)
                 indices.append(index)
-                yield piece
+                yield piece, fine_start[index]
 
         def store(number: int, solved: np.ndarray, fine_report: StrandSolveReport) -> None:
             points[fine.particles[indices[number]]] = solved
@@ -274,10 +281,12 @@ def solve_multiscale(
 
         if report.workers == 1:
             distance = BodyDistance(target, CONTACT_BAND, None if grid is None else grid.lower_bound)
-            for number, piece in enumerate(pieces()):
-                store(number, *solve_strands(piece, distance, weights, options, should_stop=should_stop))
+            for number, (piece, piece_start) in enumerate(pieces()):
+                store(number, *solve_strands(piece, distance, weights, options, start=piece_start,
+                                             should_stop=should_stop))
         else:
-            jobs = ((piece, target.vertices, target.faces, grid, weights, options) for piece in pieces())
+            jobs = ((piece, piece_start, target.vertices, target.faces, grid, weights, options)
+                    for piece, piece_start in pieces())
             with ProcessPoolExecutor(report.workers, mp_context=get_context("spawn")) as pool:
                 for number, result in enumerate(pool.map(_solve_chunk, jobs)):
                     store(number, *result)

@@ -47,7 +47,7 @@ from .scalp import Scalp, check_disk, face_adjacency, make_disk, submesh
 PARAMETERIZATIONS = ("harmonic", "lscm", "arap")
 #: rings of head faces (vertex-neighbour rings) added around the scalp; 1-3 cm each on
 #: the MakeHuman head
-DEFAULT_MARGIN_RINGS = 3
+DEFAULT_MARGIN_RINGS = 6
 #: local-global iterations of the ARAP parameterization
 ARAP_ITERATIONS = 50
 #: a parameterized triangle is flipped or degenerate when its signed area is below this

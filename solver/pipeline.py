@@ -27,6 +27,10 @@ from .hair import Hair
 from .metrics import hairstyle_metrics
 from .distance_grid import DistanceGrid
 from .guides import DEFAULT_GUIDES
+from .hairline import adaptive_weights, parse_hairline_curve, read_hairline_curve
+from .hairline_presets import PRESETS as HAIRLINE_PRESETS
+from .hairline_presets import parse_preset, preset_curve
+from .relocation import RELOCATION_METHODS, HairlineEdit, Relocation, relocate_roots, scalp_chart
 from .multiscale import (
     DEFAULT_CHUNK_PARTICLES,
     FineSource,
@@ -83,7 +87,8 @@ class RetargetOptions:
     baseline name, optionally with the ``+pushout`` suffix. ``workers`` processes share the
     multi-scale fine level (``None``: the CPUs available), in chunks of ``chunk_particles``.
     ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
-    active-set method of :mod:`.strand_solver` or OSQP.
+    active-set method of :mod:`.strand_solver` or OSQP. ``hairline`` edits the front
+    hairline (Sec. 6; solver methods only).
     """
 
     method: str = "multiscale"
@@ -97,6 +102,7 @@ class RetargetOptions:
     workers: int | None = None
     chunk_particles: int = DEFAULT_CHUNK_PARTICLES
     qp_backend: str = "active-set"
+    hairline: HairlineEdit | None = None
 
     def validate(self) -> None:
         if self.method not in SOLVER_METHODS:
@@ -122,6 +128,13 @@ class RetargetOptions:
             raise InputError("option workers must be >= 1", code="bad_option")
         if self.chunk_particles < 1:
             raise InputError("option chunk_particles must be >= 1", code="bad_option")
+        if self.hairline is not None:
+            if self.method not in SOLVER_METHODS:
+                raise InputError(
+                    f"a hairline edit needs the method multiscale or global, not the baseline {self.method!r}",
+                    code="bad_option",
+                )
+            self.hairline.validate()
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,13 +181,15 @@ class AdaptableHairstyle:
 
 @dataclass(eq=False)
 class RetargetResult:
-    """A retargeted hairstyle with what was measured on the way."""
+    """A retargeted hairstyle with what was measured on the way (``relocation``: the hairline
+    edit's relocated roots and deformed scalp, when one was asked for)."""
 
     hair: Hair
     initial: Hair
     metrics: dict
     timings: dict
     solve: SolveReport | StrandSolveReport | MultiscaleReport | None = None
+    relocation: Relocation | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -303,6 +318,14 @@ def retarget(
     initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
     timings["initial_transfer"] = time.perf_counter() - began
 
+    roots = root_targets(adaptable, target)
+    start = gamma = relocation = None
+    if options.hairline is not None:
+        progress("hairline", 0.07, f"relocating the roots for the hairline edit {options.hairline.describe()}")
+        relocation, start, gamma = relocate_hairline(adaptable, target, initial, roots, options.hairline)
+        roots = relocation.roots
+        timings["hairline"] = relocation.report["seconds"]
+
     model = adaptable.shape_model
     weights = EnergyWeights(options.alpha, options.beta)
     solve_report = None
@@ -318,8 +341,8 @@ def retarget(
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")
         points, solve_report = solve_hairstyle(
-            model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options,
-            backend=options.qp_backend, progress=solver_progress, should_stop=should_stop,
+            model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options, gamma=gamma,
+            backend=options.qp_backend, start=start, progress=solver_progress, should_stop=should_stop,
         )
         timings["solve"] = time.perf_counter() - began
     elif options.method == "multiscale":
@@ -329,7 +352,7 @@ def retarget(
         timings["distance_grid"] = time.perf_counter() - began
         points, solve_report = solve_multiscale(
             hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
-            weights, solve_options, workers=options.workers or default_workers(),
+            weights, solve_options, gamma=gamma, start=start, workers=options.workers or default_workers(),
             chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
             progress=solver_progress, should_stop=should_stop,
         )
@@ -347,15 +370,102 @@ def retarget(
     began = time.perf_counter()
     progress("metrics", 0.95, "measuring")
     metrics = hairstyle_metrics(
-        points, hair.points, initial, hair.is_root, root_targets(adaptable, target), model, target_query,
-        options.eps_c, weights,
+        points, hair.points, initial, hair.is_root, roots, model, target_query, options.eps_c, weights,
     )
     metrics["method"] = options.method
+    if relocation is not None:
+        metrics["hairline"] = relocation.report
     metrics["smoothed_particles"] = int(unsmooth.sum())
     metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
     timings["metrics"] = time.perf_counter() - began
     progress("done", 1.0, "done")
-    return RetargetResult(hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report)
+    return RetargetResult(
+        hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation
+    )
+
+
+def relocate_hairline(
+    adaptable: AdaptableHairstyle, target: Character, initial: np.ndarray, roots: np.ndarray, edit: HairlineEdit
+) -> tuple[Relocation, np.ndarray, np.ndarray]:
+    """Sec. 6: relocate the roots on the target, then the adaptive weights and a start.
+
+    Parameters
+    ----------
+    initial : (N, 3) float64
+        The initial transfer.
+    roots : (S, 3) float64
+        The roots' positions on the target before the edit.
+
+    Returns
+    -------
+    relocation : Relocation
+    start : (N, 3) float64
+        The solvers' first iterate: each strand's initial transfer moved by its root's travel
+        times ``1 - gamma`` (all of it at the root, fading along the strand as Eq. 20's
+        weight rises), the roots exactly at their new places (Eq. 12's new right-hand side).
+    gamma : (N,) float64
+        Eq. 20's weights for Eq. 21.
+    """
+    hair = adaptable.hair
+    relocation = relocate_roots(
+        target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots], edit
+    )
+    gamma = adaptive_weights(hair, relocation.travel)
+    shift = np.repeat(relocation.roots - roots, hair.counts, axis=0)
+    start = initial + (1.0 - gamma)[:, None] * shift
+    start[hair.roots] = relocation.roots
+    return relocation, start, gamma
+
+
+def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: str | None = None,
+                      parameterization: str = "harmonic") -> dict:
+    """The target's current front hairline (or a preset's edit of it) as a curve document,
+    ``{"units": "m", "points": [[x, y, z], ...], "turning_points": [...]}``, ready to be
+    edited and passed back as a hairline curve (same ends, same turning points)."""
+    target = prepare_target(adaptable, target)
+    roots = adaptable.hair.roots
+    setup = scalp_chart(target, adaptable.anchors.face[roots], parameterization)
+    if preset is None:
+        points, turning = setup.rest[setup.front], setup.turning
+    else:
+        name, amount = parse_preset(preset)
+        curve = preset_curve(name, amount, setup.rest[setup.front], setup.turning, setup.frame, setup.head)
+        points, turning = curve.points, curve.turning_points
+    return {"units": "m", "points": np.round(points, 7).tolist(), "turning_points": turning.tolist()}
+
+
+def hairline_edit_from_request(document: dict) -> HairlineEdit:
+    """A validated hairline edit from the API's ``hairline`` object: ``preset`` with
+    ``amount``, or ``curve`` (a curve document), plus ``method`` and ``parameterization``."""
+    preset, curve = document.get("preset"), document.get("curve")
+    if (preset is None) == (curve is None):
+        raise InputError("a hairline edit needs exactly one of 'preset' or 'curve'", code="bad_option")
+    return hairline_edit(
+        preset=None if preset is None else f"{preset}:{document.get('amount', 1.0)}", curve=curve,
+        method=document.get("method", "membrane"), parameterization=document.get("parameterization", "harmonic"),
+    )
+
+
+def hairline_edit(
+    preset: str | None = None,
+    curve_path=None,
+    curve: dict | None = None,
+    method: str = "membrane",
+    parameterization: str = "harmonic",
+) -> HairlineEdit:
+    """A validated hairline edit from a preset ``NAME[:AMOUNT]``, a curve JSON file or a
+    parsed curve document (exactly one)."""
+    given = sum(x is not None for x in (preset, curve_path, curve))
+    if given != 1:
+        raise InputError("give exactly one of a hairline preset, a curve file or a curve", code="bad_option")
+    if preset is not None:
+        name, amount = parse_preset(preset)
+        edit = HairlineEdit(preset=name, amount=amount, method=method, parameterization=parameterization)
+    else:
+        parsed = read_hairline_curve(curve_path) if curve_path is not None else parse_hairline_curve(curve)
+        edit = HairlineEdit(curve=parsed, method=method, parameterization=parameterization)
+    edit.validate()
+    return edit
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:

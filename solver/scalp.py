@@ -42,8 +42,8 @@ maxima only), plus both ends.
 
 Refinement (:func:`refine_scalp`)
 ---------------------------------
-A finer copy for the membrane of Eq. 15: 1-to-4 midpoint subdivision, new vertices
-projected back onto the character (closest point).
+A finer copy for the membrane of Eq. 15: 1-to-4 midpoint subdivision, which stays on the
+head exactly (every new edge lies in one head triangle).
 """
 
 from __future__ import annotations
@@ -57,7 +57,6 @@ from scipy.sparse.csgraph import connected_components
 
 from .character import Character
 from .errors import InputError
-from .geometry import MeshQuery
 from .groom import REFERENCE_CROWN_M, HeadFrame, head_frame
 
 #: fewest root faces that can make a scalp
@@ -79,8 +78,10 @@ TURNING_WINDOW_M = 0.012
 #: a front hairline vertex is a turning point when its turning angle exceeds this (degrees)
 TURNING_ANGLE_DEG = 40.0
 #: the membrane's default resolution: refine until the scalp has at least this many triangles
-#: (two rounds, ~4 mm edges, for MakeHuman scalps of 250-1000 faces)
-DEFAULT_MIN_TRIANGLES = 4000
+#: (one round, ~8 mm edges, for MakeHuman scalps of 250-1000 faces: a membrane vertex
+#: every half head edge; a second round (~4 mm) gives the same roots to ~0.3 mm at about
+#: five times the relocation time)
+DEFAULT_MIN_TRIANGLES = 1000
 
 
 class ScalpWarning(UserWarning):
@@ -568,6 +569,69 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     return Scalp(face_ids, vertices, triangles, loop, front, back, corners, rings, strays)
 
 
+def boundary_edges(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(k, 3) bool: whether edge ``j`` (corner ``j`` to ``j + 1``) of each triangle is on the boundary."""
+    directed = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2)
+    key = directed[..., 0] * n_vertices + directed[..., 1]
+    reverse = directed[..., 1] * n_vertices + directed[..., 0]
+    return ~np.isin(key, reverse.ravel())
+
+
+def split_boundary_ears(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """Split the scalp's *ears*: triangles with two edges on the hairline.
+
+    An ear's three corners are all hairline vertices, so a hairline edit that straightens
+    the hairline there prescribes a flat, zero-area triangle for the membrane (Eq. 15), and
+    every subdivision keeps an ear at the tip. The ear's inner edge gets its midpoint,
+    which splits the ear and its neighbour across that edge in two each: every new triangle
+    has at most one hairline edge and the midpoint is an interior (free) vertex. The
+    midpoint of a head edge lies on the head, so the copy stays on it; the hairline loop
+    and the orientation are unchanged. An ear whose neighbour is also an ear (a two-triangle
+    scalp) is left.
+
+    Parameters
+    ----------
+    points : (n, d) float64
+        Per-vertex values that are affine along the head's edges (positions, parameters).
+    triangles : (k, 3) int64
+        A disk, consistently oriented.
+
+    Returns
+    -------
+    points : (n + e, d) float64
+        The input rows, then one midpoint per split ear.
+    triangles : (k + 2e, 3) int64
+    split : int
+        Ears split (``e``).
+    """
+    points = np.array(points, dtype=np.float64)
+    triangles = np.array(triangles, dtype=np.int64)
+    split = 0
+    skipped: set[int] = set()
+    # a handful of ears per scalp: one at a time, the edge table re-derived after each
+    while True:
+        on_boundary = boundary_edges(triangles, len(points))
+        ears = [int(e) for e in np.flatnonzero(on_boundary.sum(axis=1) == 2) if int(e) not in skipped]
+        if not ears:
+            return points, triangles, split
+        ear = ears[0]
+        inner = int(np.flatnonzero(~on_boundary[ear])[0])
+        c, a, tip = (triangles[ear, (inner + j) % 3] for j in range(3))
+        # the neighbour holds the inner edge the other way round: a -> c
+        holds = (triangles == a) & (np.roll(triangles, -1, axis=1) == c)
+        other, edge = np.argwhere(holds)[0]
+        if on_boundary[other].sum() >= 2:
+            skipped.add(ear)
+            continue
+        d = triangles[other, (edge + 2) % 3]
+        middle = len(points)
+        points = np.vstack([points, 0.5 * (points[a] + points[c])])
+        triangles[ear] = (tip, c, middle)
+        triangles[other] = (a, middle, d)
+        triangles = np.vstack([triangles, [[tip, middle, a], [middle, c, d]]])
+        split += 1
+
+
 # --------------------------------------------------------------------------------------
 # refinement
 
@@ -613,46 +677,42 @@ def subdivide(points: np.ndarray, triangles: np.ndarray, loop: np.ndarray) -> tu
 
 
 def refine_scalp(
-    character: Character,
-    scalp: Scalp,
-    min_triangles: int = DEFAULT_MIN_TRIANGLES,
-    query: MeshQuery | None = None,
+    points: np.ndarray, triangles: np.ndarray, boundary: np.ndarray, min_triangles: int = DEFAULT_MIN_TRIANGLES
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A refined copy of the scalp for the membrane.
+    """A refined copy of the scalp for the membrane: 1-to-4 midpoint subdivision, repeated
+    until there are at least ``min_triangles`` triangles.
 
-    1-to-4 midpoint subdivision, repeated until there are at least ``min_triangles``
-    triangles; after each round the new vertices move to their closest point on the
-    character. On the MakeHuman ``average-female`` head the scalp of a 300-strand ``short``
-    groom (seed 0) has 466 faces, 264 vertices, a 60-vertex hairline and 16 mm mean edges;
-    the default ``min_triangles`` gives two rounds: 7456 triangles, 3849 vertices, a
-    240-vertex hairline, 4.0 mm mean edges (8.6 mm the longest).
+    Every new edge lies inside one triangle of the input (or on its edge), so every midpoint
+    lies on the input surface: the copy stays exactly on the head with no projection, and
+    any per-vertex quantity that is affine inside each head triangle (3D positions, a
+    piecewise-linear parameterization) is refined correctly by the same midpoints. Pass
+    positions and parameters side by side (``(n, 3 + 2)``) to refine both at once. On the
+    MakeHuman ``average-female`` head the scalp of a 300-strand ``short`` groom (seed 0) has
+    466 faces, 264 vertices, a 60-vertex hairline and 16 mm mean edges; the default
+    ``min_triangles`` gives one round: 1864 triangles, 993 vertices, a 120-vertex hairline,
+    8 mm mean edges; two rounds give 7456 triangles, 3849 vertices, a 240-vertex hairline,
+    4.0 mm mean edges (8.6 mm the longest).
 
     Parameters
     ----------
-    character : Character
-    scalp : Scalp
+    points : (n, d) float64
+        Per-vertex values of the scalp in local numbering (e.g. ``character.vertices[scalp.vertices]``).
+    triangles : (k, 3) int64
+    boundary : (b,) int64
+        The hairline loop.
     min_triangles : int
-    query : MeshQuery, optional
-        Reuse acceleration structures over ``character``.
 
     Returns
     -------
-    vertices : (n, 3) float64
-        Positions on the character's surface (m); the scalp's own vertices first, in the
-        order of ``scalp.vertices``.
-    triangles : (k, 3) int64
-        Same orientation as the character.
-    boundary : (b,) int64
-        The hairline loop in this numbering: ``scalp.boundary`` in its order with the new
-        vertices inserted between, starting at the same vertex.
+    points : (n', d) float64
+        The input rows first, then the midpoints, round after round.
+    triangles : (k', 3) int64
+        Same orientation.
+    boundary : (b',) int64
+        The loop in its order with the new vertices inserted between, starting at the same
+        vertex: after ``r`` rounds the old loop vertex ``i`` is at ``i * 2**r``.
     """
-    points = character.vertices[scalp.vertices]
-    triangles, loop = scalp.triangles, scalp.boundary
-    if len(triangles) >= min_triangles:
-        return points.copy(), triangles.copy(), loop.copy()
-    query = query or MeshQuery(character.vertices, character.faces)
+    points = np.asarray(points, dtype=np.float64)
     while len(triangles) < min_triangles:
-        n_old = len(points)
-        points, triangles, loop = subdivide(points, triangles, loop)
-        points[n_old:] = query.signed_distance(points[n_old:]).closest
-    return points, triangles, loop
+        points, triangles, boundary = subdivide(points, triangles, boundary)
+    return points.copy(), np.array(triangles, dtype=np.int64), np.array(boundary, dtype=np.int64)

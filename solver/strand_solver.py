@@ -615,6 +615,7 @@ def solve_hairstyle(
     options: SolveOptions = SolveOptions(),
     gamma: np.ndarray | None = None,
     backend: str = "active-set",
+    start: np.ndarray | None = None,
     broad_phase: Callable[[np.ndarray], np.ndarray] | None = None,
     band: float = np.inf,
     progress: ProgressFn | None = None,
@@ -631,6 +632,8 @@ def solve_hairstyle(
     target : MeshQuery
     backend : str
         One of :data:`QP_BACKENDS`.
+    start : (N, 3) float64, optional
+        First iterate (``initial`` by default); fixed particles stay where it puts them.
     broad_phase, band
         See :class:`BodyDistance` (active-set backend only).
 
@@ -643,11 +646,13 @@ def solve_hairstyle(
         from .qp import solve_shape_adaptation
 
         return solve_shape_adaptation(
-            model, initial, fixed, target, weights, options, gamma=gamma, progress=progress, should_stop=should_stop
+            model, initial, fixed, target, weights, options, gamma=gamma, start=start, progress=progress,
+            should_stop=should_stop,
         )
     if backend != "active-set":
         raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
     problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
     return solve_strands(
-        problem, BodyDistance(target, band, broad_phase), weights, options, progress=progress, should_stop=should_stop
+        problem, BodyDistance(target, band, broad_phase), weights, options, start=start, progress=progress,
+        should_stop=should_stop,
     )

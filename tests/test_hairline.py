@@ -8,6 +8,8 @@ import pytest
 from hairport.solver.errors import InputError
 from hairport.solver.hair import Hair
 from hairport.solver.hairline import (
+    smooth_polyline,
+    smoothed_arc_length,
     GAMMA_SIGMA,
     adaptive_weights,
     check_curve_on_head,
@@ -89,3 +91,19 @@ def test_self_crossing_and_off_head_curves_are_refused():
     with pytest.raises(InputError) as caught:
         check_curve_on_head(curve, np.array([0.0, 0.001, 0.05, 0.0]), arch[:4])
     assert caught.value.code == "off_head" and "point 2" in str(caught.value) and "5.0 cm" in str(caught.value)
+
+
+def test_smoothing_keeps_the_ends_and_removes_a_staircase():
+    # a 10 cm staircase of 5 mm steps along x, sampled twice as densely in a second copy
+    corners = np.array([[0.005 * (i // 2 + i % 2), 0.005 * (i // 2), 0.0] for i in range(41)])
+    dense = np.repeat(corners, 2, axis=0)[1:]
+    dense[1::2] = 0.5 * (dense[:-1:2] + dense[2::2])
+    for points in (corners, dense):
+        smooth = smooth_polyline(points)
+        np.testing.assert_array_equal(smooth[[0, -1]], points[[0, -1]])
+        arc = smoothed_arc_length(points)
+        assert arc[0] == 0.0 and np.all(np.diff(arc) >= 0)
+        # the staircase has length 0.2 m; the diagonal it follows 0.1 * sqrt(2)
+        assert arc[-1] == pytest.approx(0.1 * np.sqrt(2), rel=0.02)
+    # the same arc length whatever the sampling
+    assert smoothed_arc_length(corners)[-1] == pytest.approx(smoothed_arc_length(dense)[-1], rel=1e-3)

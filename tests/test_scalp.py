@@ -8,6 +8,8 @@ from hairport.solver.geometry import MeshQuery
 from hairport.solver.groom import generate_groom, head_frame
 from hairport.solver.makehuman import PRESETS, build_character
 from hairport.solver.scalp import (
+    boundary_edges,
+    split_boundary_ears,
     DEFAULT_MIN_TRIANGLES,
     Scalp,
     ScalpWarning,
@@ -150,9 +152,9 @@ def test_turning_points_of_a_hand_made_arch(frame):
 
 
 def test_refine_scalp_keeps_the_surface_and_the_hairline(character, scalp, query):
-    vertices, triangles, boundary = refine_scalp(character, scalp, query=query)
+    vertices, triangles, boundary = refine_scalp(character.vertices[scalp.vertices], scalp.triangles, scalp.boundary)
     assert len(triangles) >= DEFAULT_MIN_TRIANGLES
-    assert (len(vertices), len(triangles), len(boundary)) == (3849, 7456, 240)
+    assert (len(vertices), len(triangles), len(boundary)) == (993, 1864, 120)
     assert np.abs(query.signed_distance(vertices).distance).max() < 1e-9
     assert np.array_equal(vertices[: len(scalp.vertices)], character.vertices[scalp.vertices])
     # still a disk whose loop is the refined boundary, in order, from the same first vertex
@@ -162,15 +164,22 @@ def test_refine_scalp_keeps_the_surface_and_the_hairline(character, scalp, query
     start = int(np.argmax(loops[0] == boundary[0]))
     assert np.array_equal(np.roll(loops[0], -start), boundary)
     assert boundary[0] == scalp.boundary[0]
-    assert np.array_equal(boundary[::4], scalp.boundary)
+    assert np.array_equal(boundary[::2], scalp.boundary)
+    fine = refine_scalp(character.vertices[scalp.vertices], scalp.triangles, scalp.boundary, min_triangles=4000)
+    assert (len(fine[0]), len(fine[1]), len(fine[2])) == (3849, 7456, 240)
+    assert np.array_equal(fine[2][::4], scalp.boundary)
     # one round: the old loop at every second place
-    few = refine_scalp(character, scalp, min_triangles=len(scalp.faces) + 1, query=query)
+    few = refine_scalp(
+        character.vertices[scalp.vertices], scalp.triangles, scalp.boundary, min_triangles=len(scalp.faces) + 1
+    )
     assert len(few[1]) == 4 * len(scalp.faces)
     assert np.array_equal(few[2][::2], scalp.boundary)
 
 
 def test_refine_scalp_with_enough_triangles_is_a_copy(character, scalp):
-    vertices, triangles, boundary = refine_scalp(character, scalp, min_triangles=len(scalp.faces))
+    vertices, triangles, boundary = refine_scalp(
+        character.vertices[scalp.vertices], scalp.triangles, scalp.boundary, min_triangles=len(scalp.faces)
+    )
     assert np.array_equal(triangles, scalp.triangles) and np.array_equal(boundary, scalp.boundary)
 
 
@@ -193,3 +202,31 @@ def test_roots_that_do_not_reach_the_ears_are_refused(character, frame, scalp):
     front = frame.local(character.vertices[character.faces[scalp.faces]].mean(axis=1))[:, 1] > 0.03
     with pytest.raises(InputError, match="ear plane"):
         extract_scalp(character, scalp.faces[front], frame)
+
+
+def test_ears_are_split_into_triangles_with_one_hairline_edge():
+    # a fan of four triangles around vertex 0; the two outer ones are ears of the square
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, -0.5]])
+    triangles = np.array([[0, 4, 1], [0, 1, 2], [0, 2, 3]])
+    assert (boundary_edges(triangles, 5).sum(axis=1) == 2).sum() == 2
+    new_points, new_triangles, split = split_boundary_ears(points, triangles)
+    assert split == 2 and len(new_triangles) == len(triangles) + 2 * split
+    assert boundary_edges(new_triangles, len(new_points)).sum(axis=1).max() == 1
+    np.testing.assert_array_equal(new_points[:5], points)
+    # midpoints of the inner edges, same orientation and covered area
+    np.testing.assert_allclose(new_points[5:], [[0.5, 0.0], [0.5, 0.5]])
+    def areas(p, t):
+        e1, e2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
+        return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    assert (areas(new_points, new_triangles) > 0).all()
+    assert areas(new_points, new_triangles).sum() == pytest.approx(areas(points, triangles).sum(), abs=1e-15)
+    loop = boundary_loops(new_triangles)[0]
+    assert set(loop.tolist()) == {0, 1, 2, 3, 4}  # the hairline keeps its vertices
+
+
+def test_the_scalp_of_a_groom_has_ears_to_split(character, scalp):
+    uv_like = character.vertices[scalp.vertices][:, :2]
+    before = (boundary_edges(scalp.triangles, scalp.n_vertices).sum(axis=1) >= 2).sum()
+    _, triangles, split = split_boundary_ears(uv_like, scalp.triangles)
+    assert before > 0 and split == before
+    assert boundary_edges(triangles, scalp.n_vertices + split).sum(axis=1).max() == 1

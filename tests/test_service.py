@@ -343,10 +343,67 @@ def test_bad_retarget_requests(service, uploaded):
     assert_problem(client.post("/v1/retargets", headers=AUTH, json={**base, "target_character_ids": []}), 422,
                    "invalid_request")
     assert_problem(client.post("/v1/retargets", headers=OTHER, json=base), 404, "not_found")
-    body = assert_problem(client.post("/v1/retargets", headers=AUTH,
-                                      json={**base, "hairline": {"preset": "widows-peak", "amount": 0.5}}),
-                          422, "hairline_unavailable")
-    assert "hairline" in body["detail"]
+    for hairline, code in [
+        ({"preset": "mohawk"}, "invalid_request"),
+        ({"preset": "round", "amount": 1.5}, "invalid_request"),
+        ({"preset": "round", "method": "spline"}, "invalid_request"),
+        ({}, "bad_option"),
+        ({"preset": "round", "curve": {"points": [[0, 0, 0], [1, 0, 0], [0, 1, 0]]}}, "bad_option"),
+        ({"curve": {"points": [[0, 0, 0], [1, 0, 0]]}}, "invalid_request"),
+        ({"curve": {"points": [[0, 0, 0], [0, 0, 0], [1, 0, 0]]}}, "bad_curve"),
+        ({"curve": {"points": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "turning_points": [2, 1]}}, "bad_curve"),
+    ]:
+        body = assert_problem(client.post("/v1/retargets", headers=AUTH, json={**base, "hairline": hairline}),
+                              422, code)
+        assert "hairline" in body["detail"], body
+    # the toy groom does not reach the ears: the job fails with the reason, nothing else does
+    job = client.post("/v1/retargets", headers=AUTH, json={**base, "hairline": {"preset": "straight"}}).json()
+    failed = wait_for(client, f"/v1/jobs/{job['jobs'][0]['id']}", lambda b: b["state"] in ("succeeded", "failed"))
+    assert failed["state"] == "failed" and failed["error"]["code"] == "bad_scalp", failed
+    assert "ear" in failed["error"]["message"]
+
+
+def test_hairline_edit_jobs(service, tmp_path):
+    """A preset and a drawn curve on MakeHuman characters, through the queue."""
+    from hairport.solver.groom import generate_groom
+    from hairport.solver.hairio import read_hair_bytes, write_hair
+    from hairport.solver.makehuman import PRESETS, build_character, write_character
+
+    client = service["client"]
+    ids = {}
+    for name in ("average-female", "heavy-male"):
+        character = build_character(PRESETS[name])
+        write_character(character, tmp_path / f"{name}.obj", tmp_path / f"{name}.skeleton.json")
+        response = client.post("/v1/characters", headers=AUTH, files={
+            "mesh": (f"{name}.obj", (tmp_path / f"{name}.obj").read_bytes()),
+            "skeleton": (f"{name}.skeleton.json", (tmp_path / f"{name}.skeleton.json").read_bytes()),
+        })
+        assert response.status_code == 201, response.text
+        ids[name] = response.json()["id"]
+        if name == "average-female":
+            write_hair(tmp_path / "short.data", generate_groom(character, "short", 80, 6, seed=3))
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": ids["average-female"],
+                                                                 "guides": "20"},
+                           files={"hair": ("short.data", (tmp_path / "short.data").read_bytes())})
+    assert response.status_code == 201, response.text
+    base = {"hairstyle_id": response.json()["id"], "target_character_ids": [ids["heavy-male"]],
+            "options": {"max_iterations": 10}}
+    preset = client.post("/v1/retargets", headers=AUTH, json={**base, "hairline": {
+        "preset": "widows-peak", "amount": 0.7}}).json()["jobs"][0]
+    done = wait_for(client, f"/v1/jobs/{preset['id']}", lambda b: b["state"] in ("succeeded", "failed"))
+    assert done["state"] == "succeeded", done
+    hairline = done["metrics"]["hairline"]
+    assert hairline["edit"] == "widows-peak:0.7" and hairline["method"] == "membrane"
+    assert hairline["roots_moved"] > 0 and 0.0 < hairline["density_change_l1"] < 0.5
+    assert done["metrics"]["penetrating_particles"] == 0 and done["timings"]["hairline"] > 0
+    result = read_hair_bytes(client.get(f"/v1/jobs/{preset['id']}/result", headers=AUTH,
+                                        params={"format": "npz"}).content, "npz")
+    assert result.n_strands == 80
+    # a drawn curve far from the head fails its job with the reason
+    curve = {"units": "m", "points": [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.2, 0.0, 0.0]]}
+    far = client.post("/v1/retargets", headers=AUTH, json={**base, "hairline": {"curve": curve}}).json()["jobs"][0]
+    failed = wait_for(client, f"/v1/jobs/{far['id']}", lambda b: b["state"] in ("succeeded", "failed"))
+    assert failed["state"] == "failed" and failed["error"]["code"] == "off_head", failed
 
 
 def test_bad_target_fails_its_job_and_the_worker_lives_on(service, files, uploaded):

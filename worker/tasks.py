@@ -197,7 +197,9 @@ def retarget_task(self, job_id: str) -> None:
     try:
         adaptable = _adaptable(str(_blob_path(storage, artifact)))
         target = load_character(storage, job["target_character_id"])
-        options = pipeline.RetargetOptions(**job["options"], workers=get_settings().solver_workers)
+        hairline = job.get("hairline")
+        edit = None if hairline is None else pipeline.hairline_edit_from_request(hairline)
+        options = pipeline.RetargetOptions(**job["options"], workers=get_settings().solver_workers, hairline=edit)
         result = pipeline.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop)
         progress("storing", 0.99, "writing outputs")
         outputs = {}

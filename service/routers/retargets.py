@@ -43,8 +43,6 @@ def create_retargets(
             if previous["request"] != jobs.digest(body):
                 raise Problem(422, "idempotency_conflict", "this Idempotency-Key was used with a different request")
             return _created(storage, response, previous["jobs"])
-    if request.hairline is not None:
-        raise Problem(422, "hairline_unavailable", "hairline edits are not available in this version")
     if len(request.target_character_ids) > settings.max_targets_per_request:
         raise Problem(422, "too_many_targets",
                       f"at most {settings.max_targets_per_request} targets per request, got {len(request.target_character_ids)}")
@@ -53,11 +51,17 @@ def create_retargets(
     options = request.options.model_dump()
     preprocess_options = {"k": options.pop("k") or hairstyle["options"]["k"],
                           "guides": options.pop("guides") or hairstyle["options"]["guides"]}
+    hairline = body["hairline"]
     try:
         pipeline.RetargetOptions(**options).validate()
         pipeline.PreprocessOptions(**preprocess_options).validate()
     except pipeline.InputError as error:
         raise input_problem(error, "options") from None
+    try:
+        edit = None if hairline is None else pipeline.hairline_edit_from_request(hairline)
+        pipeline.RetargetOptions(**options, hairline=edit).validate()
+    except pipeline.InputError as error:
+        raise input_problem(error, "hairline") from None
     key = hairstyle["artifact_key"]
     if preprocess_options != hairstyle["options"]:
         key = jobs.variant_key(storage, hairstyle, preprocess_options, pipeline.ARTIFACT_FORMAT_VERSION)
@@ -67,7 +71,7 @@ def create_retargets(
         storage.put_record("jobs", job_id, {
             "id": job_id, "owner": owner, "kind": "retarget", "state": jobs.QUEUED, "stage": "queued",
             "progress": 0.0, "hairstyle_id": hairstyle["id"], "target_character_id": target["id"],
-            "options": options, "preprocess_options": preprocess_options, "artifact_key": key,
+            "options": options, "hairline": hairline, "preprocess_options": preprocess_options, "artifact_key": key,
             "output_format": request.output_format, "attempts": 0,
             "created_at": jobs.now(), "updated_at": jobs.now(),
         })
