@@ -236,6 +236,8 @@ def _add_demo(sub) -> None:
     p.add_argument("--source-preset", default="average-female")
     p.add_argument("--target-preset", default="heavy-male")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hairline", default="widows-peak:0.7",
+                   help="also retarget with this hairline edit, PRESET[:AMOUNT] ('none' to skip)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(run=cmd_demo)
 

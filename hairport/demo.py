@@ -2,7 +2,8 @@
 
 Builds a source and a target MakeHuman character (CC0 assets, downloaded once), grows a
 procedural groom on the source, retargets it with the constrained optimisation and with
-every baseline, and writes hair, report and preview into one folder.
+every baseline, once more with a hairline edit (Sec. 6), and writes hair, report and
+preview into one folder.
 """
 
 from __future__ import annotations
@@ -52,6 +53,10 @@ def run_demo(args: argparse.Namespace) -> int:
 
     adaptable = pipeline.preprocess(source, hair, progress=progress)
     result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(), progress=progress)
+    edited = None
+    if args.hairline != "none":
+        edit = pipeline.hairline_edit(preset=args.hairline)
+        edited = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(hairline=edit), progress=progress)
 
     progress("baselines", 0.0, "running the baselines for comparison")
     baselines = {}
@@ -67,6 +72,7 @@ def run_demo(args: argparse.Namespace) -> int:
         "result": result.report(),
         "best_baseline": best_name,
         "baselines": {m: r.metrics for m, r in baselines.items()},
+        "hairline_edit": None if edited is None else edited.report(),
         "demo": {"source_preset": args.source_preset, "target_preset": args.target_preset, "style": args.style,
                  "strands": hair.n_strands, "particles": hair.n_particles, "seed": args.seed},
     }
@@ -78,15 +84,26 @@ def run_demo(args: argparse.Namespace) -> int:
         outputs.add(out / "result_hair.hair", lambda p: write_hair(p, result.hair, format="hair"))
         outputs.add(out / f"baseline_{best_name.replace('+', '_')}.hair",
                     lambda p: write_hair(p, best.hair, format="hair"))
-        outputs.add_json(out / "report.json", report)
-        outputs.add(out / "preview.png", lambda p: render_preview(p, [
+        panels = [
             (hair, source, None, f"source ({args.source_preset})"),
             (result.hair, target, pipeline.penetrating_mask(result.hair, target), f"hairport ({result.metrics['method']})"),
             (best.hair, target, pipeline.penetrating_mask(best.hair, target), f"best baseline: {best_name}"),
-        ]))
+        ]
+        if edited is not None:
+            name = args.hairline.replace(":", "_")
+            outputs.add(out / f"result_hairline_{name}.hair", lambda p: write_hair(p, edited.hair, format="hair"))
+            panels.append((edited.hair, target, pipeline.penetrating_mask(edited.hair, target),
+                           f"hairline {args.hairline}"))
+        outputs.add_json(out / "report.json", report)
+        outputs.add(out / "preview.png", lambda p: render_preview(p, panels))
         outputs.commit()
 
     print(format_table(result.metrics, best.metrics, best_name))
+    if edited is not None:
+        h = edited.metrics["hairline"]
+        print(f"\nhairline {h['edit']}: {h['roots_moved']} roots moved (largest {100 * h['max_travel_m']:.1f} cm) in "
+              f"{h['seconds']:.2f} s, root density change L1 {h['density_change_l1']:.3f}, penetrating particles "
+              f"{edited.metrics['penetrating_particles']}")
     print(f"\nwrote {out}/ (result_hair.hair, report.json, preview.png, characters) in "
           f"{time.perf_counter() - began:.1f} s", file=sys.stdout)
     return 0
