@@ -86,6 +86,10 @@ HARMONIC_SHIFT = 1e-12
 #: a scalp triangle whose uv area falls below this share of its starting one meets the fold
 #: barrier of :func:`fold_barrier`
 FOLD_THRESHOLD = 0.1
+#: weight of the fold barrier per triangle, in units of ``mu * A_t``: the barrier only grows
+#: like a logarithm, and at 1 a triangle folded to 1e-4 of its uv area costs less than
+#: the same triangle compressed three-fold in 3D
+FOLD_STIFFNESS = 1000.0
 #: boundary-motion fractions below this are not split further (load stepping, relocate)
 MIN_LOAD_FRACTION = 1.0 / 1024.0
 
@@ -961,7 +965,7 @@ def relocate(
     free = ~fixed
     oriented = np.where((orientation < 0)[:, None], membrane.triangles[:, [0, 2, 1]], membrane.triangles)
     rest_uv = signed_uv_areas(oriented, u_start)
-    barrier_weights = membrane.mu * membrane.areas
+    barrier_weights = FOLD_STIFFNESS * membrane.mu * membrane.areas
     energy_scale = membrane.mu * float(membrane.areas.sum())
     laplacian = None
 
