@@ -167,18 +167,13 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     from .outputs import OutputSet
     from .settings import get_settings
     from .solver import pipeline
-    from .solver.artifact import load_adaptable
     from .solver.characterio import load_character
     from .solver.hairio import format_for_path, write_hair
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
     units = args.units or "m"
-    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.guides is not None):
-        raise InputError("give either --adaptable or --source with --hair, not both "
-                         "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
-    if not args.adaptable and not (args.source and args.hair):
-        raise InputError("give --adaptable, or --source with --hair", code="bad_option")
+    _check_source_arguments(args)
     format_for_path(args.out)  # refuse unknown formats and options before any work
     if args.hair:
         format_for_path(args.hair)
@@ -186,19 +181,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
                                        max_iterations=args.max_iterations, workers=args.workers,
                                        qp_backend=args.qp_backend, hairline=_hairline_edit(args))
     options.validate()
-    began = time.perf_counter()
-    if args.adaptable:
-        progress("load", 0.0, "reading the adaptable hairstyle")
-        adaptable = load_adaptable(args.adaptable)
-        preprocess_seconds = 0.0
-        inputs = {"adaptable": args.adaptable}
-    else:
-        preprocess_options = _preprocess_options(args)
-        source, hair = _load_source(args, settings, progress)
-        began = time.perf_counter()
-        adaptable = pipeline.preprocess(source, hair, preprocess_options, progress=progress)
-        preprocess_seconds = time.perf_counter() - began
-        inputs = {"source": args.source, "hair": args.hair}
+    adaptable, preprocess_seconds = _adaptable_from_args(args, settings, progress)
+    inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
     target = load_character(args.target, skeleton_path=args.target_skeleton,
                             units=_mesh_units(args, args.target, args.target_skeleton), **_mesh_limits(settings))
     result = pipeline.retarget(adaptable, target, options, progress=progress)
@@ -342,21 +326,29 @@ def _add_hairline(sub) -> None:
     p.set_defaults(run=cmd_hairline)
 
 
-def _adaptable_from_args(args: argparse.Namespace, settings, progress):
-    """The adaptable hairstyle of --adaptable, or preprocessed from --source/--hair."""
-    from .solver import pipeline
-    from .solver.artifact import load_adaptable
-
+def _check_source_arguments(args: argparse.Namespace) -> None:
     if args.adaptable and (args.source or args.hair or args.source_skeleton or args.guides is not None):
         raise InputError("give either --adaptable or --source with --hair, not both "
                          "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
     if not args.adaptable and not (args.source and args.hair):
         raise InputError("give --adaptable, or --source with --hair", code="bad_option")
+
+
+def _adaptable_from_args(args: argparse.Namespace, settings, progress):
+    """The adaptable hairstyle of --adaptable, or preprocessed from --source/--hair, and the
+    seconds preprocessing took (0 for an artifact)."""
+    from .solver import pipeline
+    from .solver.artifact import load_adaptable
+
+    _check_source_arguments(args)
     if args.adaptable:
         progress("load", 0.0, "reading the adaptable hairstyle")
-        return load_adaptable(args.adaptable)
+        return load_adaptable(args.adaptable), 0.0
+    preprocess_options = _preprocess_options(args)
     source, hair = _load_source(args, settings, progress)
-    return pipeline.preprocess(source, hair, _preprocess_options(args), progress=progress)
+    began = time.perf_counter()
+    adaptable = pipeline.preprocess(source, hair, preprocess_options, progress=progress)
+    return adaptable, time.perf_counter() - began
 
 
 def cmd_hairline(args: argparse.Namespace) -> int:
@@ -367,7 +359,7 @@ def cmd_hairline(args: argparse.Namespace) -> int:
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
-    adaptable = _adaptable_from_args(args, settings, progress)
+    adaptable, _ = _adaptable_from_args(args, settings, progress)
     target = load_character(args.target, skeleton_path=args.target_skeleton,
                             units=_mesh_units(args, args.target, args.target_skeleton), **_mesh_limits(settings))
     document = pipeline.hairline_document(adaptable, target, args.preset)

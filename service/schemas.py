@@ -6,9 +6,11 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from hairport.solver import pipeline
+
 HairFormat = Literal["data", "hair", "ply", "npz", "obj"]
 JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
-HairlinePresetName = Literal["straight", "round", "widows-peak", "m-shape", "bell", "triangular", "sideburns", "receding"]
+HairlinePresetName = Literal[pipeline.HAIRLINE_PRESETS]
 #: most points of a drawn hairline accepted in a request
 MAX_CURVE_POINTS = 10_000
 
@@ -85,9 +87,9 @@ class HairlineIn(BaseModel):
     preset: HairlinePresetName | None = None
     amount: float = Field(1.0, ge=0.0, le=1.0, description="strength of the preset (0: no change)")
     curve: HairlineCurveIn | None = None
-    method: Literal["membrane", "harmonic", "rbf2d", "rbf3d"] = Field(
+    method: Literal[pipeline.RELOCATION_METHODS] = Field(
         "membrane", description="how the roots follow: the embedded membrane, or a Sec. 7.5 baseline")
-    parameterization: Literal["harmonic", "lscm", "arap"] = "harmonic"
+    parameterization: Literal[pipeline.PARAMETERIZATIONS] = "harmonic"
 
 
 class RetargetIn(BaseModel):

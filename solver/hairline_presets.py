@@ -80,7 +80,7 @@ PEAK = 0.3
 #: centre and width (in x) of the m-shape's temple recessions
 M_CENTRE, M_WIDTH = 0.5, 0.18
 #: the span of |x| where sideburns grow (the ears are at 1)
-SIDEBURNS_SPAN = (0.72, 0.97)
+SIDEBURNS_SPAN = (0.62, 0.9)
 #: elevations closer than this (rad) to the current one count as unmoved
 UNMOVED_RAD = 1e-12
 

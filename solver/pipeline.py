@@ -28,9 +28,11 @@ from .metrics import hairstyle_metrics
 from .distance_grid import DistanceGrid
 from .guides import DEFAULT_GUIDES
 from .hairline import adaptive_weights, parse_hairline_curve, read_hairline_curve
-from .hairline_presets import PRESETS as HAIRLINE_PRESETS
+from .hairline_presets import PRESETS as HAIRLINE_PRESETS  # noqa: F401 - the CLI's and service's choices
 from .hairline_presets import parse_preset, preset_curve
-from .relocation import RELOCATION_METHODS, HairlineEdit, Relocation, relocate_roots, scalp_chart
+from .parameterization import PARAMETERIZATIONS  # noqa: F401 - the CLI's and service's choices
+from .relocation import RELOCATION_METHODS  # noqa: F401 - the CLI's and service's choices
+from .relocation import HairlineEdit, Relocation, relocate_roots, scalp_chart
 from .multiscale import (
     DEFAULT_CHUNK_PARTICLES,
     FineSource,
