@@ -252,6 +252,21 @@ class MeshQuery:
         return RayHits(hit, distance, faces, barycentric, points)
 
 
+def polyline_arc_length(points: np.ndarray) -> np.ndarray:
+    """Cumulative arc length of a polyline.
+
+    Parameters
+    ----------
+    points : (k, d) float64
+
+    Returns
+    -------
+    arc : (k,) float64
+        0 at the first point, non-decreasing.
+    """
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+
+
 def barycentric_coordinates(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Barycentric coordinates of points with respect to triangles (of the projection onto the plane).
 

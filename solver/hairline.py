@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
+from .geometry import polyline_arc_length
 from .hair import Hair
 from .units import unit_scale
 
@@ -187,7 +188,7 @@ def smooth_polyline(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.nd
     from scipy.ndimage import gaussian_filter1d
 
     points = np.asarray(points, dtype=np.float64)
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    arc = polyline_arc_length(points)
     step = SMOOTHING_STEP_SHARE * width
     samples = np.linspace(0.0, arc[-1], max(int(np.ceil(arc[-1] / step)) + 1, 2))
     resampled = np.column_stack([np.interp(samples, arc, points[:, k]) for k in range(points.shape[1])])
@@ -204,8 +205,7 @@ def smooth_polyline(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.nd
 def smoothed_arc_length(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.ndarray:
     """(k,) cumulative arc length (m) of a polyline ``(k, 3)`` measured on its smoothed copy
     (:func:`smooth_polyline`): non-decreasing, 0 at the first vertex."""
-    smooth = smooth_polyline(points, width)
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(smooth, axis=0), axis=1))])
+    return polyline_arc_length(smooth_polyline(points, width))
 
 
 def first_self_crossing(polyline: np.ndarray) -> tuple[int, int] | None:

@@ -51,9 +51,9 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import InputError
-from .geometry import MeshQuery
+from .geometry import MeshQuery, polyline_arc_length
 from .groom import REFERENCE_CROWN_M, HeadFrame
-from .hairline import HairlineCurve, smooth_polyline, smoothed_arc_length
+from .hairline import HairlineCurve, smooth_polyline
 
 PRESETS = ("straight", "round", "widows-peak", "m-shape", "bell", "triangular", "sideburns", "receding")
 #: presets that offset the current hairline (keeping its azimuths) rather than replace it
@@ -152,14 +152,13 @@ def taper(x: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 + np.cos(np.pi * t))
 
 
-def preset_elevation(name: str, amount: float, x: np.ndarray, phi0: np.ndarray, radius: float,
-                     scale: float) -> np.ndarray:
-    """(f,) the edited elevation (rad) of each front point (see the module docstring).
+def preset_elevation(name: str, x: np.ndarray, phi0: np.ndarray, radius: float, scale: float) -> np.ndarray:
+    """(f,) the full preset's elevation (rad) of each front point (see the module docstring;
+    :func:`preset_curve` applies the amount to positions).
 
     Parameters
     ----------
     name : str
-    amount : float
     x : (f,) float64
         Lateral positions.
     phi0 : (f,) float64
@@ -194,11 +193,11 @@ def preset_elevation(name: str, amount: float, x: np.ndarray, phi0: np.ndarray, 
     elif name == "sideburns":
         low, high = SIDEBURNS_SPAN
         t = np.clip((np.abs(x) - low) / (high - low), 0.0, 1.0)
-        return phi0 - amount * amplitude(SIDEBURNS_LENGTH_M) * np.sin(np.pi * t) ** 2
+        return phi0 - amplitude(SIDEBURNS_LENGTH_M) * np.sin(np.pi * t) ** 2
     else:
         raise InputError(f"unknown hairline preset {name!r}; expected one of {', '.join(PRESETS)}",
                          code="unknown_preset")
-    return phi0 + amount * taper(x) * (shape - phi0)
+    return phi0 + taper(x) * (shape - phi0)
 
 
 def preset_curve(name: str, amount: float, front: np.ndarray, turning: np.ndarray, frame: HeadFrame,
@@ -236,16 +235,15 @@ def preset_curve(name: str, amount: float, front: np.ndarray, turning: np.ndarra
         return HairlineCurve(front.copy(), turning)
     smooth = smooth_polyline(front)
     theta0, phi0, distance = spherical(smooth, frame)
-    x = lateral_position(smoothed_arc_length(front), theta0)
+    x = lateral_position(polyline_arc_length(smooth), theta0)
     scale = frame.crown / REFERENCE_CROWN_M
-    phi = preset_elevation(name, 1.0, x, phi0, float(np.median(distance)), scale)
+    phi = preset_elevation(name, x, phi0, float(np.median(distance)), scale)
     theta = theta0
     if name not in OFFSET_PRESETS:
         # even azimuths across the band, the current ones beyond it, blended by the taper
         ends = np.interp([-BAND, BAND], x, theta0)
-        theta = theta0 + taper(x) * (np.interp(x, [-BAND, BAND], ends, left=np.nan, right=np.nan) - theta0)
-        theta = np.where(np.isfinite(theta), theta, theta0 + taper(x) * (
-            ends[0] + (x + BAND) * (ends[1] - ends[0]) / (2 * BAND) - theta0))
+        even = ends[0] + (x + BAND) * (ends[1] - ends[0]) / (2 * BAND)
+        theta = theta0 + taper(x) * (even - theta0)
     shaped = head.signed_distance(smooth).closest
     moved = np.flatnonzero((np.abs(phi - phi0) > UNMOVED_RAD) | (np.abs(theta - theta0) > UNMOVED_RAD))
     if len(moved):

@@ -560,6 +560,14 @@ def _assemble_hessian(membrane: Membrane, F: np.ndarray, M: np.ndarray, project:
     return _assemble_blocks(membrane.triangles, _project_psd(blocks) if project else blocks, len(M))
 
 
+def _shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """``(H + shift I)^-1 rhs`` for a square sparse ``H``: the shift is
+    :data:`REGULARISATION_SHARE` of its largest diagonal entry, as a projected Hessian may be
+    singular."""
+    shift = REGULARISATION_SHARE * max(float(np.abs(H.diagonal()).max()), np.finfo(float).tiny)
+    return np.atleast_1d(spla.spsolve((H + shift * sp.identity(H.shape[0])).tocsc(), rhs))
+
+
 def _located(chart: HeadChart, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hosts and 3D positions of ``u``; ``ValueError`` outside the chart."""
     host, barycentric = chart.locate(u)
@@ -993,6 +1001,19 @@ def relocate(
     def barrier(u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         return fold_barrier(oriented, u, rest_uv, barrier_weights)
 
+    def derivatives(u: np.ndarray, F: np.ndarray, gx: np.ndarray, M: np.ndarray, exact: bool):
+        """``dE/du (2n,)`` of Eq. 15 plus the fold barrier, its projected Hessian and (if
+        ``exact``) its exact one, ``(2n, 2n)``, at deformation gradients ``F`` and position
+        gradients ``gx`` with host Jacobians ``M``."""
+        _, fold_gradient, fold_blocks = barrier(u)
+        g = (np.einsum("nia,ni->na", M, gx) + fold_gradient).ravel()
+        blocks = _parameter_blocks(membrane, F, M)
+        projected = (_assemble_blocks(membrane.triangles, _project_psd(blocks), n)
+                     + _assemble_blocks(oriented, _project_psd(fold_blocks), n))
+        if not exact:
+            return g, projected, None
+        return g, projected, _assemble_blocks(membrane.triangles, blocks, n) + _assemble_blocks(oriented, fold_blocks, n)
+
     def elastic_start(u: np.ndarray, target: np.ndarray) -> np.ndarray | None:
         """One Newton step of Eq. 15 with the hairline moved to ``target`` (an inhomogeneous
         Dirichlet step): the free vertices follow the boundary motion as the linearised
@@ -1000,16 +1021,10 @@ def relocate(
         host, barycentric = chart.locate(u)
         x = np.einsum("nk,nkc->nc", barycentric, chart.vertices[chart.faces[host]])
         F, gx = _position_gradients(membrane, x)
-        M = chart.jacobians(host)
-        _, fold_gradient, fold_blocks = barrier(u)
-        H = (_assemble_blocks(membrane.triangles, _project_psd(_parameter_blocks(membrane, F, M)), n)
-             + _assemble_blocks(oriented, _project_psd(fold_blocks), n))
-        g = (np.einsum("nia,ni->na", M, gx) + fold_gradient).ravel()
+        g, H, _ = derivatives(u, F, gx, chart.jacobians(host), exact=False)
         free2, fixed2 = np.repeat(free, 2), np.repeat(fixed, 2)
-        H_ff = H[free2][:, free2]
-        shift = REGULARISATION_SHARE * max(float(np.abs(H_ff.diagonal()).max()), np.finfo(float).tiny)
         rhs = -(g[free2] + H[free2][:, fixed2] @ (target - u[fixed]).ravel())
-        step = spla.spsolve((H_ff + shift * sp.identity(H_ff.shape[0])).tocsc(), rhs)
+        step = _shifted_solve(H[free2][:, free2], rhs)
         if not np.isfinite(step).all():
             return None
         extended = u.copy()
@@ -1065,22 +1080,16 @@ def relocate(
         cols = np.concatenate([first, first + 1] + [2 * len(loose) + np.arange(len(edged))] * 2)
         vals = np.concatenate([np.ones(2 * len(loose)), tangent[edged, 0], tangent[edged, 1]])
         T = sp.csr_matrix((vals, (rows, cols)), shape=(2 * n, 2 * len(loose) + len(edged)))
-        _, fold_gradient, fold_blocks = barrier(u)
-        gr = T.T @ (np.einsum("nia,ni->na", M, gx) + fold_gradient).ravel()
-        blocks = _parameter_blocks(membrane, F, M)
-        folds = _assemble_blocks(oriented, _project_psd(fold_blocks), n)
-        hessians = [(T.T @ (_assemble_blocks(membrane.triangles, _project_psd(blocks), n) + folds) @ T).tocsc()]
-        if exact:
-            exact_folds = _assemble_blocks(oriented, fold_blocks, n)
-            hessians.append((T.T @ (_assemble_blocks(membrane.triangles, blocks, n) + exact_folds) @ T).tocsc())
+        g, projected, exact_hessian = derivatives(u, F, gx, M, exact)
+        gr = T.T @ g
+        hessians = [(T.T @ H @ T).tocsc() for H in (projected, exact_hessian) if H is not None]
         return u, energy, gr, hessians, T, host, int((free & (mode != FREE)).sum())
 
     def direction(u: np.ndarray, gr: np.ndarray, Hr: sp.csc_matrix, T: sp.csr_matrix, host: np.ndarray):
         """Step ``(n, 2)``, squared decrement and the first fraction at which a vertex leaves its host."""
         if Hr.shape[0] == 0:  # every free vertex held at a head vertex
             return np.zeros((n, 2)), 0.0, np.inf
-        shift = REGULARISATION_SHARE * max(float(np.abs(Hr.diagonal()).max()), np.finfo(float).tiny)
-        z = np.atleast_1d(spla.spsolve((Hr + shift * sp.identity(Hr.shape[0])).tocsc(), -gr))
+        z = _shifted_solve(Hr, -gr)
         d = (T @ z).reshape(n, 2)
         weights = chart._barycentric(host, u)
         local = np.einsum("nab,nb->na", chart.uv_inverse[host], d)

@@ -27,12 +27,12 @@ from .hair import Hair
 from .metrics import hairstyle_metrics
 from .distance_grid import DistanceGrid
 from .guides import DEFAULT_GUIDES
-from .hairline import adaptive_weights, parse_hairline_curve, read_hairline_curve
+from .hairline import HairlineCurve, adaptive_weights, parse_hairline_curve, read_hairline_curve
 from .hairline_presets import PRESETS as HAIRLINE_PRESETS  # noqa: F401 - the CLI's and service's choices
-from .hairline_presets import parse_preset, preset_curve
+from .hairline_presets import parse_preset
 from .parameterization import PARAMETERIZATIONS  # noqa: F401 - the CLI's and service's choices
 from .relocation import RELOCATION_METHODS  # noqa: F401 - the CLI's and service's choices
-from .relocation import HairlineEdit, Relocation, relocate_roots, scalp_chart
+from .relocation import HairlineEdit, Relocation, edit_curve, relocate_roots, scalp_chart
 from .multiscale import (
     DEFAULT_CHUNK_PARTICLES,
     FineSource,
@@ -428,20 +428,18 @@ def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: 
     roots = adaptable.hair.roots
     setup = scalp_chart(target, adaptable.anchors.face[roots], parameterization)
     if preset is None:
-        points, turning = setup.rest[setup.front], setup.turning
+        curve = HairlineCurve(setup.rest[setup.front], setup.turning)
     else:
         name, amount = parse_preset(preset)
-        curve = preset_curve(name, amount, setup.rest[setup.front], setup.turning, setup.frame, setup.head)
-        points, turning = curve.points, curve.turning_points
-    return {"units": "m", "points": np.round(points, 7).tolist(), "turning_points": turning.tolist()}
+        curve = edit_curve(setup, HairlineEdit(preset=name, amount=amount))
+    points, turning = np.round(curve.points, 7).tolist(), np.asarray(curve.turning_points).tolist()
+    return {"units": "m", "points": points, "turning_points": turning}
 
 
 def hairline_edit_from_request(document: dict) -> HairlineEdit:
     """A validated hairline edit from the API's ``hairline`` object: ``preset`` with
     ``amount``, or ``curve`` (a curve document), plus ``method`` and ``parameterization``."""
     preset, curve = document.get("preset"), document.get("curve")
-    if (preset is None) == (curve is None):
-        raise InputError("a hairline edit needs exactly one of 'preset' or 'curve'", code="bad_option")
     return hairline_edit(
         preset=None if preset is None else f"{preset}:{document.get('amount', 1.0)}", curve=curve,
         method=document.get("method", "membrane"), parameterization=document.get("parameterization", "harmonic"),

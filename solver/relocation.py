@@ -43,7 +43,7 @@ import numpy as np
 
 from .character import Character
 from .errors import InputError
-from .geometry import MeshQuery, barycentric_coordinates
+from .geometry import MeshQuery, barycentric_coordinates, interpolate_barycentric, polyline_arc_length
 from .groom import HeadFrame, head_frame
 from .hairline import HairlineCurve, check_curve_on_head, smoothed_arc_length
 from .hairline_presets import PRESETS, check_amount, preset_curve
@@ -240,11 +240,6 @@ def scalp_chart(
     )
 
 
-def _arc_length(points: np.ndarray) -> np.ndarray:
-    """(k,) cumulative arc length of a polyline ``(k, 3)``."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-
-
 def hairline_targets(setup: ScalpChart, curve: HairlineCurve, source: str = "hairline curve",
                      pointwise: bool = False) -> np.ndarray:
     """Step 4: where each front hairline vertex goes.
@@ -308,8 +303,9 @@ def hairline_targets(setup: ScalpChart, curve: HairlineCurve, source: str = "hai
     a, b = front_arc[front_knots[segment]], front_arc[front_knots[segment + 1]]
     t = (front_arc - a) / (b - a)
     ca, cb = curve_arc[curve_knots[segment]], curve_arc[curve_knots[segment + 1]]
-    along = np.interp(ca + t * (cb - ca), curve_arc, _arc_length(points))
-    on_curve = np.column_stack([np.interp(along, _arc_length(points), points[:, k]) for k in range(3)])
+    raw_arc = polyline_arc_length(points)
+    along = np.interp(ca + t * (cb - ca), curve_arc, raw_arc)
+    on_curve = np.column_stack([np.interp(along, raw_arc, points[:, k]) for k in range(3)])
     return setup.head.signed_distance(on_curve).closest
 
 
@@ -454,7 +450,7 @@ def relocate_roots(
     weights = np.zeros((len(root_faces), 3))
     host[in_patch], weights[in_patch] = locator.locate(roots_uv[in_patch])
     inside = host >= 0
-    old = np.einsum("kc,kcd->kd", root_barycentric, character.vertices[character.faces[root_faces]])
+    old = interpolate_barycentric(character.vertices, character.faces, root_faces, root_barycentric)
     roots = old.copy()
     new_uv = np.einsum("kc,kcd->kd", weights[inside], u[setup.triangles[host[inside]]])
     roots[inside] = setup.chart.embed(new_uv)

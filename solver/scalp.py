@@ -57,6 +57,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .character import Character
 from .errors import InputError
+from .geometry import polyline_arc_length
 from .groom import REFERENCE_CROWN_M, HeadFrame, head_frame
 
 #: fewest root faces that can make a scalp
@@ -476,7 +477,7 @@ def turning_points(points: np.ndarray, frame: HeadFrame) -> np.ndarray:
     xy = local[:, [2, 0]]  # front view: (side, up)
     for _ in range(HAIRLINE_SMOOTHING_ITERATIONS):
         xy[1:-1] = 0.25 * xy[:-2] + 0.5 * xy[1:-1] + 0.25 * xy[2:]
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    arc = polyline_arc_length(xy)
     window = TURNING_WINDOW_M * frame.crown / REFERENCE_CROWN_M
     if arc[-1] <= 2.0 * window:
         return ends

@@ -5,9 +5,6 @@ import pytest
 from scipy.spatial import Delaunay
 
 from hairport.solver.errors import InputError
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom, head_frame
-from hairport.solver.makehuman import PRESETS, build_character
 from hairport.solver.parameterization import (
     DEFAULT_MARGIN_RINGS,
     PARAMETERIZATIONS,
@@ -17,24 +14,7 @@ from hairport.solver.parameterization import (
     parameterize,
     signed_areas,
 )
-from hairport.solver.scalp import boundary_loops, euler_characteristic, extract_scalp, refine_scalp
-
-
-@pytest.fixture(scope="module")
-def character():
-    return build_character(PRESETS["average-female"])
-
-
-@pytest.fixture(scope="module")
-def frame(character):
-    return head_frame(character)
-
-
-@pytest.fixture(scope="module")
-def scalp(character, frame):
-    hair = generate_groom(character, "short", 300, 8, seed=0)
-    faces = MeshQuery(character.vertices, character.faces).signed_distance(hair.points[hair.roots]).faces
-    return extract_scalp(character, faces, frame)
+from hairport.solver.scalp import boundary_loops, euler_characteristic, refine_scalp
 
 
 @pytest.fixture(scope="module")

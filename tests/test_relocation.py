@@ -27,11 +27,6 @@ PARAMETERIZATION_AGREEMENT_M = 1e-3
 
 
 @pytest.fixture(scope="module")
-def character():
-    return build_character(CHARACTERS["average-female"])
-
-
-@pytest.fixture(scope="module")
 def roots(character):
     """(faces, barycentric, points) of a 300-strand groom's roots."""
     hair = generate_groom(character, "short", 300, 4, seed=0)

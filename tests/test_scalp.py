@@ -4,9 +4,6 @@ import numpy as np
 import pytest
 
 from hairport.solver.errors import InputError
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom, head_frame
-from hairport.solver.makehuman import PRESETS, build_character
 from hairport.solver.scalp import (
     boundary_edges,
     split_boundary_ears,
@@ -24,34 +21,6 @@ from hairport.solver.scalp import (
 
 #: roots dropped within this distance (m) of the crown make a hole no closing can fill
 HOLE_RADIUS_M = 0.04
-
-
-@pytest.fixture(scope="module")
-def character():
-    return build_character(PRESETS["average-female"])
-
-
-@pytest.fixture(scope="module")
-def frame(character):
-    return head_frame(character)
-
-
-@pytest.fixture(scope="module")
-def query(character):
-    return MeshQuery(character.vertices, character.faces)
-
-
-@pytest.fixture(scope="module")
-def roots(character, query):
-    """(S, 3) root positions and (S,) faces holding them."""
-    hair = generate_groom(character, "short", 300, 8, seed=0)
-    points = hair.points[hair.roots]
-    return points, query.signed_distance(points).faces
-
-
-@pytest.fixture(scope="module")
-def scalp(character, roots, frame):
-    return extract_scalp(character, roots[1], frame)
 
 
 def assert_disk_scalp(scalp: Scalp, character, frame) -> None:

@@ -57,11 +57,11 @@ def create_retargets(
         pipeline.PreprocessOptions(**preprocess_options).validate()
     except pipeline.InputError as error:
         raise input_problem(error, "options") from None
-    try:
-        edit = None if hairline is None else pipeline.hairline_edit_from_request(hairline)
-        pipeline.RetargetOptions(**options, hairline=edit).validate()
-    except pipeline.InputError as error:
-        raise input_problem(error, "hairline") from None
+    if hairline is not None:
+        try:
+            pipeline.RetargetOptions(**options, hairline=pipeline.hairline_edit_from_request(hairline)).validate()
+        except pipeline.InputError as error:
+            raise input_problem(error, "hairline") from None
     key = hairstyle["artifact_key"]
     if preprocess_options != hairstyle["options"]:
         key = jobs.variant_key(storage, hairstyle, preprocess_options, pipeline.ARTIFACT_FORMAT_VERSION)

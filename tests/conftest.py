@@ -1,0 +1,37 @@
+"""Fixtures shared by the hairline test modules: the MakeHuman average female and the scalp
+of a 300-strand "short" groom on her (seed 0)."""
+
+import pytest
+
+from hairport.solver.geometry import MeshQuery
+from hairport.solver.groom import generate_groom, head_frame
+from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.scalp import extract_scalp
+
+
+@pytest.fixture(scope="session")
+def character():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="session")
+def frame(character):
+    return head_frame(character)
+
+
+@pytest.fixture(scope="session")
+def query(character):
+    return MeshQuery(character.vertices, character.faces)
+
+
+@pytest.fixture(scope="session")
+def roots(character, query):
+    """(S, 3) root positions and (S,) faces holding them."""
+    hair = generate_groom(character, "short", 300, 8, seed=0)
+    points = hair.points[hair.roots]
+    return points, query.signed_distance(points).faces
+
+
+@pytest.fixture(scope="session")
+def scalp(character, roots, frame):
+    return extract_scalp(character, roots[1], frame)
