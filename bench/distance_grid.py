@@ -26,12 +26,11 @@ import argparse
 import time
 
 import numpy as np
-
-from hairport.solver import distance_grid
-from hairport.solver.distance_grid import DistanceGrid, near_mask
-from hairport.solver.geometry import MeshQuery
-
 from geometry import strand_points, timed  # bench/geometry.py, beside this script
+
+from hairport.solver.mesh import distance_grid
+from hairport.solver.mesh.distance_grid import DistanceGrid, near_mask
+from hairport.solver.mesh.query import MeshQuery
 
 
 def broad_phase(grid, query, band):
@@ -71,8 +70,8 @@ def main():
     parser.add_argument("--full-exact", action="store_true", help="also time the build with every node exact (slow)")
     args = parser.parse_args()
 
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.makehuman import PRESETS, build_character
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     character = build_character(PRESETS["heavy-male"])
     vertices, faces = np.asarray(character.vertices, float), np.asarray(character.faces, np.int64)

@@ -1,4 +1,4 @@
-"""Benchmark of the geometric queries in solver/geometry.py.
+"""Benchmark of the geometric queries in solver/mesh/.
 
 Prints, for random points near a ~27k-face body (the MakeHuman "average-female" preset when
 it can be built, else a 20k-face icosphere), the median over runs of:
@@ -26,13 +26,14 @@ import time
 import igl
 import numpy as np
 
-from hairport.solver import geometry
-from hairport.solver.geometry import MeshQuery
+from hairport.solver.mesh import backends
+from hairport.solver.mesh import query as mesh_query
+from hairport.solver.mesh.query import MeshQuery
 
 
 def load_body():
     try:
-        from hairport.solver.makehuman import build_preset
+        from hairport.solver.synthetic.makehuman import build_preset
 
         body = build_preset("average-female")
         return "MakeHuman average-female", np.asarray(body.vertices, float), np.asarray(body.faces, np.int64)
@@ -76,7 +77,7 @@ def timed(fn, runs, warm_up=True):
 def forced(vertices, faces, backend):
     query = MeshQuery(vertices, faces)
     query._prepare()
-    query._closest = geometry._closest_face_index(query.vertices, query.faces, [backend])
+    query._closest = backends._closest_face_index(query.vertices, query.faces, [backend])
     return query
 
 
@@ -91,7 +92,7 @@ def main():
     name, vertices, faces = load_body()
     print(f"mesh: {name}, {len(vertices)} vertices, {len(faces)} faces; median of {args.runs} runs\n")
     rng = np.random.default_rng(0)
-    available = [b for b in geometry._FACE_INDEXES if _available(b, vertices, faces)]
+    available = [b for b in backends._FACE_INDEXES if _available(b, vertices, faces)]
 
     # one-off setup
     for backend in available:
@@ -144,7 +145,7 @@ def old_first_hits(vertices, faces):
     import trimesh
     from trimesh.ray.ray_pyembree import RayMeshIntersector
 
-    from hairport.solver.geometry import barycentric_coordinates
+    from hairport.solver.mesh.triangles import barycentric_coordinates
 
     rays = RayMeshIntersector(trimesh.Trimesh(vertices, faces, process=False))
 
@@ -163,15 +164,15 @@ def old_first_hits(vertices, faces):
 
 
 def with_setting(name, value, fn):
-    """``fn`` with ``geometry.<name>`` set to ``value`` during the call."""
+    """``fn`` with ``mesh.query.<name>`` set to ``value`` during the call."""
 
     def call(points):
-        keep = getattr(geometry, name)
-        setattr(geometry, name, value)
+        keep = getattr(mesh_query, name)
+        setattr(mesh_query, name, value)
         try:
             return fn(points)
         finally:
-            setattr(geometry, name, keep)
+            setattr(mesh_query, name, keep)
 
     return call
 
@@ -183,7 +184,7 @@ def unsorted(fn):
 
 def _available(backend, vertices, faces):
     try:
-        geometry._FACE_INDEXES[backend](vertices[:3], np.array([[0, 1, 2]]))
+        backends._FACE_INDEXES[backend](vertices[:3], np.array([[0, 1, 2]]))
         return True
     except ImportError:
         return False

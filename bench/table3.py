@@ -32,9 +32,11 @@ import time
 
 import numpy as np
 
-from hairport.solver.groom import generate_groom, head_frame, sample_roots, scalp_faces
-from hairport.solver.makehuman import PRESETS, build_character
-from hairport.solver.relocation import HairlineEdit, relocate_roots
+from hairport.solver.body.head_frame import head_frame
+from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.hairline.relocation import relocate_roots
+from hairport.solver.synthetic.groom import generate_groom, sample_roots, scalp_faces
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 #: (source character, target character, style, seed)
 GROOMS = [
@@ -55,7 +57,8 @@ PARTICLES = 4
 
 def groom_roots(source, style: str, strands: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """(faces, barycentric) of a groom's roots on its source."""
-    from hairport.solver.geometry import MeshQuery, barycentric_coordinates
+    from hairport.solver.mesh.query import MeshQuery
+    from hairport.solver.mesh.triangles import barycentric_coordinates
 
     hair = generate_groom(source, style, strands, PARTICLES, seed=seed)
     points = hair.points[hair.roots]

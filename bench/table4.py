@@ -69,8 +69,8 @@ def measure_size(args) -> dict:
     """One size, in this process: preprocess, multi-scale retargets, baselines."""
     from hairport.solver import pipeline
     from hairport.solver.baselines import BASELINE_METHODS
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.makehuman import PRESETS, build_character
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     strands, per_strand = groom_shape(int(float(args.one)))
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
@@ -126,8 +126,8 @@ def measure_size(args) -> dict:
 def measure_full(args) -> dict:
     """The coupled solve of one size, in this process."""
     from hairport.solver import pipeline
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.makehuman import PRESETS, build_character
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     strands, per_strand = groom_shape(int(float(args.full)))
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])

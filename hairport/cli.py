@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from .solver.errors import InputError
+from hairport.solver.model.errors import InputError
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
@@ -43,7 +43,7 @@ def _add_units(p) -> None:
 
 
 def _add_preprocess(sub) -> None:
-    from .solver.artifact import EXTENSION as ARTIFACT_EXTENSION
+    from hairport.solver.artifact import EXTENSION as ARTIFACT_EXTENSION
 
     p = sub.add_parser("preprocess", help="compute the adaptable hairstyle of a source groom once (.hpa)")
     _add_source_arguments(p, required=True)
@@ -54,8 +54,8 @@ def _add_preprocess(sub) -> None:
 
 
 def _add_retarget(sub) -> None:
-    from .solver.pipeline import METHODS
-    from .solver.strand_solver import QP_BACKENDS
+    from hairport.solver.adaptation.coupled import QP_BACKENDS
+    from hairport.solver.options import METHODS
 
     p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
     p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
@@ -81,8 +81,8 @@ def _add_retarget(sub) -> None:
 
 
 def _add_hairline_arguments(p) -> None:
-    from .solver.parameterization import PARAMETERIZATIONS
-    from .solver.pipeline import HAIRLINE_PRESETS, RELOCATION_METHODS
+    from hairport.solver.mesh.parameterization import PARAMETERIZATIONS
+    from hairport.solver.pipeline import HAIRLINE_PRESETS, RELOCATION_METHODS
 
     edit = p.add_mutually_exclusive_group()
     edit.add_argument("--hairline", metavar="PRESET[:AMOUNT]",
@@ -98,7 +98,7 @@ def _add_hairline_arguments(p) -> None:
 
 
 def _hairline_edit(args: argparse.Namespace):
-    from .solver import pipeline
+    from hairport.solver import pipeline
 
     if args.hairline is None and args.hairline_curve is None:
         return None
@@ -107,8 +107,8 @@ def _hairline_edit(args: argparse.Namespace):
 
 
 def _preprocess_options(args: argparse.Namespace):
-    from .solver import pipeline
-    from .solver.guides import DEFAULT_GUIDES
+    from hairport.solver import pipeline
+    from hairport.solver.adaptation.guides import DEFAULT_GUIDES
 
     options = pipeline.PreprocessOptions(k=args.k, guides=DEFAULT_GUIDES if args.guides is None else args.guides)
     options.validate()
@@ -117,8 +117,8 @@ def _preprocess_options(args: argparse.Namespace):
 
 def _load_source(args: argparse.Namespace, settings, progress):
     """Source character and hair from --source/--hair, with the configured limits."""
-    from .solver.characterio import load_character
-    from .solver.hairio import ReadLimits, read_hair
+    from hairport.solver.io.character import load_character
+    from hairport.solver.io.hair import ReadLimits, read_hair
 
     limits = ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
     progress("load", 0.0, "reading the source")
@@ -133,19 +133,20 @@ def _mesh_limits(settings) -> dict:
 
 
 def _mesh_units(args: argparse.Namespace, mesh: str, skeleton: str | None) -> str | None:
-    from .solver.characterio import resolve_skeleton_path
+    from hairport.solver.io.character import resolve_skeleton_path
 
     # a skeleton sidecar states its own units; --units is for meshes without one
     return None if (skeleton is not None or resolve_skeleton_path(mesh) is not None) else args.units
 
 
 def cmd_preprocess(args: argparse.Namespace) -> int:
+    from hairport.solver import pipeline
+    from hairport.solver.artifact import EXTENSION as ARTIFACT_EXTENSION
+    from hairport.solver.artifact import save_adaptable
+    from hairport.solver.io.hair import format_for_path
+
     from .outputs import OutputSet
     from .settings import get_settings
-    from .solver import pipeline
-    from .solver.artifact import EXTENSION as ARTIFACT_EXTENSION
-    from .solver.artifact import save_adaptable
-    from .solver.hairio import format_for_path
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
@@ -164,11 +165,12 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 
 def cmd_retarget(args: argparse.Namespace) -> int:
+    from hairport.solver import pipeline
+    from hairport.solver.io.character import load_character
+    from hairport.solver.io.hair import format_for_path, write_hair
+
     from .outputs import OutputSet
     from .settings import get_settings
-    from .solver import pipeline
-    from .solver.characterio import load_character
-    from .solver.hairio import format_for_path, write_hair
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
@@ -241,7 +243,7 @@ def _add_assets(sub) -> None:
 
 
 def cmd_assets_fetch(args: argparse.Namespace) -> int:
-    from .solver.assets import fetch_makehuman_assets
+    from hairport.solver.synthetic.assets import fetch_makehuman_assets
 
     path = fetch_makehuman_assets(Path(args.cache_dir) if args.cache_dir else None)
     print(path)
@@ -261,7 +263,6 @@ def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from .service.app import create_app
-
     from .service.auth import check_configuration
     from .settings import get_settings
 
@@ -337,8 +338,8 @@ def _check_source_arguments(args: argparse.Namespace) -> None:
 def _adaptable_from_args(args: argparse.Namespace, settings, progress):
     """The adaptable hairstyle of --adaptable, or preprocessed from --source/--hair, and the
     seconds preprocessing took (0 for an artifact)."""
-    from .solver import pipeline
-    from .solver.artifact import load_adaptable
+    from hairport.solver import pipeline
+    from hairport.solver.artifact import load_adaptable
 
     _check_source_arguments(args)
     if args.adaptable:
@@ -352,10 +353,11 @@ def _adaptable_from_args(args: argparse.Namespace, settings, progress):
 
 
 def cmd_hairline(args: argparse.Namespace) -> int:
+    from hairport.solver import pipeline
+    from hairport.solver.io.character import load_character
+
     from .outputs import OutputSet
     from .settings import get_settings
-    from .solver import pipeline
-    from .solver.characterio import load_character
 
     settings = get_settings()
     progress = StageProgress(args.quiet)

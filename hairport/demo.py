@@ -29,13 +29,14 @@ TABLE_ROWS = (
 
 
 def run_demo(args: argparse.Namespace) -> int:
+    from hairport.solver import pipeline
+    from hairport.solver.baselines import BASELINE_METHODS
+    from hairport.solver.io.hair import write_hair
+    from hairport.solver.render.preview import render_preview
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character, write_character
+
     from .cli import StageProgress
-    from .solver import pipeline
-    from .solver.baselines import BASELINE_METHODS
-    from .solver.groom import generate_groom
-    from .solver.hairio import write_hair
-    from .solver.makehuman import PRESETS, build_character, write_character
-    from .solver.preview import render_preview
 
     progress = StageProgress(args.quiet)
     began = time.perf_counter()
@@ -43,7 +44,7 @@ def run_demo(args: argparse.Namespace) -> int:
     progress("characters", 0.0, f"building MakeHuman characters {args.source_preset!r} -> {args.target_preset!r}")
     for preset in (args.source_preset, args.target_preset):
         if preset not in PRESETS:
-            from .solver.errors import InputError
+            from hairport.solver.model.errors import InputError
 
             raise InputError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}", code="unknown_preset")
     source = build_character(PRESETS[args.source_preset])

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .character import Character, Skeleton
-from .energies import Neighbours
-from .errors import InputError
-from .hair import Hair
-from .multiscale import MultiscaleModel
-from .transfer import Anchors
+from hairport.solver.adaptation.multiscale import MultiscaleModel
+from hairport.solver.adaptation.neighbours import Neighbours
+from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair
+from hairport.solver.transfer.anchors import Anchors
 
 FORMAT_NAME = "hairport-adaptable-hairstyle"
 #: bump when the arrays or their meaning change; older artifacts are then refused
@@ -131,7 +131,8 @@ def load_adaptable(path: str | os.PathLike):
         altered, another format), ``code="artifact_version"`` for another format version.
     FileNotFoundError
     """
-    from .pipeline import AdaptableHairstyle, PreprocessOptions
+    from hairport.solver.adaptable import AdaptableHairstyle
+    from hairport.solver.options import PreprocessOptions
 
     path = Path(path)
     if not path.is_file():

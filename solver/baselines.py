@@ -37,10 +37,12 @@ from typing import Callable
 import numpy as np
 from scipy.interpolate import RBFInterpolator
 
-from .character import Character, check_same_topology
-from .errors import InputError
-from .geometry import MeshQuery, barycentric_coordinates, face_frames, interpolate_barycentric, push_out
-from .hair import Hair
+from hairport.solver.mesh.clearance import push_out
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
+from hairport.solver.model.character import Character, check_same_topology
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair
 
 #: the method names accepted by :func:`retarget_baseline` (each may carry :data:`PUSHOUT_SUFFIX`)
 BASELINE_METHODS = ("global-translate", "root-translate", "root-rigid", "affine-translate", "rbf-warp")
@@ -76,10 +78,6 @@ RBF_CHUNK_PARTICLES = 4096
 ROTATION_CHUNK_PARTICLES = 1 << 18
 
 
-# --------------------------------------------------------------------------------------------
-# method names
-
-
 def parse_method(name: str) -> tuple[str, bool]:
     """Split a method name into the baseline and whether push-out follows.
 
@@ -113,10 +111,6 @@ def parse_method(name: str) -> tuple[str, bool]:
             code="unknown_method",
         )
     return base, pushout
-
-
-# --------------------------------------------------------------------------------------------
-# root anchoring
 
 
 def anchor_roots(source_query: MeshQuery, hair: Hair) -> tuple[np.ndarray, np.ndarray]:
@@ -158,10 +152,6 @@ def root_targets(target: Character, faces: np.ndarray, bary: np.ndarray) -> np.n
     targets : (S, 3) float64
     """
     return interpolate_barycentric(target.vertices, target.faces, faces, bary)
-
-
-# --------------------------------------------------------------------------------------------
-# helpers
 
 
 def hair_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -310,10 +300,6 @@ def snap_roots(points: np.ndarray, hair: Hair, targets: np.ndarray) -> np.ndarra
     return points
 
 
-# --------------------------------------------------------------------------------------------
-# the baselines; each maps (source, target, hair, root faces (S,), root targets (S, 3)) -> (N, 3)
-
-
 def _global_translate(source: Character, target: Character, hair: Hair, faces: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """Fig. 2b top: every particle moves by the mean root displacement (roots not snapped)."""
     shift = (targets - hair.points[hair.roots]).mean(axis=0)
@@ -374,10 +360,6 @@ _METHODS: dict[str, Callable[..., np.ndarray]] = {
     "affine-translate": _affine_translate,
     "rbf-warp": _rbf_warp,
 }
-
-
-# --------------------------------------------------------------------------------------------
-# push-out and the entry point
 
 
 def retarget_baseline(

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .energies import EnergyWeights, ShapeModel, energy_terms
-from .geometry import MeshQuery
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, energy_terms
+from hairport.solver.mesh.query import MeshQuery
 
 #: a particle counts as closer than eps_c only when it is short by more than this (m): the
 #: solver meets the clearance to its QP tolerance, and 1 um is far below anything visible

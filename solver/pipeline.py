@@ -14,26 +14,12 @@ from functools import cached_property
 
 import numpy as np
 
-from .baselines import BASELINE_METHODS, parse_method, retarget_baseline
-from .character import Character, Skeleton, check_same_topology
-from .energies import EnergyWeights, Neighbours, ShapeModel, knn_other_strands, laplacian_operator
-from .artifact import FORMAT_VERSION, load_adaptable, save_adaptable
-from .characterio import MESH_EXTENSIONS as CHARACTER_MESH_EXTENSIONS
-from .characterio import load_character
-from .errors import InputError
-from .hairio import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
-from .geometry import MeshQuery, interpolate_barycentric
-from .hair import Hair
-from .metrics import hairstyle_metrics
-from .distance_grid import DistanceGrid
-from .guides import DEFAULT_GUIDES
-from .hairline import HairlineCurve, adaptive_weights, parse_hairline_curve, read_hairline_curve
-from .hairline_presets import PRESETS as HAIRLINE_PRESETS  # noqa: F401 - the CLI's and service's choices
-from .hairline_presets import parse_preset
-from .parameterization import PARAMETERIZATIONS  # noqa: F401 - the CLI's and service's choices
-from .relocation import RELOCATION_METHODS  # noqa: F401 - the CLI's and service's choices
-from .relocation import HairlineEdit, Relocation, edit_curve, relocate_roots, scalp_chart
-from .multiscale import (
+from hairport.solver.adaptable import AdaptableHairstyle
+from hairport.solver.adaptation.active_set import StrandSolveReport
+from hairport.solver.adaptation.coupled import QP_BACKENDS, solve_hairstyle
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
+from hairport.solver.adaptation.guides import DEFAULT_GUIDES
+from hairport.solver.adaptation.multiscale import (
     DEFAULT_CHUNK_PARTICLES,
     FineSource,
     MultiscaleModel,
@@ -44,141 +30,39 @@ from .multiscale import (
     fine_source,
     solve_multiscale,
 )
-from .qp import Cancelled, SolveOptions, SolveReport  # noqa: F401 - Cancelled is part of this module's interface
-from .strand_solver import QP_BACKENDS, StrandSolveReport, solve_hairstyle
-from .skeleton_transfer import ensure_skeleton
-from .transfer import ANCHOR_SIGMA, SMOOTHING_EPS, Anchors, compute_anchors, place_anchors, smooth_strands, strand_laplacian
-
-#: the shape-adaptation solvers: guides then independent strands (Sec. 5), or all strands coupled
-SOLVER_METHODS = ("multiscale", "global")
-METHODS = SOLVER_METHODS + BASELINE_METHODS
+from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
+from hairport.solver.adaptation.options import Cancelled, SolveOptions
+from hairport.solver.adaptation.osqp_backend import SolveReport
+from hairport.solver.artifact import FORMAT_VERSION, load_adaptable, save_adaptable
+from hairport.solver.baselines import BASELINE_METHODS, parse_method, retarget_baseline
+from hairport.solver.body.skeleton_transfer import ensure_skeleton
+from hairport.solver.body.target import prepare_target
+from hairport.solver.hairline.curve import HairlineCurve, parse_hairline_curve, read_hairline_curve
+from hairport.solver.hairline.edit import RELOCATION_METHODS, HairlineEdit, hairline_edit, hairline_edit_from_request
+from hairport.solver.hairline.presets import PRESETS as HAIRLINE_PRESETS
+from hairport.solver.hairline.presets import parse_preset
+from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
+from hairport.solver.hairline.weights import adaptive_weights
+from hairport.solver.io.character import MESH_EXTENSIONS as CHARACTER_MESH_EXTENSIONS
+from hairport.solver.io.character import load_character
+from hairport.solver.io.hair import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
+from hairport.solver.mesh.distance_grid import DistanceGrid
+from hairport.solver.mesh.parameterization import PARAMETERIZATIONS
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import interpolate_barycentric
+from hairport.solver.metrics import hairstyle_metrics
+from hairport.solver.model.character import Character, Skeleton, check_same_topology
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair
+from hairport.solver.options import ENERGY_TOLERANCE, METHODS, SOLVER_METHODS, PreprocessOptions, RetargetOptions
+from hairport.solver.transfer.anchors import ANCHOR_SIGMA, Anchors, compute_anchors, place_anchors
+from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands, strand_laplacian
 
 ProgressFn = Callable[[str, float, str], None]
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
 GRID_REGION_MARGIN = 0.05
-#: the solvers stop a strand (or the coupled guides) once an iteration lowers Eq. 1 by less
-#: than this fraction (see SolveOptions.energy_tolerance)
-ENERGY_TOLERANCE = 1e-3
-
-
-@dataclass(frozen=True)
-class PreprocessOptions:
-    """Source-side parameters (Table 1, meters)."""
-
-    k: int = 5
-    sigma: float = ANCHOR_SIGMA
-    guides: int = DEFAULT_GUIDES
-    guide_seed: int = 0
-
-    def validate(self) -> None:
-        if self.k < 1:
-            raise InputError(f"option k must be >= 1, got {self.k}", code="bad_option")
-        if self.guides < 1:
-            raise InputError(f"option guides must be >= 1, got {self.guides}", code="bad_option")
-        if not np.isfinite(self.sigma) or self.sigma < 0:
-            raise InputError(f"option sigma must be a finite non-negative number, got {self.sigma}", code="bad_option")
-
-
-@dataclass(frozen=True)
-class RetargetOptions:
-    """Target-side parameters (Table 1, meters) and the method.
-
-    ``method`` is ``multiscale`` (Sec. 5), ``global`` (Eq. 1 over all strands coupled) or a
-    baseline name, optionally with the ``+pushout`` suffix. ``workers`` processes share the
-    multi-scale fine level (``None``: the CPUs available), in chunks of ``chunk_particles``.
-    ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
-    active-set method of :mod:`.strand_solver` or OSQP. ``hairline`` edits the front
-    hairline (Sec. 6; solver methods only).
-    """
-
-    method: str = "multiscale"
-    alpha: float = 3e3
-    beta: float = 1e3
-    eps_c: float = 5e-4
-    eps_s: float = SMOOTHING_EPS
-    max_iterations: int = 30
-    step_tolerance: float = 1e-5
-    energy_tolerance: float = ENERGY_TOLERANCE
-    workers: int | None = None
-    chunk_particles: int = DEFAULT_CHUNK_PARTICLES
-    qp_backend: str = "active-set"
-    hairline: HairlineEdit | None = None
-
-    def validate(self) -> None:
-        if self.method not in SOLVER_METHODS:
-            try:
-                parse_method(self.method)
-            except InputError:
-                raise InputError(
-                    f"unknown method {self.method!r}; expected one of {', '.join(METHODS)} "
-                    "(a baseline may carry the suffix +pushout)",
-                    code="unknown_method",
-                ) from None
-        for name in ("alpha", "beta", "eps_c", "eps_s", "step_tolerance", "energy_tolerance"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise InputError(f"option {name} must be a finite non-negative number, got {value}", code="bad_option")
-        if self.max_iterations < 1:
-            raise InputError("option max_iterations must be >= 1", code="bad_option")
-        if self.qp_backend not in QP_BACKENDS:
-            raise InputError(
-                f"unknown QP backend {self.qp_backend!r}; expected one of {', '.join(QP_BACKENDS)}", code="bad_option"
-            )
-        if self.workers is not None and self.workers < 1:
-            raise InputError("option workers must be >= 1", code="bad_option")
-        if self.chunk_particles < 1:
-            raise InputError("option chunk_particles must be >= 1", code="bad_option")
-        if self.hairline is not None:
-            if self.method not in SOLVER_METHODS:
-                raise InputError(
-                    f"a hairline edit needs the method multiscale or global, not the baseline {self.method!r}",
-                    code="bad_option",
-                )
-            self.hairline.validate()
-
-
-@dataclass(frozen=True, eq=False)
-class AdaptableHairstyle:
-    """Everything retargeting needs that depends on the source only."""
-
-    source: Character
-    hair: Hair
-    anchors: Anchors
-    multiscale: MultiscaleModel
-    options: PreprocessOptions
-    bone_names: tuple[str, ...]
-    timings: dict = field(default_factory=dict)
-
-    # derived from the source only: built once, reused by every retarget of this hairstyle
-    # (cached_property writes the instance __dict__ directly, which a frozen dataclass allows)
-    @cached_property
-    def neighbours(self) -> Neighbours:
-        """Eq. 8-9 over all strands (the coupled ``global`` solve only)."""
-        return knn_other_strands(self.hair.points, self.hair.strand_of, self.options.k)
-
-    @cached_property
-    def coarse_model(self) -> ShapeModel:
-        """Eq. 7/10 operators of the guide hairstyle."""
-        return coarse_shape_model(self.hair, self.multiscale)
-
-    @cached_property
-    def fine_source(self) -> FineSource:
-        """Source-only arrays of the fine level."""
-        return fine_source(self.hair, self.multiscale)
-
-    @cached_property
-    def shape_model(self) -> ShapeModel:
-        """Eq. 7/10 operators of the whole hairstyle."""
-        n = self.hair.n_particles
-        K = laplacian_operator(self.neighbours, np.arange(n), n)
-        return ShapeModel.build(self.hair.points, self.hair.segments, K)
-
-    @cached_property
-    def strand_laplacian(self):
-        """Eq. 5's per-strand Laplacian of the source, ``(N, N)`` csr_matrix."""
-        return strand_laplacian(self.hair.points, self.hair.offsets)
 
 
 @dataclass(eq=False)
@@ -236,24 +120,6 @@ def preprocess(
     timings["guides"] = time.perf_counter() - began
     progress("preprocess", 1.0, "done")
     return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings)
-
-
-def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Character:
-    """Check topology, give the target a skeleton if it has none, and check its bones."""
-    check_same_topology(adaptable.source, target)
-    target = ensure_skeleton(adaptable.source, target)
-    if target.skeleton.names != adaptable.bone_names:
-        missing = sorted(set(adaptable.bone_names) - set(target.skeleton.names))
-        if missing:
-            raise InputError(f"target skeleton lacks bones {missing[:5]}", target.name, "bad_skeleton")
-        order = [target.skeleton.names.index(name) for name in adaptable.bone_names]
-        parents = np.array([
-            adaptable.bone_names.index(target.skeleton.names[p]) if p >= 0 else -1 for p in target.skeleton.parents[order]
-        ])
-        skeleton = Skeleton(adaptable.bone_names, parents, target.skeleton.heads[order], target.skeleton.tails[order])
-        weights = target.weights[:, order] if target.weights is not None else None
-        target = Character(target.vertices, target.faces, skeleton, weights, target.name)
-    return target
 
 
 def initial_transfer(
@@ -436,38 +302,6 @@ def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: 
     return {"units": "m", "points": points, "turning_points": turning}
 
 
-def hairline_edit_from_request(document: dict) -> HairlineEdit:
-    """A validated hairline edit from the API's ``hairline`` object: ``preset`` with
-    ``amount``, or ``curve`` (a curve document), plus ``method`` and ``parameterization``."""
-    preset, curve = document.get("preset"), document.get("curve")
-    return hairline_edit(
-        preset=None if preset is None else f"{preset}:{document.get('amount', 1.0)}", curve=curve,
-        method=document.get("method", "membrane"), parameterization=document.get("parameterization", "harmonic"),
-    )
-
-
-def hairline_edit(
-    preset: str | None = None,
-    curve_path=None,
-    curve: dict | None = None,
-    method: str = "membrane",
-    parameterization: str = "harmonic",
-) -> HairlineEdit:
-    """A validated hairline edit from a preset ``NAME[:AMOUNT]``, a curve JSON file or a
-    parsed curve document (exactly one)."""
-    given = sum(x is not None for x in (preset, curve_path, curve))
-    if given != 1:
-        raise InputError("give exactly one of a hairline preset, a curve file or a curve", code="bad_option")
-    if preset is not None:
-        name, amount = parse_preset(preset)
-        edit = HairlineEdit(preset=name, amount=amount, method=method, parameterization=parameterization)
-    else:
-        parsed = read_hairline_curve(curve_path) if curve_path is not None else parse_hairline_curve(curve)
-        edit = HairlineEdit(curve=parsed, method=method, parameterization=parameterization)
-    edit.validate()
-    return edit
-
-
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:
     """(N,) bool: non-root particles inside the target body."""
     query = query or MeshQuery(target.vertices, target.faces)
@@ -476,10 +310,6 @@ def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = No
     mask[free] = query.signed_distance(hair.points[free]).distance < 0.0
     return mask
 
-
-# --------------------------------------------------------------------------------------
-# files: the entry points the service and the worker use (they import nothing else)
-# --------------------------------------------------------------------------------------
 
 #: hair file formats read and written (file extensions without the dot)
 HAIR_FORMATS = SUPPORTED_FORMATS
@@ -520,7 +350,7 @@ def load_adaptable_file(path) -> AdaptableHairstyle:
 
 def write_preview(path, adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> None:
     """PNG: the source hairstyle next to the result, penetrating particles highlighted."""
-    from .preview import render_preview
+    from hairport.solver.render.preview import render_preview
 
     render_preview(path, [
         (adaptable.hair, adaptable.source, None, "source"),

@@ -3,10 +3,11 @@ of a 300-strand "short" groom on her (seed 0)."""
 
 import pytest
 
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom, head_frame
-from hairport.solver.makehuman import PRESETS, build_character
-from hairport.solver.scalp import extract_scalp
+from hairport.solver.body.head_frame import head_frame
+from hairport.solver.hairline.scalp import extract_scalp
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 
 @pytest.fixture(scope="session")

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from hairport.solver import artifact, pipeline
-from hairport.solver.errors import InputError
-from hairport.solver.groom import generate_groom
-from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.model.errors import InputError
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from hairport.solver import banded
+from hairport.solver.adaptation import banded
 
 
 def random_block_tridiagonal(n, rng, breaks=()):

@@ -8,18 +8,13 @@ import scipy.sparse as sp
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from hairport.solver.geometry import face_frames, push_out
-from hairport.solver.baselines import (
-    BASELINE_METHODS,
-    anchor_roots,
-    parse_method,
-    retarget_baseline,
-    root_targets,
-)
-from hairport.solver.character import Character, Skeleton
-from hairport.solver.errors import InputError, TopologyMismatch
-from hairport.solver.geometry import MeshQuery, interpolate_barycentric
-from hairport.solver.hair import Hair
+from hairport.solver.baselines import BASELINE_METHODS, anchor_roots, parse_method, retarget_baseline, root_targets
+from hairport.solver.mesh.clearance import push_out
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import face_frames, interpolate_barycentric
+from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.errors import InputError, TopologyMismatch
+from hairport.solver.model.hair import Hair
 
 HEAD_RADIUS = 0.1  # m
 SEGMENTS_PER_STRAND = 12

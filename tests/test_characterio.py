@@ -10,8 +10,7 @@ import pytest
 import scipy.sparse as sp
 import trimesh
 
-from hairport.solver.character import Skeleton
-from hairport.solver.characterio import (
+from hairport.solver.io.character import (
     derive_skin_weights,
     fan_triangulate,
     load_character,
@@ -20,7 +19,8 @@ from hairport.solver.characterio import (
     resolve_skeleton_path,
     write_skeleton_json,
 )
-from hairport.solver.errors import InputError
+from hairport.solver.model.character import Skeleton
+from hairport.solver.model.errors import InputError
 
 # --------------------------------------------------------------------------------------
 # synthetic inputs

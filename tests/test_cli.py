@@ -27,12 +27,14 @@ import pytest
 
 from hairport import cli
 from hairport.settings import get_settings
-from hairport.solver import characterio, pipeline, toy
-from hairport.solver.characterio import load_character
-from hairport.solver.errors import InputError
-from hairport.solver.groom import generate_groom
-from hairport.solver.hairio import read_hair, write_hair
-from hairport.solver.makehuman import write_character
+from hairport.solver import pipeline
+from hairport.solver.io import character as characterio
+from hairport.solver.io.character import load_character
+from hairport.solver.io.hair import read_hair, write_hair
+from hairport.solver.model.errors import InputError
+from hairport.solver.synthetic import toy
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import write_character
 
 BASELINE = "root-translate+pushout"
 N_STRANDS = 60
@@ -327,7 +329,7 @@ def test_progress_lines_precede_the_error_without_quiet(capsys, world, out, tmp_
 
 def test_failure_while_writing_outputs_leaves_nothing(capsys, world, out, monkeypatch):
     """The hair and the report are already in temporary files when the preview fails."""
-    from hairport.solver import preview
+    from hairport.solver.render import preview
 
     def broken(path, panels):
         Path(path).write_bytes(b"half a PNG")
@@ -564,7 +566,7 @@ def test_preprocess_refuses_a_wrong_extension_and_zero_guides(capsys, world, out
 
 @pytest.fixture(scope="module")
 def human_world(tmp_path_factory) -> dict:
-    from hairport.solver.makehuman import PRESETS, build_character
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     d = tmp_path_factory.mktemp("cli-human")
     for name in ("average-female", "heavy-male"):

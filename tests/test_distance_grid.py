@@ -11,14 +11,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from hairport.solver import distance_grid
-from hairport.solver.distance_grid import (
-    DEFAULT_GRID_MARGIN,
-    DEFAULT_GRID_SPACING,
-    DistanceGrid,
-    near_mask,
-)
-from hairport.solver.geometry import MeshQuery
+from hairport.solver.mesh import distance_grid
+from hairport.solver.mesh.distance_grid import DEFAULT_GRID_MARGIN, DEFAULT_GRID_SPACING, DistanceGrid, near_mask
+from hairport.solver.mesh.query import MeshQuery
 
 RADIUS = 0.1  # m
 SPACING = DEFAULT_GRID_SPACING  # 5 mm

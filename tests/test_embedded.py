@@ -46,10 +46,10 @@ def server(tmp_path_factory):
 
 
 def test_embedded_server_runs_a_retarget_without_redis(server, tmp_path):
-    from hairport.solver import toy
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.hairio import read_hair_bytes, write_hair
-    from hairport.solver.makehuman import write_character
+    from hairport.solver.io.hair import read_hair_bytes, write_hair
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import write_character
 
     source = toy.toy_character(name="source")
     target = toy.toy_character(head_scale=(1.1, 0.95, 1.05), shoulder_width=0.42, name="target")

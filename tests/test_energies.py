@@ -3,17 +3,16 @@
 import numpy as np
 import pytest
 
-from hairport.solver.energies import (
+from hairport.solver.adaptation.energies import (
     EnergyWeights,
     ShapeModel,
     energy_terms,
     gradient,
     hessian,
-    knn_other_strands,
-    laplacian_operator,
     segment_operator,
 )
-from hairport.solver.hair import Hair
+from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
+from hairport.solver.model.hair import Hair
 
 
 def parallel_strands(n_strands=3, n_points=6, spacing=0.01, step=0.005):
@@ -140,7 +139,7 @@ def test_hessian_is_exact_where_directions_match_the_source():
 
 
 def test_closed_form_clamped_hessians_match_an_eigensolver():
-    from hairport.solver.energies import clamped_direction_hessians
+    from hairport.solver.adaptation.energies import clamped_direction_hessians
 
     rng = np.random.default_rng(0)
     u = rng.normal(size=(500, 3))

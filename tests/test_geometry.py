@@ -1,4 +1,4 @@
-"""Geometric queries (solver/geometry.py): signed distance with a cached tree, ray hits, helpers.
+"""Geometric queries (solver/mesh/): signed distance with a cached tree, ray hits, helpers.
 
 The reference for the signed distance is libigl's ``signed_distance`` with the
 pseudonormal sign (the implementation before the tree was cached), the analytic distance
@@ -12,31 +12,29 @@ import numpy as np
 import pytest
 import trimesh
 
-from hairport.solver import geometry
-from hairport.solver.geometry import (
-    ON_SURFACE_DISTANCE,
-    MeshQuery,
-    barycentric_coordinates,
-    closest_points_on_segments,
-    interpolate_barycentric,
-)
+from hairport.solver.mesh import backends
+from hairport.solver.mesh import query as mesh_query
+from hairport.solver.mesh.polyline import closest_points_on_segments
+from hairport.solver.mesh.query import ON_SURFACE_DISTANCE, MeshQuery
+from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
+
 
 def _available(name):
     try:
-        geometry._FACE_INDEXES[name](np.eye(3), np.array([[0, 1, 2]]))
+        backends._FACE_INDEXES[name](np.eye(3), np.array([[0, 1, 2]]))
         return True
     except ImportError:
         return False
 
 
-BACKENDS = [name for name in geometry._FACE_INDEXES if _available(name)]  # the default and the opt-in ones
+BACKENDS = [name for name in backends._FACE_INDEXES if _available(name)]  # the default and the opt-in ones
 
 
 def query_with(vertices, faces, backend):
     """A MeshQuery whose face search is forced to ``backend``."""
     query = MeshQuery(vertices, faces)
     query._prepare()
-    query._closest = geometry._closest_face_index(query.vertices, query.faces, [backend])
+    query._closest = backends._closest_face_index(query.vertices, query.faces, [backend])
     return query
 
 
@@ -71,13 +69,13 @@ def assert_matches_old(sd, distance, closest, backend, vertices):
     """Equal to the previous implementation: to rounding with the float64 search; with the
     float32 one exactly within the near-surface band and to ~1e-7 of the size beyond it
     (a near-tie face may be picked there, so the closest point is not compared)."""
-    if geometry._FACE_INDEXES[backend].exact:
+    if backends._FACE_INDEXES[backend].exact:
         np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-12)
         np.testing.assert_allclose(sd.closest, closest, rtol=0, atol=1e-12)
         return
     extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
     np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-6 * extent)
-    near = np.abs(distance) < 0.5 * geometry.EXACT_BAND * extent
+    near = np.abs(distance) < 0.5 * mesh_query.EXACT_BAND * extent
     np.testing.assert_allclose(sd.distance[near], distance[near], rtol=0, atol=1e-12)
     np.testing.assert_allclose(sd.closest[near], closest[near], rtol=0, atol=1e-12)
     return near
@@ -243,7 +241,7 @@ def test_float32_face_search_is_close_everywhere_and_exact_near_the_surface():
     np.testing.assert_array_equal(a.distance < 0, b.distance < 0)
     extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
     np.testing.assert_allclose(a.distance, b.distance, atol=1e-6 * extent)
-    near = np.abs(b.distance) < 0.5 * geometry.EXACT_BAND * extent
+    near = np.abs(b.distance) < 0.5 * mesh_query.EXACT_BAND * extent
     np.testing.assert_allclose(a.distance[near], b.distance[near], atol=1e-14)
 
 
@@ -273,7 +271,8 @@ def test_sign_next_to_a_knife_edge(backend):
 
 @pytest.fixture(scope="module")
 def body():
-    from hairport.solver.makehuman import build_preset, fetch_makehuman_assets
+    from hairport.solver.synthetic.assets import fetch_makehuman_assets
+    from hairport.solver.synthetic.makehuman import build_preset
 
     assets = fetch_makehuman_assets(offline_ok=True)
     if assets is None:
@@ -309,9 +308,9 @@ def test_z_order_sorting_does_not_change_results(backend, monkeypatch):
     vertices, faces = icosphere()
     query = query_with(vertices, faces, backend)
     points = sample_near_features(vertices, faces, np.random.default_rng(11), n=3000)
-    monkeypatch.setattr(geometry, "SORT_QUERIES_FROM", 1)
+    monkeypatch.setattr(mesh_query, "SORT_QUERIES_FROM", 1)
     sorted_ = query.signed_distance(points)
-    monkeypatch.setattr(geometry, "SORT_QUERIES_FROM", 10**12)
+    monkeypatch.setattr(mesh_query, "SORT_QUERIES_FROM", 10**12)
     plain = query.signed_distance(points)
     for field in ("distance", "closest", "normal", "faces"):
         np.testing.assert_array_equal(getattr(sorted_, field), getattr(plain, field))
@@ -324,7 +323,7 @@ def test_default_backend_and_structures_are_built_once():
     points = np.random.default_rng(4).normal(size=(50, 3)) * 0.1
     first = query.signed_distance(points)
     index = query._closest
-    assert type(index) is geometry._FACE_INDEXES[geometry.CLOSEST_FACE_BACKENDS[0]]
+    assert type(index) is backends._FACE_INDEXES[backends.CLOSEST_FACE_BACKENDS[0]]
     second = query.signed_distance(points)
     assert query._closest is index
     np.testing.assert_array_equal(first.distance, second.distance)
@@ -335,10 +334,10 @@ def test_an_unavailable_backend_falls_through(monkeypatch):
     def missing(*_):
         raise ImportError("not installed")
 
-    monkeypatch.setitem(geometry._FACE_INDEXES, "missing", missing)
-    assert isinstance(geometry._closest_face_index(vertices, faces, ["missing", "igl"]), geometry._IglFaces)
+    monkeypatch.setitem(backends._FACE_INDEXES, "missing", missing)
+    assert isinstance(backends._closest_face_index(vertices, faces, ["missing", "igl"]), backends._IglFaces)
     with pytest.raises(ImportError):
-        geometry._closest_face_index(vertices, faces, ["missing"])
+        backends._closest_face_index(vertices, faces, ["missing"])
 
 
 def test_pickle_and_empty_input():
@@ -428,7 +427,7 @@ def test_closest_point_regions_against_brute_force():
     triangles = rng.normal(size=(n, 3, 3))
     triangles[:300, 2] = triangles[:300, 0] + 1e-4 * rng.normal(size=(300, 3)) + (triangles[:300, 1] - triangles[:300, 0]) * 0.5
     points = rng.normal(size=(n, 3)) * 2.0
-    closest, feature = geometry._closest_points_on_triangles(points, triangles)
+    closest, feature = mesh_query._closest_points_on_triangles(points, triangles)
     # squared distance from libigl per (point, triangle)
     for i in range(0, n, 100):
         v = triangles[i]

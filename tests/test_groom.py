@@ -2,26 +2,19 @@
 
 from __future__ import annotations
 
-
 import igl
 import numpy as np
 import pytest
 import trimesh
 from PIL import Image
 
-from hairport.solver.character import Character, Skeleton
-from hairport.solver.errors import InputError
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import (
-    DEFAULT_CLEARANCE_M,
-    HEAD_WEIGHT_MIN,
-    STYLES,
-    generate_groom,
-    head_frame,
-    scalp_faces,
-)
-from hairport.solver.preview import render_preview
-from hairport.solver.toy import TOY_BONES, toy_character
+from hairport.solver.body.head_frame import HEAD_WEIGHT_MIN, head_frame
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.errors import InputError
+from hairport.solver.render.preview import render_preview
+from hairport.solver.synthetic.groom import DEFAULT_CLEARANCE_M, STYLES, generate_groom, scalp_faces
+from hairport.solver.synthetic.toy import TOY_BONES, toy_character
 
 N_STRANDS = 200
 PARTICLES = 24

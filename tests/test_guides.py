@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hairport.solver.guides import RESAMPLE_POINTS, resample_strands, select_guides
-from hairport.solver.hair import Hair
+from hairport.solver.adaptation.guides import RESAMPLE_POINTS, resample_strands, select_guides
+from hairport.solver.model.hair import Hair
 
 BUNDLE_SPACING_M = 1.0
 BUNDLE_RADIUS_M = 0.01

@@ -17,9 +17,8 @@ import zipfile
 
 import numpy as np
 import pytest
-from hairport.solver.errors import InputError
-from hairport.solver.hair import Hair
-from hairport.solver.hairio import (
+
+from hairport.solver.io.hair import (
     ERROR_CODES,
     SUPPORTED_FORMATS,
     HairIOWarning,
@@ -31,6 +30,8 @@ from hairport.solver.hairio import (
     read_hair_report,
     write_hair,
 )
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair
 
 # every (format, ascii) pair the writer can produce
 WRITE_VARIANTS = [

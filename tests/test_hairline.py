@@ -5,18 +5,17 @@ import json
 import numpy as np
 import pytest
 
-from hairport.solver.errors import InputError
-from hairport.solver.hair import Hair
-from hairport.solver.hairline import (
-    smooth_polyline,
-    smoothed_arc_length,
-    GAMMA_SIGMA,
-    adaptive_weights,
+from hairport.solver.hairline.curve import (
     check_curve_on_head,
     first_self_crossing,
     parse_hairline_curve,
     read_hairline_curve,
+    smooth_polyline,
+    smoothed_arc_length,
 )
+from hairport.solver.hairline.weights import GAMMA_SIGMA, adaptive_weights
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair
 
 
 def straight_strands():

@@ -18,11 +18,11 @@ import pytest
 import scipy.sparse as sp
 import trimesh
 
-from hairport.solver import assets as assets_mod
-from hairport.solver.assets import AssetsUnavailable, fetch_makehuman_assets
-from hairport.solver.character import check_same_topology
-from hairport.solver.errors import InputError
-from hairport.solver.makehuman import (
+from hairport.solver.model.character import check_same_topology
+from hairport.solver.model.errors import InputError
+from hairport.solver.synthetic import assets as assets_mod
+from hairport.solver.synthetic.assets import AssetsUnavailable, fetch_makehuman_assets
+from hairport.solver.synthetic.makehuman import (
     HAIR_BONES,
     PRESETS,
     MakeHumanParams,

@@ -4,8 +4,21 @@ finite differences, a brute-force locator and edits with known minimisers."""
 import numpy as np
 import pytest
 
-from hairport.solver import membrane as mb
-from hairport.solver.errors import InputError
+from hairport.solver.hairline.head_chart import HeadChart
+from hairport.solver.hairline.membrane import (
+    DEFAULT_LAM,
+    DEFAULT_MU,
+    Membrane,
+    deformation_gradients,
+    energy_density,
+    fold_barrier,
+    membrane_energy,
+    membrane_gradient,
+    membrane_hessian,
+    signed_uv_areas,
+)
+from hairport.solver.hairline.newton import KINK_BARYCENTRIC, relocate
+from hairport.solver.model.errors import InputError
 
 PARABOLOID = 0.3  # head z = PARABOLOID (x^2 + y^2), uv = (x, y)
 
@@ -21,12 +34,12 @@ def grid(nx, ny, x0, x1, y0, y1):
 
 def paraboloid_chart(cells=16):
     uv, faces = grid(cells, cells, -1.0, 1.0, -1.0, 1.0)
-    return mb.HeadChart.build(np.column_stack([uv, PARABOLOID * (uv**2).sum(axis=1)]), faces, uv)
+    return HeadChart.build(np.column_stack([uv, PARABOLOID * (uv**2).sum(axis=1)]), faces, uv)
 
 
 def flat_chart(cells=12):
     uv, faces = grid(cells, cells, -0.5, 1.5, -0.5, 1.5)
-    return mb.HeadChart.build(np.column_stack([uv, np.zeros(len(uv))]), faces, uv)
+    return HeadChart.build(np.column_stack([uv, np.zeros(len(uv))]), faces, uv)
 
 
 def rotated_scalp(chart, cells=6):
@@ -34,7 +47,7 @@ def rotated_scalp(chart, cells=6):
     u, triangles = grid(cells, cells, -0.5, 0.5, -0.5, 0.5)
     c, s = np.cos(0.3), np.sin(0.3)
     u = u @ np.array([[c, s], [-s, c]]) + 0.013
-    return mb.Membrane.build(chart.embed(u), triangles), u
+    return Membrane.build(chart.embed(u), triangles), u
 
 
 def boundary_of(u, low, high):
@@ -42,8 +55,8 @@ def boundary_of(u, low, high):
 
 
 def assert_unflipped(membrane, u, u_rest):
-    signs = np.sign(mb.signed_uv_areas(membrane.triangles, u_rest))
-    assert (mb.signed_uv_areas(membrane.triangles, u) * signs > 0).all()
+    signs = np.sign(signed_uv_areas(membrane.triangles, u_rest))
+    assert (signed_uv_areas(membrane.triangles, u) * signs > 0).all()
 
 
 def assert_monotone(report):
@@ -56,7 +69,7 @@ def assert_monotone(report):
 
 
 def test_lame_parameters_are_the_membrane_ones():
-    membrane = mb.Membrane.build(np.eye(3), [[0, 1, 2]], young=2.0, poisson=0.3)
+    membrane = Membrane.build(np.eye(3), [[0, 1, 2]], young=2.0, poisson=0.3)
     assert membrane.mu == pytest.approx(2.0 / 2.6, rel=1e-15)
     assert membrane.lam == pytest.approx(2.0 * 0.3 / 0.91, rel=1e-15)  # plane stress
     assert membrane.areas[0] == pytest.approx(np.sqrt(3.0) / 2.0, rel=1e-15)  # equilateral, side sqrt 2
@@ -69,22 +82,22 @@ def test_uniaxial_stretch_by_hand():
     mu, lam = 0.7, 1.3
     # C = diag(4, 1): tr C - 2 = 3, J = 2
     expected = 0.5 * mu * 3.0 - mu * np.log(2.0) + 0.5 * lam * np.log(2.0) ** 2
-    assert mb.energy_density(F, mu, lam)[0] == pytest.approx(expected, rel=1e-14)
-    assert mb.energy_density(F)[0] == pytest.approx(
-        1.5 * mb.DEFAULT_MU - mb.DEFAULT_MU * np.log(2.0) + 0.5 * mb.DEFAULT_LAM * np.log(2.0) ** 2, rel=1e-14
+    assert energy_density(F, mu, lam)[0] == pytest.approx(expected, rel=1e-14)
+    assert energy_density(F)[0] == pytest.approx(
+        1.5 * DEFAULT_MU - DEFAULT_MU * np.log(2.0) + 0.5 * DEFAULT_LAM * np.log(2.0) ** 2, rel=1e-14
     )
     collapsed = np.array([[[1.0, 2.0], [0.0, 0.0], [0.0, 0.0]], [[np.nan, 0.0], [0.0, 1.0], [0.0, 0.0]]])
-    assert np.isinf(mb.energy_density(collapsed)).all()
+    assert np.isinf(energy_density(collapsed)).all()
 
 
 def test_rest_state_is_an_isometry_with_zero_energy_and_gradient():
     chart = paraboloid_chart()
     membrane, u = rotated_scalp(chart)
-    F = mb.deformation_gradients(membrane, chart.embed(u))
+    F = deformation_gradients(membrane, chart.embed(u))
     np.testing.assert_allclose(np.einsum("mia,mib->mab", F, F), np.broadcast_to(np.eye(2), (len(F), 2, 2)), atol=1e-12)
-    assert np.abs(mb.energy_density(F, membrane.mu, membrane.lam)).max() < 1e-12
-    assert abs(mb.membrane_energy(membrane, chart, u)) < 1e-12
-    assert np.abs(mb.membrane_gradient(membrane, chart, u)).max() < 1e-10
+    assert np.abs(energy_density(F, membrane.mu, membrane.lam)).max() < 1e-12
+    assert abs(membrane_energy(membrane, chart, u)) < 1e-12
+    assert np.abs(membrane_gradient(membrane, chart, u)).max() < 1e-10
 
 
 # ----------------------------------------------------------------------------------------
@@ -110,15 +123,15 @@ def test_gradient_matches_central_differences(perturbed):
             step = np.zeros_like(u)
             step[i, a] = h
             assert (chart.locate(u + step)[0] == hosts).all() and (chart.locate(u - step)[0] == hosts).all()
-            fd[i, a] = (mb.membrane_energy(membrane, chart, u + step) - mb.membrane_energy(membrane, chart, u - step)) / (2 * h)
-    g = mb.membrane_gradient(membrane, chart, u)
+            fd[i, a] = (membrane_energy(membrane, chart, u + step) - membrane_energy(membrane, chart, u - step)) / (2 * h)
+    g = membrane_gradient(membrane, chart, u)
     assert np.linalg.norm(fd - g) < 1e-6 * np.linalg.norm(g)
 
 
 def test_hessian_matches_differences_of_the_gradient(perturbed):
     chart, membrane, u = perturbed
     h = 1e-6
-    H = mb.membrane_hessian(membrane, chart, u, project=False)
+    H = membrane_hessian(membrane, chart, u, project=False)
     assert H.shape == (2 * len(u), 2 * len(u))
     H = H.toarray()
     fd = np.zeros_like(H)
@@ -127,7 +140,7 @@ def test_hessian_matches_differences_of_the_gradient(perturbed):
             step = np.zeros_like(u)
             step[i, a] = h
             fd[:, 2 * i + a] = (
-                mb.membrane_gradient(membrane, chart, u + step) - mb.membrane_gradient(membrane, chart, u - step)
+                membrane_gradient(membrane, chart, u + step) - membrane_gradient(membrane, chart, u - step)
             ).ravel() / (2 * h)
     assert np.linalg.norm(fd - H) < 1e-5 * np.linalg.norm(H)
     np.testing.assert_allclose(H, H.T, rtol=0, atol=1e-12 * np.abs(H).max())
@@ -137,31 +150,31 @@ def test_projected_hessian_is_positive_semidefinite(perturbed):
     chart, membrane, u = perturbed
     compressed = 0.6 * u  # squeezed scalp: the exact per-triangle Hessians are indefinite
     for state in (u, compressed):
-        w = np.linalg.eigvalsh(mb.membrane_hessian(membrane, chart, state).toarray())
+        w = np.linalg.eigvalsh(membrane_hessian(membrane, chart, state).toarray())
         assert w.min() >= -1e-9 * w.max()
-    exact = np.linalg.eigvalsh(mb.membrane_hessian(membrane, chart, compressed, project=False).toarray())
+    exact = np.linalg.eigvalsh(membrane_hessian(membrane, chart, compressed, project=False).toarray())
     assert exact.min() < -1e-6 * exact.max()
 
 
 def test_fold_barrier_against_hand_values_and_differences():
     triangles = np.array([[0, 1, 2], [1, 3, 2]])
     rest = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
-    rest_areas = mb.signed_uv_areas(triangles, rest)
+    rest_areas = signed_uv_areas(triangles, rest)
     weights = np.array([2.0, 3.0])
-    energy, gradient, blocks = mb.fold_barrier(triangles, rest, rest_areas, weights)
+    energy, gradient, blocks = fold_barrier(triangles, rest, rest_areas, weights)
     assert energy == 0.0 and not gradient.any() and not blocks.any()  # inactive above the threshold
     # squeeze the first triangle to 4 % of its area: -(r - r^)^2 ln(r / r^) by hand
     u = rest.copy()
     u[2] = [0.3, 0.04]
     r = 0.04
-    energy, gradient, blocks = mb.fold_barrier(triangles, u, rest_areas, weights)
+    energy, gradient, blocks = fold_barrier(triangles, u, rest_areas, weights)
     assert energy == pytest.approx(2.0 * -((r - 0.1) ** 2) * np.log(r / 0.1), rel=1e-12)
     h = 1e-7
     flat = u.ravel()
     dofs = np.concatenate([2 * triangles[0][:, None] + np.arange(2)]).ravel()
 
     def at(v):
-        return mb.fold_barrier(triangles, v.reshape(-1, 2), rest_areas, weights)
+        return fold_barrier(triangles, v.reshape(-1, 2), rest_areas, weights)
 
     fd = np.array([(at(flat + h * e)[0] - at(flat - h * e)[0]) / (2 * h) for e in np.eye(len(flat))])
     np.testing.assert_allclose(gradient.ravel(), fd, rtol=1e-6, atol=1e-9)
@@ -171,7 +184,7 @@ def test_fold_barrier_against_hand_values_and_differences():
     assert not blocks[1].any()
     # folded: infinite
     u[2] = [0.3, -0.01]
-    assert mb.fold_barrier(triangles, u, rest_areas, weights)[0] == np.inf
+    assert fold_barrier(triangles, u, rest_areas, weights)[0] == np.inf
 
 
 # ----------------------------------------------------------------------------------------
@@ -184,7 +197,7 @@ def test_locator_matches_a_brute_force_scan():
     uv, faces = grid(10, 10, 0.0, 2.0, 0.0, 1.0)  # 200 triangles
     inner = ~boundary_of(uv, 0.0, 1.0) & ~np.isclose(uv[:, 0], 2.0)
     uv[inner] += rng.uniform(-0.03, 0.03, size=(inner.sum(), 2))
-    chart = mb.HeadChart.build(np.column_stack([uv, np.sin(uv[:, 0])]), faces, uv)
+    chart = HeadChart.build(np.column_stack([uv, np.sin(uv[:, 0])]), faces, uv)
     points = rng.uniform([-0.2, -0.2], [2.2, 1.2], size=(2000, 2))
     host, barycentric = chart.locate(points)
 
@@ -230,7 +243,7 @@ def test_identity_edit_keeps_the_rest_state():
     membrane, u_rest = rotated_scalp(chart)
     fixed = np.zeros(len(u_rest), dtype=bool)
     fixed[[0, 6, 42, 48, 3, 21, 27, 45]] = True  # corners and side midpoints of the 7x7 grid
-    u, report = mb.relocate(membrane, chart, u_rest, fixed, u_rest[fixed])
+    u, report = relocate(membrane, chart, u_rest, fixed, u_rest[fixed])
     assert report.converged and report.iterations <= 1
     np.testing.assert_allclose(u, u_rest, rtol=0, atol=1e-9)
 
@@ -239,7 +252,7 @@ def test_identity_edit_keeps_the_rest_state():
 def flat_sheet():
     chart = flat_chart()
     u_rest, triangles = grid(10, 10, 0.0, 1.0, 0.0, 1.0)
-    membrane = mb.Membrane.build(np.column_stack([u_rest, np.zeros(len(u_rest))]), triangles)
+    membrane = Membrane.build(np.column_stack([u_rest, np.zeros(len(u_rest))]), triangles)
     return chart, membrane, u_rest, boundary_of(u_rest, 0.0, 1.0)
 
 
@@ -247,7 +260,7 @@ def test_flat_scaling_edit_reaches_the_scaled_sheet(flat_sheet):
     chart, membrane, u_rest, fixed = flat_sheet
     centre = np.array([0.5, 0.5])
     scaled = centre + 1.2 * (u_rest - centre)  # uniform F = 1.2 I: the exact minimiser
-    u, report = mb.relocate(membrane, chart, u_rest, fixed, scaled[fixed])
+    u, report = relocate(membrane, chart, u_rest, fixed, scaled[fixed])
     assert report.converged and report.stages == 1 and report.start == ["pinned"]
     assert report.iterations <= 8
     assert_monotone(report)
@@ -259,16 +272,16 @@ def test_flat_push_edit_converges_to_a_stationary_point(flat_sheet):
     chart, membrane, u_rest, fixed = flat_sheet
     target = u_rest[fixed].copy()
     target[:, 0] -= 0.2 * target[:, 0] ** 2  # the side x = 1 pushed in by 20 %, smoothly
-    u, report = mb.relocate(membrane, chart, u_rest, fixed, target)
+    u, report = relocate(membrane, chart, u_rest, fixed, target)
     assert report.converged and report.iterations <= 8
     assert report.start == ["elastic"]  # pinning alone flips the triangles at x = 1
     assert_monotone(report)
     assert_unflipped(membrane, u, u_rest)
     np.testing.assert_array_equal(u[fixed], target)
-    assert np.abs(mb.membrane_gradient(membrane, chart, u)[~fixed]).max() < 1e-8
+    assert np.abs(membrane_gradient(membrane, chart, u)[~fixed]).max() < 1e-8
     # Young's modulus only scales the energy
-    stiff = mb.Membrane.build(membrane.rest, membrane.triangles, young=1000.0)
-    u_stiff, _ = mb.relocate(stiff, chart, u_rest, fixed, target)
+    stiff = Membrane.build(membrane.rest, membrane.triangles, young=1000.0)
+    u_stiff, _ = relocate(stiff, chart, u_rest, fixed, target)
     np.testing.assert_allclose(u_stiff, u, rtol=0, atol=1e-9)
 
 
@@ -276,10 +289,10 @@ def test_flat_push_edit_converges_to_a_stationary_point(flat_sheet):
 def test_curved_edits_stay_on_the_head(edit):
     chart = paraboloid_chart()
     u_rest, triangles = grid(10, 10, -0.5, 0.5, -0.5, 0.5)
-    membrane = mb.Membrane.build(chart.embed(u_rest), triangles)
+    membrane = Membrane.build(chart.embed(u_rest), triangles)
     fixed = boundary_of(u_rest, -0.5, 0.5)
     target = 1.2 * u_rest[fixed] if edit == "scale" else u_rest[fixed] - [[0.2, 0.0]] * (u_rest[fixed, :1] + 0.5) ** 2
-    u, report = mb.relocate(membrane, chart, u_rest, fixed, target, energy_tolerance=0.0)
+    u, report = relocate(membrane, chart, u_rest, fixed, target, energy_tolerance=0.0)
     assert report.converged and report.iterations <= 15 and report.stop in ("step", "decrement")
     assert_monotone(report)
     assert_unflipped(membrane, u, u_rest)
@@ -293,12 +306,12 @@ def test_curved_edits_stay_on_the_head(edit):
     gap = x[:, 2] - PARABOLOID * (u**2).sum(axis=1)
     assert gap.min() > -1e-12 and gap.max() < PARABOLOID * (2.0 / 16) ** 2
     # stationary: free vertices inside a head triangle have no gradient left
-    interior = ~fixed & (barycentric.min(axis=1) > mb.KINK_BARYCENTRIC)
-    assert np.abs(mb.membrane_gradient(membrane, chart, u)[interior]).max() < 1e-8
+    interior = ~fixed & (barycentric.min(axis=1) > KINK_BARYCENTRIC)
+    assert np.abs(membrane_gradient(membrane, chart, u)[interior]).max() < 1e-8
     # the default stops once a step lowers the energy by less than 1e-7 of it, earlier, at
     # parameters within 5e-5 of the converged ones: 2.5e-5 of the chart's 2-unit width,
     # a few micrometres on a 20 cm head patch
-    early, early_report = mb.relocate(membrane, chart, u_rest, fixed, target)
+    early, early_report = relocate(membrane, chart, u_rest, fixed, target)
     assert early_report.converged and early_report.iterations <= report.iterations
     assert early_report.stop == "energy" and np.abs(early - u).max() < 5e-5
 
@@ -308,7 +321,7 @@ def test_large_dent_is_reached_in_load_stages(flat_sheet):
     target = u_rest[fixed].copy()
     y = target[:, 1] - 0.5
     target[:, 0] -= 0.8 * (target[:, 0] > 0.9) * (1.0 - 4.0 * y**2) ** 2  # an 80 % dent into side x = 1
-    u, report = mb.relocate(membrane, chart, u_rest, fixed, target)
+    u, report = relocate(membrane, chart, u_rest, fixed, target)
     assert report.converged and report.stages > 1 and set(report.start) == {"elastic"}
     assert_unflipped(membrane, u, u_rest)
     np.testing.assert_array_equal(u[fixed], target)
@@ -317,6 +330,6 @@ def test_large_dent_is_reached_in_load_stages(flat_sheet):
 def test_relocate_refuses_targets_outside_the_chart(flat_sheet):
     chart, membrane, u_rest, fixed = flat_sheet
     with pytest.raises(InputError):
-        mb.relocate(membrane, chart, u_rest, fixed, u_rest[fixed] + 10.0)
+        relocate(membrane, chart, u_rest, fixed, u_rest[fixed] + 10.0)
     with pytest.raises(InputError):
-        mb.relocate(membrane, chart, u_rest, fixed, u_rest[fixed][:-1])
+        relocate(membrane, chart, u_rest, fixed, u_rest[fixed][:-1])

@@ -3,7 +3,7 @@
 import numpy as np
 import trimesh
 
-from hairport.solver.geometry import MeshQuery
+from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import mean_particle_distance, mean_segment_angle, penetration, segment_angles
 
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom
-from hairport.solver.makehuman import PRESETS, build_character
-from hairport.solver.multiscale import chunk_strands
+from hairport.solver.adaptation.multiscale import chunk_strands
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 EPS_C = 5e-4
 
@@ -55,7 +55,7 @@ def test_multiscale_result_is_penetration_free_with_exact_roots(case):
 def test_guides_move_only_in_the_coarse_solve(case):
     """The fine level leaves guide particles where the coarse level put them."""
     _, target, hair, adaptable, multiscale = case
-    from hairport.solver.hair import particle_indices
+    from hairport.solver.model.hair import particle_indices
 
     guides = particle_indices(hair.offsets, adaptable.multiscale.guides)
     options = pipeline.RetargetOptions(method="multiscale", workers=1, chunk_particles=1)

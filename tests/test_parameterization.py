@@ -4,17 +4,17 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from hairport.solver.errors import InputError
-from hairport.solver.parameterization import (
-    DEFAULT_MARGIN_RINGS,
+from hairport.solver.hairline.head_patch import DEFAULT_MARGIN_RINGS, head_patch
+from hairport.solver.hairline.scalp import refine_scalp
+from hairport.solver.mesh.parameterization import (
     PARAMETERIZATIONS,
     _segments_cross,
     check_injective,
-    head_patch,
     parameterize,
     signed_areas,
 )
-from hairport.solver.scalp import boundary_loops, euler_characteristic, refine_scalp
+from hairport.solver.mesh.topology import boundary_loops, euler_characteristic
+from hairport.solver.model.errors import InputError
 
 
 @pytest.fixture(scope="module")

@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.errors import InputError, TopologyMismatch
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom
-from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import mean_particle_distance, mean_segment_angle
-from hairport.solver.toy import toy_character
+from hairport.solver.model.errors import InputError, TopologyMismatch
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
+from hairport.solver.synthetic.toy import toy_character
 
 
 @pytest.fixture(scope="module")

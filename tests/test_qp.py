@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
-from hairport.solver.energies import EnergyWeights, ShapeModel, knn_other_strands, laplacian_operator
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.qp import Cancelled, SolveOptions, solve_shape_adaptation
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
+from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
+from hairport.solver.adaptation.options import Cancelled, SolveOptions
+from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
+from hairport.solver.mesh.query import MeshQuery
 from tests.test_transfer import outward_strands, sphere_character
 
 

@@ -5,22 +5,17 @@ import numpy as np
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.errors import InputError
-from hairport.solver.geometry import MeshQuery, barycentric_coordinates
-from hairport.solver.groom import generate_groom
-from hairport.solver.hairline import HairlineCurve, first_self_crossing
-from hairport.solver.hairline_presets import BAND, PRESETS, lateral_position, parse_preset, spherical
-from hairport.solver.hairline import smoothed_arc_length
-from hairport.solver.makehuman import PRESETS as CHARACTERS
-from hairport.solver.makehuman import build_character
-from hairport.solver.membrane import signed_uv_areas
-from hairport.solver.relocation import (
-    HairlineEdit,
-    edit_curve,
-    hairline_targets,
-    relocate_roots,
-    scalp_chart,
-)
+from hairport.solver.hairline.curve import HairlineCurve, first_self_crossing, smoothed_arc_length
+from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.hairline.membrane import signed_uv_areas
+from hairport.solver.hairline.presets import BAND, PRESETS, lateral_position, parse_preset, spherical
+from hairport.solver.hairline.relocation import edit_curve, hairline_targets, relocate_roots, scalp_chart
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import barycentric_coordinates
+from hairport.solver.model.errors import InputError
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS as CHARACTERS
+from hairport.solver.synthetic.makehuman import build_character
 
 #: the paper's Fig. 17 claim, our target: roots from different parameterizations agree (m)
 PARAMETERIZATION_AGREEMENT_M = 1e-3

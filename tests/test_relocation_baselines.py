@@ -4,8 +4,15 @@ Table 3's density change, against hand values and the fields each method must re
 import numpy as np
 import pytest
 
-from hairport.solver import relocation_baselines as rb
-from hairport.solver.errors import InputError
+from hairport.solver.hairline.baselines import (
+    RBF_INTERIOR_SEEDS,
+    harmonic_displacement,
+    interior_seeds,
+    rbf_displacement_2d,
+    rbf_displacement_3d,
+)
+from hairport.solver.hairline.density import density_change
+from hairport.solver.model.errors import InputError
 
 CELLS = 8  # grid cells per side: (CELLS + 1)^2 vertices on [0, 1]^2
 BOWL = 0.3  # curved scalp for the 3D RBF: z = BOWL (x^2 + y^2)
@@ -49,7 +56,7 @@ def test_harmonic_translation_moves_every_vertex_by_it():
     uv, triangles = grid()
     fixed = outer_ring(uv)
     shift = np.array([0.13, -0.07])
-    u = rb.harmonic_displacement(uv, triangles, fixed, uv[fixed] + shift)
+    u = harmonic_displacement(uv, triangles, fixed, uv[fixed] + shift)
     np.testing.assert_allclose(u - uv, np.broadcast_to(shift, uv.shape), rtol=0, atol=1e-12)
 
 
@@ -57,10 +64,10 @@ def test_harmonic_reproduces_linear_maps():
     uv, triangles = grid()
     fixed = outer_ring(uv)
     centre = np.array([0.5, 0.5])
-    u = rb.harmonic_displacement(uv, triangles, fixed, centre + 1.2 * (uv[fixed] - centre))
+    u = harmonic_displacement(uv, triangles, fixed, centre + 1.2 * (uv[fixed] - centre))
     np.testing.assert_allclose(u, centre + 1.2 * (uv - centre), rtol=0, atol=1e-10)
     shear = np.array([[1.1, 0.3], [-0.2, 0.9]])
-    u = rb.harmonic_displacement(uv, triangles, fixed, uv[fixed] @ shear.T + 0.05)
+    u = harmonic_displacement(uv, triangles, fixed, uv[fixed] @ shear.T + 0.05)
     np.testing.assert_allclose(u, uv @ shear.T + 0.05, rtol=0, atol=1e-10)
 
 
@@ -73,7 +80,7 @@ def test_harmonic_uses_cotangent_weights_of_the_uv_triangles():
     fixed = outer_ring(uv)
     target = uv.copy()
     target[7, 0] += 0.4
-    u = rb.harmonic_displacement(uv, triangles, fixed, target[fixed])
+    u = harmonic_displacement(uv, triangles, fixed, target[fixed])
     np.testing.assert_allclose(u[4], uv[4] + [0.1, 0.0], rtol=0, atol=1e-14)
     # The same mesh with another parameterization (stretched along x by 2): the horizontal
     # edges face angles atan 2 (cot 1/2, weight 1/2), the vertical ones atan 1/2 (weight 2):
@@ -81,7 +88,7 @@ def test_harmonic_uses_cotangent_weights_of_the_uv_triangles():
     stretched = uv * [2.0, 1.0]
     target = stretched.copy()
     target[7, 0] += 0.4
-    u = rb.harmonic_displacement(stretched, triangles, fixed, target[fixed])
+    u = harmonic_displacement(stretched, triangles, fixed, target[fixed])
     np.testing.assert_allclose(u[4], stretched[4] + [0.04, 0.0], rtol=0, atol=1e-14)
 
 
@@ -93,9 +100,9 @@ def test_harmonic_identity_is_exact_and_unanchored_pieces_stay():
     uv = np.vstack([uv, [[2.0, 2.0], [2.5, 2.0], [2.0, 2.5], [3.0, 3.0]]])
     triangles = np.vstack([triangles, [[n, n + 1, n + 2]]])
     fixed = np.concatenate([fixed, np.zeros(4, dtype=bool)])
-    u = rb.harmonic_displacement(uv, triangles, fixed, uv[fixed])
+    u = harmonic_displacement(uv, triangles, fixed, uv[fixed])
     assert np.abs(u - uv).max() <= 1e-14
-    u = rb.harmonic_displacement(uv, triangles, fixed, uv[fixed] + 0.25)
+    u = harmonic_displacement(uv, triangles, fixed, uv[fixed] + 0.25)
     np.testing.assert_array_equal(u[n:], uv[n:])
     np.testing.assert_allclose(u[:n], uv[:n] + 0.25, rtol=0, atol=1e-12)
 
@@ -105,7 +112,7 @@ def test_harmonic_fixed_vertices_get_their_targets_exactly():
     fixed = outer_ring(uv)
     rng = np.random.default_rng(3)
     target = uv[fixed] + 0.02 * rng.standard_normal((int(fixed.sum()), 2))
-    u = rb.harmonic_displacement(uv, triangles, fixed, target)
+    u = harmonic_displacement(uv, triangles, fixed, target)
     np.testing.assert_array_equal(u[fixed], target)
     # the maximum principle: interior displacements stay within the boundary's range
     d = u - uv
@@ -123,7 +130,7 @@ def test_rbf_2d_reproduces_affine_displacements_without_seeds():
     fixed = outer_ring(uv)
     A = np.array([[0.2, -0.1], [0.05, 0.15]])
     b = np.array([0.03, -0.02])
-    u = rb.rbf_displacement_2d(uv, fixed, uv[fixed] + uv[fixed] @ A.T + b, np.zeros(0, dtype=np.int64))
+    u = rbf_displacement_2d(uv, fixed, uv[fixed] + uv[fixed] @ A.T + b, np.zeros(0, dtype=np.int64))
     np.testing.assert_allclose(u, uv + uv @ A.T + b, rtol=0, atol=1e-8)
 
 
@@ -133,16 +140,16 @@ def test_rbf_3d_reproduces_affine_displacements_without_seeds():
     fixed = outer_ring(uv)
     A = np.array([[0.1, 0.0, -0.05], [0.02, -0.1, 0.0], [0.0, 0.03, 0.08]])
     b = np.array([0.01, 0.0, -0.02])
-    x = rb.rbf_displacement_3d(rest, fixed, rest[fixed] + rest[fixed] @ A.T + b, [])
+    x = rbf_displacement_3d(rest, fixed, rest[fixed] + rest[fixed] @ A.T + b, [])
     np.testing.assert_allclose(x, rest + rest @ A.T + b, rtol=0, atol=1e-8)
 
 
 def test_rbf_seeds_stay_and_fixed_vertices_reach_their_targets():
     uv, triangles = grid()
     fixed = outer_ring(uv)
-    seeds = rb.interior_seeds(triangles, np.flatnonzero(fixed), flat(uv), count=5)
+    seeds = interior_seeds(triangles, np.flatnonzero(fixed), flat(uv), count=5)
     shift = np.array([0.0, 0.1])
-    u = rb.rbf_displacement_2d(uv, fixed, uv[fixed] + shift, seeds)
+    u = rbf_displacement_2d(uv, fixed, uv[fixed] + shift, seeds)
     np.testing.assert_array_equal(u[fixed], uv[fixed] + shift)
     np.testing.assert_array_equal(u[seeds], uv[seeds])
     free = ~fixed
@@ -153,7 +160,7 @@ def test_rbf_seeds_stay_and_fixed_vertices_reach_their_targets():
     np.testing.assert_array_equal(u[:, 0], uv[:, 0])
     assert np.abs(u[free, 1] - uv[free, 1]).max() < 0.1
     rest = bowl(uv)
-    x = rb.rbf_displacement_3d(rest, fixed, rest[fixed] + [0.0, 0.1, 0.02], seeds)
+    x = rbf_displacement_3d(rest, fixed, rest[fixed] + [0.0, 0.1, 0.02], seeds)
     np.testing.assert_array_equal(x[fixed], rest[fixed] + [0.0, 0.1, 0.02])
     np.testing.assert_array_equal(x[seeds], rest[seeds])
 
@@ -164,7 +171,7 @@ def test_rbf_2d_is_symmetric_with_a_symmetric_setup():
     uv, _ = grid()
     fixed = outer_ring(uv)
     centre = CELLS // 2 * (CELLS + 1) + CELLS // 2
-    u = rb.rbf_displacement_2d(uv, fixed, uv[fixed] + [0.0, 0.1], np.array([centre]))
+    u = rbf_displacement_2d(uv, fixed, uv[fixed] + [0.0, 0.1], np.array([centre]))
     d = (u - uv).reshape(CELLS + 1, CELLS + 1, 2)
     np.testing.assert_allclose(d[::-1, :, 1], d[:, :, 1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(d[::-1, :, 0], -d[:, :, 0], rtol=0, atol=1e-12)
@@ -174,10 +181,10 @@ def test_every_method_leaves_an_identity_edit_exact():
     uv, triangles = grid()
     rest = bowl(uv)
     fixed = outer_ring(uv)
-    seeds = rb.interior_seeds(triangles, np.flatnonzero(fixed), rest)
-    assert np.abs(rb.harmonic_displacement(uv, triangles, fixed, uv[fixed]) - uv).max() <= 1e-14
-    assert np.abs(rb.rbf_displacement_2d(uv, fixed, uv[fixed], seeds) - uv).max() <= 1e-14
-    assert np.abs(rb.rbf_displacement_3d(rest, fixed, rest[fixed], seeds) - rest).max() <= 1e-14
+    seeds = interior_seeds(triangles, np.flatnonzero(fixed), rest)
+    assert np.abs(harmonic_displacement(uv, triangles, fixed, uv[fixed]) - uv).max() <= 1e-14
+    assert np.abs(rbf_displacement_2d(uv, fixed, uv[fixed], seeds) - uv).max() <= 1e-14
+    assert np.abs(rbf_displacement_3d(rest, fixed, rest[fixed], seeds) - rest).max() <= 1e-14
 
 
 # ----------------------------------------------------------------------------------------
@@ -195,14 +202,14 @@ def hops_from_ring(cells=CELLS):
 def test_interior_seeds_lie_in_the_core_and_are_distinct():
     uv, triangles = grid()
     boundary = np.flatnonzero(outer_ring(uv))
-    seeds = rb.interior_seeds(triangles, boundary, flat(uv))
+    seeds = interior_seeds(triangles, boundary, flat(uv))
     hops = hops_from_ring()
     assert seeds.dtype == np.int64
-    assert len(seeds) == rb.RBF_INTERIOR_SEEDS == len(np.unique(seeds))
+    assert len(seeds) == RBF_INTERIOR_SEEDS == len(np.unique(seeds))
     assert not np.isin(seeds, boundary).any()
     assert (hops[seeds] >= hops.max() / 2).all()
     np.testing.assert_array_equal(seeds, np.sort(seeds))
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary[::-1], flat(uv)), seeds)
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary[::-1], flat(uv)), seeds)
 
 
 def test_interior_seeds_farthest_point_order_by_hand():
@@ -212,21 +219,21 @@ def test_interior_seeds_farthest_point_order_by_hand():
     uv, triangles = grid()
     boundary = np.flatnonzero(outer_ring(uv))
     rest = flat(uv)
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary, rest, count=1), [40])
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary, rest, count=2), [20, 40])
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary, rest, count=3), [20, 24, 40])
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary, rest, count=1), [40])
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary, rest, count=2), [20, 40])
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary, rest, count=3), [20, 24, 40])
     core = np.flatnonzero(hops_from_ring() >= 2)
     assert len(core) == 25
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary, rest, count=30), core)
-    assert rb.interior_seeds(triangles, boundary, rest, count=0).shape == (0,)
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary, rest, count=30), core)
+    assert interior_seeds(triangles, boundary, rest, count=0).shape == (0,)
 
 
 def test_interior_seeds_small_scalp():
     uv, triangles = grid(2)  # one interior vertex
     boundary = np.flatnonzero(outer_ring(uv))
-    np.testing.assert_array_equal(rb.interior_seeds(triangles, boundary, flat(uv)), [4])
+    np.testing.assert_array_equal(interior_seeds(triangles, boundary, flat(uv)), [4])
     uv, triangles = grid(1)  # every vertex on the boundary
-    assert rb.interior_seeds(triangles, np.arange(4), flat(uv)).shape == (0,)
+    assert interior_seeds(triangles, np.arange(4), flat(uv)).shape == (0,)
 
 
 # ----------------------------------------------------------------------------------------
@@ -239,12 +246,12 @@ def test_density_change_of_a_uniform_scaling():
     rest = bowl(uv)
     roots = np.array([0, 0, 5, -1, 17, 17, 17, 100, -1])
     for s in (0.8, 1.0, 1.25):
-        density = rb.density_change(rest, s * rest, triangles, roots)
+        density = density_change(rest, s * rest, triangles, roots)
         np.testing.assert_array_equal(density.triangles, [0, 5, 17, 100])
         np.testing.assert_allclose(density.changes, np.full(4, 1.0 / s**2 - 1.0), rtol=0, atol=1e-12)
         assert density.l1 == pytest.approx(abs(1.0 / s**2 - 1.0), abs=1e-12)
         assert density.linf == pytest.approx(abs(1.0 / s**2 - 1.0), abs=1e-12)
-    identity = rb.density_change(rest, rest, triangles, roots)
+    identity = density_change(rest, rest, triangles, roots)
     assert identity.l1 == identity.linf == 0.0
     np.testing.assert_array_equal(identity.changes, np.zeros(4))
 
@@ -255,20 +262,20 @@ def test_density_change_by_hand():
     # one triangle: its area doubles (0.5 -> 1), the density halves
     stretched = rest.copy()
     stretched[1, 0] = 2.0
-    density = rb.density_change(rest, stretched, triangles[:1], np.array([0, 0, 0]))
+    density = density_change(rest, stretched, triangles[:1], np.array([0, 0, 0]))
     np.testing.assert_allclose(density.changes, [-0.5], rtol=0, atol=1e-15)
     assert (density.l1, density.linf) == pytest.approx((0.5, 0.5), abs=1e-15)
     # lifted out of the plane: area 0.5 sqrt(2), change 1 / sqrt(2) - 1
     lifted = rest.copy()
     lifted[2, 2] = 1.0
-    density = rb.density_change(rest, lifted, triangles[:1], np.array([0]))
+    density = density_change(rest, lifted, triangles[:1], np.array([0]))
     np.testing.assert_allclose(density.changes, [1.0 / np.sqrt(2.0) - 1.0], rtol=0, atol=1e-15)
     # two triangles: the first stretched to twice its area (-0.5), the second compressed to
     # half (+1); roots outside the scalp (-1) are ignored
     deformed = rest.copy()
     deformed[0] = [-0.5, -0.5, 0.0]  # first triangle (0, 1, 2): area 0.5 -> 1.0
     deformed[3] = [0.75, 0.75, 0.0]  # second triangle (1, 3, 2): area 0.5 -> 0.25
-    density = rb.density_change(rest, deformed, triangles, np.array([1, -1, 0, 1]))
+    density = density_change(rest, deformed, triangles, np.array([1, -1, 0, 1]))
     np.testing.assert_array_equal(density.triangles, [0, 1])
     np.testing.assert_allclose(density.changes, [-0.5, 1.0], rtol=0, atol=1e-15)
     assert density.l1 == pytest.approx(0.75, abs=1e-15)
@@ -276,14 +283,14 @@ def test_density_change_by_hand():
     # a collapsed triangle holding roots: infinite change
     collapsed = rest.copy()
     collapsed[2] = [0.5, 0.0, 0.0]
-    density = rb.density_change(rest, collapsed, triangles, np.array([0, 1]))
+    density = density_change(rest, collapsed, triangles, np.array([0, 1]))
     assert np.isinf(density.changes[0]) and density.linf == np.inf
 
 
 def test_density_change_without_roots():
     uv, triangles = grid(2)
     for roots in (np.zeros(0, dtype=np.int64), np.array([-1, -1]), []):
-        density = rb.density_change(flat(uv), 2.0 * flat(uv), triangles, roots)
+        density = density_change(flat(uv), 2.0 * flat(uv), triangles, roots)
         assert density.l1 == density.linf == 0.0
         assert density.changes.shape == density.triangles.shape == (0,)
         assert density.triangles.dtype == np.int64
@@ -299,42 +306,42 @@ def test_bad_input_is_refused():
     fixed = outer_ring(uv)
     rest = bowl(uv)
     seeds = np.array([12])
-    expect_refusal(rb.harmonic_displacement, uv, triangles, fixed, uv[fixed][:-1])
-    expect_refusal(rb.harmonic_displacement, uv, triangles, fixed[:-1], uv[fixed])
+    expect_refusal(harmonic_displacement, uv, triangles, fixed, uv[fixed][:-1])
+    expect_refusal(harmonic_displacement, uv, triangles, fixed[:-1], uv[fixed])
     bad = uv.copy()
     bad[12, 0] = np.nan
-    expect_refusal(rb.harmonic_displacement, bad, triangles, fixed, uv[fixed])
+    expect_refusal(harmonic_displacement, bad, triangles, fixed, uv[fixed])
     target = uv[fixed].copy()
     target[0, 1] = np.inf
-    expect_refusal(rb.harmonic_displacement, uv, triangles, fixed, target)
-    expect_refusal(rb.harmonic_displacement, uv, triangles + len(uv), fixed, uv[fixed])
-    expect_refusal(rb.harmonic_displacement, uv, triangles.astype(float), fixed, uv[fixed])
+    expect_refusal(harmonic_displacement, uv, triangles, fixed, target)
+    expect_refusal(harmonic_displacement, uv, triangles + len(uv), fixed, uv[fixed])
+    expect_refusal(harmonic_displacement, uv, triangles.astype(float), fixed, uv[fixed])
     squashed = uv.copy()
     squashed[12] = squashed[6]  # triangles around vertex 12 collapse in uv
-    expect_refusal(rb.harmonic_displacement, squashed, triangles, fixed, squashed[fixed])
+    expect_refusal(harmonic_displacement, squashed, triangles, fixed, squashed[fixed])
 
-    expect_refusal(rb.rbf_displacement_2d, uv, fixed, uv[fixed][:-1], seeds)
-    expect_refusal(rb.rbf_displacement_2d, bad, fixed, uv[fixed], seeds)
-    error = expect_refusal(rb.rbf_displacement_2d, uv, fixed, uv[fixed], np.array([0, 12]))
+    expect_refusal(rbf_displacement_2d, uv, fixed, uv[fixed][:-1], seeds)
+    expect_refusal(rbf_displacement_2d, bad, fixed, uv[fixed], seeds)
+    error = expect_refusal(rbf_displacement_2d, uv, fixed, uv[fixed], np.array([0, 12]))
     assert "fixed" in str(error)
-    expect_refusal(rb.rbf_displacement_2d, uv, fixed, uv[fixed], np.array([len(uv)]))
-    expect_refusal(rb.rbf_displacement_2d, uv, fixed, uv[fixed], np.array([12.0]))
-    expect_refusal(rb.rbf_displacement_3d, rest, fixed, rest[fixed][:, :2], seeds)
-    expect_refusal(rb.rbf_displacement_3d, flat(uv), fixed, flat(uv)[fixed] + 0.1, seeds)  # coplanar data
+    expect_refusal(rbf_displacement_2d, uv, fixed, uv[fixed], np.array([len(uv)]))
+    expect_refusal(rbf_displacement_2d, uv, fixed, uv[fixed], np.array([12.0]))
+    expect_refusal(rbf_displacement_3d, rest, fixed, rest[fixed][:, :2], seeds)
+    expect_refusal(rbf_displacement_3d, flat(uv), fixed, flat(uv)[fixed] + 0.1, seeds)  # coplanar data
     few = np.zeros(len(uv), dtype=bool)
     few[:2] = True
-    expect_refusal(rb.rbf_displacement_2d, uv, few, uv[few], [])
+    expect_refusal(rbf_displacement_2d, uv, few, uv[few], [])
 
     boundary = np.flatnonzero(fixed)
-    expect_refusal(rb.interior_seeds, triangles, [], rest)
-    expect_refusal(rb.interior_seeds, triangles, boundary + 100, rest)
-    expect_refusal(rb.interior_seeds, triangles, boundary, rest, count=-1)
-    expect_refusal(rb.interior_seeds, triangles, boundary, rest[:, :2])
+    expect_refusal(interior_seeds, triangles, [], rest)
+    expect_refusal(interior_seeds, triangles, boundary + 100, rest)
+    expect_refusal(interior_seeds, triangles, boundary, rest, count=-1)
+    expect_refusal(interior_seeds, triangles, boundary, rest[:, :2])
 
-    expect_refusal(rb.density_change, rest, rest[:-1], triangles, [0])
-    expect_refusal(rb.density_change, rest, rest, triangles, [-2])
-    expect_refusal(rb.density_change, rest, rest, triangles, [len(triangles)])
-    expect_refusal(rb.density_change, rest, np.where(np.isclose(rest, 0.0), np.nan, rest), triangles, [0])
+    expect_refusal(density_change, rest, rest[:-1], triangles, [0])
+    expect_refusal(density_change, rest, rest, triangles, [-2])
+    expect_refusal(density_change, rest, rest, triangles, [len(triangles)])
+    expect_refusal(density_change, rest, np.where(np.isclose(rest, 0.0), np.nan, rest), triangles, [0])
     degenerate = rest.copy()
     degenerate[5] = degenerate[0]  # triangle 0 is (0, 5, 6)
-    expect_refusal(rb.density_change, degenerate, rest, triangles, [0])
+    expect_refusal(density_change, degenerate, rest, triangles, [0])

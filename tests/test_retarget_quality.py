@@ -8,9 +8,9 @@ import pytest
 
 from hairport.solver import pipeline
 from hairport.solver.baselines import BASELINE_METHODS
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.groom import generate_groom
-from hairport.solver.makehuman import PRESETS, build_character
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 EPS_C = 5e-4
 #: the final QP's constraints hold to OSQP's tolerance; exact distances may fall short by this (m)

@@ -3,21 +3,23 @@
 import numpy as np
 import pytest
 
-from hairport.solver.errors import InputError
-from hairport.solver.scalp import (
-    boundary_edges,
-    split_boundary_ears,
+from hairport.solver.hairline.scalp import (
     DEFAULT_MIN_TRIANGLES,
     Scalp,
     ScalpWarning,
-    boundary_loops,
-    euler_characteristic,
     extract_scalp,
-    face_adjacency,
-    fill_holes,
     refine_scalp,
+    split_boundary_ears,
     turning_points,
 )
+from hairport.solver.mesh.topology import (
+    boundary_edges,
+    boundary_loops,
+    euler_characteristic,
+    face_adjacency,
+    fill_holes,
+)
+from hairport.solver.model.errors import InputError
 
 #: roots dropped within this distance (m) of the crown make a hole no closing can fill
 HOLE_RADIUS_M = 0.04

@@ -102,10 +102,10 @@ def service(tmp_path_factory, redis_client):
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """Toy characters (OBJ + skeleton JSON) and a groom, as bytes."""
-    from hairport.solver import toy
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.hairio import write_hair
-    from hairport.solver.makehuman import write_character
+    from hairport.solver.io.hair import write_hair
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import write_character
 
     d = tmp_path_factory.mktemp("service-inputs")
     source = toy.toy_character(name="source")
@@ -280,7 +280,7 @@ def test_retarget_onto_two_targets(service, files, uploaded):
         assert done["timings"]["solve"] > 0 and done["metrics"]["method"] == "multiscale"
         result = client.get(f"/v1/jobs/{job['id']}/result", headers=AUTH)
         assert result.status_code == 200
-        from hairport.solver.hairio import read_hair_bytes
+        from hairport.solver.io.hair import read_hair_bytes
 
         hair = read_hair_bytes(result.content, "ply")
         assert (hair.n_strands, hair.n_particles) == (60, 720)
@@ -365,9 +365,9 @@ def test_bad_retarget_requests(service, uploaded):
 
 def test_hairline_edit_jobs(service, tmp_path):
     """A preset and a drawn curve on MakeHuman characters, through the queue."""
-    from hairport.solver.groom import generate_groom
-    from hairport.solver.hairio import read_hair_bytes, write_hair
-    from hairport.solver.makehuman import PRESETS, build_character, write_character
+    from hairport.solver.io.hair import read_hair_bytes, write_hair
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character, write_character
 
     client = service["client"]
     ids = {}
@@ -408,13 +408,13 @@ def test_hairline_edit_jobs(service, tmp_path):
 
 def test_bad_target_fails_its_job_and_the_worker_lives_on(service, files, uploaded):
     client = service["client"]
-    from hairport.solver import toy
-    from hairport.solver.makehuman import write_character
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.makehuman import write_character
 
     d = files["dir"]
     other = toy.toy_character(name="other", neck_length=0.3)
     # another topology: drop the last face
-    from hairport.solver.character import Character
+    from hairport.solver.model.character import Character
 
     other = Character(other.vertices, other.faces[:-1], other.skeleton, other.weights, "other")
     write_character(other, d / "other.obj", d / "other.skeleton.json")

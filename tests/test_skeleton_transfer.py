@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.character import Character, Skeleton
-from hairport.solver.errors import InputError, TopologyMismatch
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.skeleton_transfer import (
+from hairport.solver.body.skeleton_transfer import (
     JointRegressor,
     ensure_skeleton,
     fit_joint_regressor,
     sphere_directions,
     transfer_skeleton,
 )
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.errors import InputError, TopologyMismatch
 
 BODY_RADIUS = 0.15  # m
 BODY_HALF_HEIGHT = 0.75  # m

@@ -5,18 +5,18 @@ import osqp
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.energies import EnergyWeights, ShapeModel, segment_operator, unit_rows
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.qp import Cancelled, SolveOptions, solve_shape_adaptation
-from hairport.solver.strand_solver import (
-    BodyDistance,
+from hairport.solver.adaptation.active_set import solve_qp, solve_strands
+from hairport.solver.adaptation.constraints import BodyDistance
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator, unit_rows
+from hairport.solver.adaptation.options import Cancelled, SolveOptions
+from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
+from hairport.solver.adaptation.strand_problem import (
     StrandProblem,
     group_energies,
     newton_system,
     problem_from_shape_model,
-    solve_qp,
-    solve_strands,
 )
+from hairport.solver.mesh.query import MeshQuery
 from tests.test_qp import model_of, tilt_into_surface
 from tests.test_transfer import outward_strands, sphere_character
 

@@ -4,10 +4,11 @@ import numpy as np
 import scipy.sparse as sp
 import trimesh
 
-from hairport.solver.character import Character, Skeleton
-from hairport.solver.geometry import MeshQuery
-from hairport.solver.hair import Hair
-from hairport.solver.transfer import compute_anchors, place_anchors, smooth_strands, strand_laplacian
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.hair import Hair
+from hairport.solver.transfer.anchors import compute_anchors, place_anchors
+from hairport.solver.transfer.smoothing import smooth_strands, strand_laplacian
 
 
 def sphere_character(scale=(1.0, 1.0, 1.0), shift=(0.0, 0.0, 0.0)):

@@ -49,9 +49,9 @@ import tempfile
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterable, Iterator
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from contextlib import AbstractContextManager
 from typing import Protocol
 
 #: bytes read from an upload (or a produced file) at a time: bounds the memory of one save

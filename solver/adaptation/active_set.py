@@ -1,0 +1,387 @@
+"""Eq. 1 under Eq. 12-13 by sequential QPs, solved with strand-banded factorisations.
+
+The Newton Hessian of Eq. 1 is ``S + 2 alpha K^T G K + 2 beta G`` (``G = diag(gamma)``):
+``S``, Eq. 7's per-segment 3x3 blocks (:func:`.energies.shape_blocks`), is block-tridiagonal
+along each strand; ``K`` (Eq. 10) couples a particle with its kNN on other strands. Each
+outer iteration solves the QP
+
+    min  1/2 d^T H d + g^T d   s.t.  <n_i, d_i> >= eps_c - s_i  (particles near the body),  d_i = 0 (roots)
+
+by a primal-dual active-set method (Hintermueller, Ito & Kunisch 2002): after rotating each
+constrained particle into its ``(n, t1, t2)`` frame a constraint bounds one unknown, and
+each active-set round is a linear solve with those unknowns pinned. The linear solve is a
+conjugate-gradient method preconditioned by the strand-banded part of ``H`` (``S``, the
+diagonal terms and the diagonal of ``K^T G K``), factorised by banded Cholesky
+(:mod:`.banded`): exact, in one step, when ``K`` is diagonal (Eq. 14's fine level, whose
+neighbours are fixed guides), a few dozen steps when strands are coupled.
+
+When no entry of ``K`` links two strands every strand is its own problem: each gets its own
+backtracking line search, damping and convergence test, and leaves the loop when done.
+Coupled problems take one step length for all.
+
+Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``),
+vectors particle-major.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from hairport.solver.adaptation import banded
+from hairport.solver.adaptation.constraints import BodyDistance
+from hairport.solver.adaptation.energies import EnergyWeights
+from hairport.solver.adaptation.options import (
+    DAMPING_FACTOR,
+    INITIAL_RADIAL_DAMPING,
+    MAX_BACKTRACKS,
+    MAX_RADIAL_DAMPING,
+    MERIT_PENALTY_FACTOR,
+    MIN_RADIAL_DAMPING,
+    Cancelled,
+    SolveOptions,
+)
+from hairport.solver.adaptation.strand_problem import NewtonSystem, StrandProblem, group_energies, newton_system
+from hairport.solver.mesh.clearance import push_out
+
+#: active-set rounds per QP before the last iterate is taken (they converge in a few)
+MAX_ACTIVE_SET_ROUNDS = 50
+#: conjugate gradients stop at this residual relative to the right-hand side ...
+CG_RELATIVE_TOLERANCE = 1e-6
+#: ... or after this many steps
+CG_MAX_STEPS = 1000
+
+ProgressFn = Callable[[float, str], None]
+
+
+@dataclass
+class StrandSolveReport:
+    """What the loop did."""
+
+    iterations: int = 0
+    converged: bool = False
+    groups: int = 0
+    converged_groups: int = 0
+    max_step: list[float] = field(default_factory=list)
+    min_clearance: list[float] = field(default_factory=list)
+    open_groups: list[int] = field(default_factory=list)
+    active_set_rounds: list[int] = field(default_factory=list)
+    cg_steps: list[int] = field(default_factory=list)
+    merit: list[float] = field(default_factory=list)
+    step_fractions: list[float] = field(default_factory=list)
+    pushed_out: int = 0
+    seconds: float = 0.0
+
+
+def normal_frames(normals: np.ndarray) -> np.ndarray:
+    """Orthonormal frames ``(N, 3, 3)`` whose first column is each unit normal ``(N, 3)``."""
+    axis = np.zeros_like(normals)
+    axis[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    return np.stack([normals, t1, t2], axis=2)
+
+
+class Frames:
+    """Per-particle rotations ``R_i`` (identity except at ``rows``), applied to ``(N, 3)`` arrays."""
+
+    def __init__(self, n: int, rows: np.ndarray, normals: np.ndarray):
+        self.n = n
+        # near the body most particles are constrained: rotate all rows then (identity
+        # elsewhere), which is cheaper than gathering and scattering a large subset
+        self.dense = len(rows) > n // 2
+        if self.dense:
+            all_normals = np.zeros((n, 3))
+            all_normals[rows] = normals
+            R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+            R[rows] = normal_frames(normals)
+            self.rows = np.arange(n)
+        else:
+            R = normal_frames(normals)
+            self.rows = rows
+        self.R = R
+        self.RT = np.ascontiguousarray(np.transpose(R, (0, 2, 1)))
+
+    def to_local(self, x: np.ndarray) -> np.ndarray:
+        """``R_i^T x_i``."""
+        if self.dense:
+            return np.einsum("nij,nj->ni", self.RT, x)
+        y = x.copy()
+        y[self.rows] = np.einsum("nij,nj->ni", self.RT, x[self.rows])
+        return y
+
+    def to_world(self, y: np.ndarray) -> np.ndarray:
+        """``R_i y_i``."""
+        if self.dense:
+            return np.einsum("nij,nj->ni", self.R, y)
+        x = y.copy()
+        x[self.rows] = np.einsum("nij,nj->ni", self.R, y[self.rows])
+        return x
+
+    def rotate_blocks(self, diagonal: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Blocks of ``R^T H R``."""
+        if self.dense:
+            rotated_upper = np.zeros_like(upper)
+            rotated_upper[:-1] = np.matmul(np.matmul(self.RT[:-1], upper[:-1]), self.R[1:])
+            return np.matmul(np.matmul(self.RT, diagonal), self.R), rotated_upper
+        rotated_diagonal = diagonal.copy()
+        rotated_diagonal[self.rows] = np.matmul(np.matmul(self.RT, diagonal[self.rows]), self.R)
+        rotated_upper = upper.copy()
+        rotated = np.zeros(self.n, dtype=np.int64) - 1
+        rotated[self.rows] = np.arange(len(self.rows))
+        left = self.rows[self.rows < self.n - 1]  # block (i, i+1) gets R_i^T on the left
+        rotated_upper[left] = np.matmul(self.RT[rotated[left]], rotated_upper[left])
+        right = self.rows[self.rows > 0] - 1  # ... and R_{i+1} on the right
+        rotated_upper[right] = np.matmul(rotated_upper[right], self.R[rotated[right + 1]])
+        return rotated_diagonal, rotated_upper
+
+
+def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values) -> tuple[np.ndarray, int]:
+    """Solve ``H' y = rhs`` (``H' = R^T H R``) for the free unknowns with ``y[pinned] = values[pinned]``."""
+    start = np.where(pinned, values, 0.0)
+
+    def rotated_matvec(y: np.ndarray) -> np.ndarray:
+        return frames.to_local(system.matvec(frames.to_world(y)))
+
+    residual = rhs - rotated_matvec(start)
+    residual[pinned] = 0.0
+    ab = banded.with_fixed_unknowns(banded.to_bands(rotated_diagonal, rotated_upper), pinned.ravel())
+    factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+
+    def precondition(r: np.ndarray) -> np.ndarray:
+        z = scipy.linalg.cho_solve_banded((factor, False), r.ravel(), check_finite=False).reshape(-1, 3)
+        z[pinned] = 0.0
+        return z
+
+    if system.coupling is None:
+        return start + precondition(residual), 1
+    # conjugate gradients on the free unknowns
+    x = np.zeros_like(residual)
+    z = precondition(residual)
+    direction = z.copy()
+    rz = float(np.sum(residual * z))
+    target = CG_RELATIVE_TOLERANCE * float(np.linalg.norm(residual))
+    steps = 0
+    for steps in range(1, CG_MAX_STEPS + 1):
+        if float(np.linalg.norm(residual)) <= target or rz <= 0:
+            break
+        q = rotated_matvec(direction)
+        q[pinned] = 0.0
+        step = rz / float(np.sum(direction * q))
+        x += step * direction
+        residual -= step * q
+        z = precondition(residual)
+        rz_next = float(np.sum(residual * z))
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return start + x, steps
+
+
+def solve_qp(
+    system: NewtonSystem,
+    fixed: np.ndarray,
+    constrained: np.ndarray,
+    normals: np.ndarray,
+    lower: np.ndarray,
+    active: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """``min 1/2 d^T H d + g^T d  s.t. <n_i, d_i> >= l_i (i constrained), d_i = 0 (i fixed)``.
+
+    Parameters
+    ----------
+    system : NewtonSystem
+        Positive definite ``H`` and ``g``.
+    fixed, constrained : (N,) bool
+    normals : (N, 3) float64
+        Unit normals (rows of unconstrained particles unused).
+    lower : (N,) float64
+    active : (N,) bool
+        Initial guess of the active constraints (e.g. the previous QP's).
+
+    Returns
+    -------
+    step : (N, 3) float64
+    multipliers : (N,) float64
+        Zero off the active set.
+    active : (N,) bool
+    rounds, cg_steps : int
+    """
+    n = len(system.gradient)
+    frames = Frames(n, np.flatnonzero(constrained), normals[constrained])
+    rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
+    rotated_gradient = frames.to_local(system.gradient)
+    curvature = rotated_diagonal[:, 0, 0]
+    active = active & constrained & ~fixed
+    pinned = np.zeros((n, 3), dtype=bool)
+    pinned[fixed] = True
+    values = np.zeros((n, 3))
+    values[:, 0] = np.where(constrained, lower, 0.0)
+    rounds = cg_steps = 0
+    y = np.zeros((n, 3))
+    multipliers = np.zeros(n)
+    for rounds in range(1, MAX_ACTIVE_SET_ROUNDS + 1):
+        pinned[:, 0] = fixed | active
+        y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values)
+        cg_steps += steps
+        residual = frames.to_local(system.matvec(frames.to_world(y))) + rotated_gradient
+        multipliers = np.where(active, residual[:, 0], 0.0)
+        next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)
+        if np.array_equal(next_active, active):
+            break
+        active = next_active
+    return frames.to_world(y), multipliers, active, rounds, cg_steps
+
+
+def _adapt_damping(damping: np.ndarray, ratio: np.ndarray) -> np.ndarray:
+    """Per-group Levenberg-Marquardt update from actual/predicted decrease (as :func:`.qp._adapt_damping`)."""
+    return np.where(
+        ratio < 0.25,
+        np.minimum(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR),
+        np.where(ratio > 0.75, np.maximum(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR), damping),
+    )
+
+
+def solve_strands(
+    problem: StrandProblem,
+    distance: BodyDistance,
+    weights: EnergyWeights = EnergyWeights(),
+    options: SolveOptions = SolveOptions(),
+    start: np.ndarray | None = None,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray, StrandSolveReport]:
+    """Minimise Eq. 1 under Eq. 12-13 by sequential QPs (Sec. 4.6).
+
+    Each outer iteration: the projected-Newton QP (:func:`solve_qp`), then backtracking on
+    Eq. 1 plus an l1 penalty on clearance short of ``eps_c``, with a second-order correction
+    (particles a step leaves short of ``eps_c`` are projected back out along the normal:
+    the linearised half-spaces ignore the body's curvature, and without it the loop zig-zags
+    along the surface). Uncoupled strands each run this loop on their own.
+
+    Parameters
+    ----------
+    problem : StrandProblem
+    distance : BodyDistance
+        Over the target body.
+    weights : EnergyWeights
+    options : SolveOptions
+        ``eps_c``, ``max_iterations``, ``step_tolerance``, ``clearance_tolerance``.
+    start : (N, 3) float64, optional
+        First iterate (``problem.initial`` by default).
+    progress : callable(fraction, message), optional
+    should_stop : callable() -> bool, optional
+        Polled once per outer iteration; True raises :class:`.qp.Cancelled`.
+
+    Returns
+    -------
+    points : (N, 3) float64
+    report : StrandSolveReport
+    """
+    began = time.perf_counter()
+    points = np.array(problem.initial if start is None else start, dtype=np.float64)
+    coupled = problem.coupled
+    n_groups = 1 if coupled else problem.n_strands
+    report = StrandSolveReport(groups=n_groups)
+    # the damping is per strand even when strands share one step length: one strand that
+    # turns far must not stiffen every other strand's segments
+    damping = np.full(problem.n_strands, INITIAL_RADIAL_DAMPING)
+    active_set = np.zeros(problem.n_particles, dtype=bool)
+    open_groups = np.arange(n_groups)
+    dist_all, normal_all, near_all = distance(points)
+    penalty = 0.0
+    for iteration in range(options.max_iterations):
+        if len(open_groups) == 0:
+            break
+        if should_stop is not None and should_stop():
+            raise Cancelled("solve cancelled")
+        if coupled:
+            sub, index = problem, np.arange(problem.n_particles)
+            group = np.zeros(problem.n_particles, dtype=np.int64)
+        else:
+            sub, index = problem.subset(open_groups)
+            group = sub.strand_of
+        k = len(open_groups)
+        p = points[index]
+        dist, normal, near = dist_all[index], normal_all[index], near_all[index]
+        strands = np.arange(problem.n_strands) if coupled else open_groups
+        system = newton_system(sub, p, weights, damping[strands][sub.strand_of])
+        constrained = near & ~sub.fixed
+        step, multipliers, active, rounds, cg_steps = solve_qp(
+            system, sub.fixed, constrained, normal, options.eps_c - dist, active_set[index]
+        )
+        active_set[index] = active
+        report.active_set_rounds.append(rounds)
+        report.cg_steps.append(cg_steps)
+        report.open_groups.append(k)
+        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(multipliers), initial=0.0)))
+        merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
+        model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
+        strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
+        # uncoupled, a group is a strand: the per-strand merits are the group merits
+        strand_merit_now = merit_now if not coupled else group_energies(
+            sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
+
+        fraction = np.ones(k)
+        accepted = np.zeros(k, dtype=bool)
+        trial = p.copy()
+        trial_dist, trial_normal, trial_near = dist.copy(), normal.copy(), near.copy()
+        for attempt in range(MAX_BACKTRACKS):
+            todo = ~accepted[group]
+            moved = p[todo] + fraction[group][todo, None] * step[todo]
+            d, nrm, nr = distance(moved)
+            short = nr & (d < options.eps_c) & ~sub.fixed[todo]
+            if short.any():
+                moved[short] += (options.eps_c - d[short])[:, None] * nrm[short]
+                d2, nrm2, nr2 = distance(moved[short])
+                d[short], nrm[short], nr[short] = d2, nrm2, nr2
+            trial[todo] = moved
+            trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
+            merit_trial = group_energies(sub, trial, weights, group, k, penalty, trial_dist, options.eps_c)
+            if attempt == 0:
+                strand_merit_trial = merit_trial if not coupled else group_energies(
+                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c)
+                actual = strand_merit_trial - strand_merit_now
+                safe = np.where(strand_predicted < 0, strand_predicted, -1.0)
+                ratio = np.where(strand_predicted < 0, actual / safe, 0.0)
+                damping[strands] = _adapt_damping(damping[strands], ratio)
+            accepted |= merit_trial <= merit_now
+            if accepted.all() or attempt == MAX_BACKTRACKS - 1:
+                break
+            fraction = np.where(accepted, fraction, 0.5 * fraction)
+        report.merit.append(float(merit_trial.sum()))
+        report.step_fractions.append(float(fraction.min(initial=1.0)))
+        points[index] = trial
+        dist_all[index], normal_all[index], near_all[index] = trial_dist, trial_normal, trial_near
+        moved_by = np.linalg.norm(trial - p, axis=1)
+        max_step = np.zeros(k)
+        np.maximum.at(max_step, group, moved_by)
+        shortfall = np.full(k, -np.inf)
+        np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
+        decrease = merit_now - merit_trial
+        stalled = (decrease >= 0) & (decrease < options.energy_tolerance * np.abs(merit_now))
+        done = ((max_step < options.step_tolerance) | stalled) & (shortfall <= options.clearance_tolerance)
+        report.converged_groups += int(done.sum())
+        report.max_step.append(float(max_step.max(initial=0.0)))
+        report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))
+        open_groups = open_groups[~done]
+        report.iterations = iteration + 1
+        if progress is not None:
+            progress(
+                (iteration + 1) / options.max_iterations,
+                f"iteration {iteration + 1}: max step {report.max_step[-1]:.2e} m, {len(open_groups)} open",
+            )
+    report.converged = len(open_groups) == 0
+    if not report.converged:
+        # stopped by the iteration cap, possibly with some particle short of its clearance:
+        # the result must never break Eq. 13
+        short = (dist_all < options.eps_c - options.clearance_tolerance) & ~problem.fixed
+        report.pushed_out = int(short.sum())
+        if report.pushed_out:
+            points = push_out(points, problem.fixed, distance.query, options.eps_c)
+    report.seconds = time.perf_counter() - began
+    return points, report

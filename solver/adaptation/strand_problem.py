@@ -1,0 +1,203 @@
+"""Eq. 1 over a set of strands and its projected-Newton model (gradient, strand-banded Hessian)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from hairport.solver.adaptation import banded
+from hairport.solver.adaptation.energies import (
+    NEGATIVE_CURVATURE_SHARE,
+    EnergyWeights,
+    ShapeModel,
+    clamped_direction_hessians,
+    unit_rows,
+)
+
+
+@dataclass(frozen=True, eq=False)
+class StrandProblem:
+    """Eq. 1 over a set of strands: ``sum_seg ||u - d||^2 + alpha sum_i gamma_i ||(K p)_i - f_i||^2 + beta sum_i gamma_i ||p_i - p-hat_i||^2``.
+
+    Attributes
+    ----------
+    offsets : (S+1,) int64
+        CSR strand layout.
+    source_directions : (N, 3) float64
+        Unit source direction of the segment starting at each particle (tip rows unused).
+    initial : (N, 3) float64
+        ``p-hat`` (Eq. 11).
+    coupling : (N, N) csr_matrix
+        ``K`` of Eq. 10 over these particles; diagonal for Eq. 14's fine level.
+    features : (N, 3) float64
+        ``f``: the source features ``L-bar`` (plus the fixed neighbours' share for Eq. 14).
+    gamma : (N,) float64
+        Eq. 21's weights.
+    fixed : (N,) bool
+        Particles that do not move (roots).
+    """
+
+    offsets: np.ndarray
+    source_directions: np.ndarray
+    initial: np.ndarray
+    coupling: sp.csr_matrix
+    features: np.ndarray
+    gamma: np.ndarray
+    fixed: np.ndarray
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.initial)
+
+    @property
+    def n_strands(self) -> int:
+        return len(self.offsets) - 1
+
+    @cached_property
+    def strand_of(self) -> np.ndarray:
+        """(N,) int64."""
+        return np.repeat(np.arange(self.n_strands), np.diff(self.offsets))
+
+    @cached_property
+    def segment_starts(self) -> np.ndarray:
+        """(M,) int64 particles that start a segment (all but strand tips)."""
+        starts = np.ones(self.n_particles, dtype=bool)
+        starts[self.offsets[1:] - 1] = False
+        return np.flatnonzero(starts)
+
+    @cached_property
+    def gram(self) -> sp.csr_matrix:
+        """``K^T diag(gamma) K`` (constant over a solve)."""
+        K = self.coupling
+        return (K.T @ sp.diags(self.gamma) @ K).tocsr()
+
+    @cached_property
+    def coupled(self) -> bool:
+        """Whether ``K`` links particles of different strands."""
+        K = self.coupling.tocoo()
+        return bool(np.any(self.strand_of[K.row] != self.strand_of[K.col]))
+
+    def subset(self, strands: np.ndarray) -> tuple["StrandProblem", np.ndarray]:
+        """The problem over some strands ``(s,) int64`` (ascending) and their particle indices.
+
+        Only meaningful for an uncoupled problem (couplings to other strands are dropped).
+        """
+        counts = np.diff(self.offsets)[strands]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        index = np.repeat(self.offsets[strands] - offsets[:-1], counts) + np.arange(offsets[-1])
+        return (
+            StrandProblem(
+                offsets,
+                self.source_directions[index],
+                self.initial[index],
+                self.coupling[index][:, index].tocsr(),
+                self.features[index],
+                self.gamma[index],
+                self.fixed[index],
+            ),
+            index,
+        )
+
+
+def problem_from_shape_model(
+    model: ShapeModel, offsets: np.ndarray, initial: np.ndarray, fixed: np.ndarray, gamma: np.ndarray | None = None
+) -> StrandProblem:
+    """The :class:`StrandProblem` of a whole hairstyle's :class:`.energies.ShapeModel`."""
+    n = len(initial)
+    directions = np.zeros((n, 3))
+    directions[model.segments[:, 0]] = model.source_directions
+    return StrandProblem(
+        np.asarray(offsets, dtype=np.int64), directions, np.asarray(initial, dtype=np.float64), model.K,
+        model.source_features, np.ones(n) if gamma is None else np.asarray(gamma, dtype=np.float64),
+        np.asarray(fixed, dtype=bool),
+    )
+
+
+def group_energies(
+    problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, group: np.ndarray, n_groups: int,
+    penalty: float = 0.0, distance: np.ndarray | None = None, eps_c: float = 0.0,
+) -> np.ndarray:
+    """Eq. 1 summed per group ``(n_groups,)`` of particles (``group (N,)``), plus ``penalty``
+    times the clearance short of ``eps_c`` when ``distance (N,)`` is given."""
+    seg = problem.segment_starts
+    _, unit = unit_rows(points[seg + 1] - points[seg])
+    per_particle = np.zeros(problem.n_particles)
+    per_particle[seg] = np.sum((unit - problem.source_directions[seg]) ** 2, axis=1)
+    residual = problem.coupling @ points - problem.features
+    per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
+    per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
+    if distance is not None and penalty > 0:
+        per_particle += penalty * np.where(problem.fixed, 0.0, np.maximum(eps_c - distance, 0.0))
+    return np.bincount(group, per_particle, minlength=n_groups)
+
+
+@dataclass(frozen=True, eq=False)
+class NewtonSystem:
+    """Gradient and Hessian of Eq. 1 at an iterate.
+
+    Attributes
+    ----------
+    gradient : (N, 3) float64
+    diagonal, upper : (N, 3, 3) float64
+        The strand-banded part (exact Hessian when ``K`` is diagonal), :mod:`.banded` layout.
+    coupling : (N, N) csr_matrix or None
+        ``2 alpha K^T G K`` minus its diagonal, when strands are coupled through it.
+    """
+
+    gradient: np.ndarray
+    diagonal: np.ndarray
+    upper: np.ndarray
+    coupling: sp.csr_matrix | None
+
+    def matvec(self, x: np.ndarray) -> np.ndarray:
+        """``H x`` for ``x (N, 3)``."""
+        y = banded.matvec(self.diagonal, self.upper, x)
+        if self.coupling is not None:
+            y += self.coupling @ x
+        return y
+
+
+def newton_system(
+    problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, radial_damping: np.ndarray
+) -> NewtonSystem:
+    """Projected-Newton model of Eq. 1 at ``points`` (see :func:`.energies.shape_blocks`).
+
+    Parameters
+    ----------
+    radial_damping : (N,) float64
+        Levenberg-Marquardt damping along the segment starting at each particle.
+    """
+    n = problem.n_particles
+    seg = problem.segment_starts
+    length, unit = unit_rows(points[seg + 1] - points[seg])
+    d = problem.source_directions[seg]
+    cosine = np.einsum("ij,ij->i", unit, d)
+    g = problem.gamma
+    floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[seg], g[seg + 1]) * length**2
+    projected = clamped_direction_hessians(unit, d, floor)
+    mu = radial_damping[seg]
+    blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
+
+    K = problem.coupling
+    KtGK = problem.gram
+    kdiag = KtGK.diagonal()
+    diagonal = np.zeros((n, 3, 3))
+    diagonal[seg] += blocks
+    diagonal[seg + 1] += blocks
+    diagonal += (2.0 * weights.alpha * kdiag + 2.0 * weights.beta * g)[:, None, None] * np.eye(3)[None]
+    upper = np.zeros((n, 3, 3))
+    upper[seg] = -blocks
+    off_diagonal = KtGK - sp.diags(kdiag)
+    off_diagonal.eliminate_zeros()
+    coupling = 2.0 * weights.alpha * off_diagonal.tocsr() if off_diagonal.nnz else None
+
+    shape_residual = (unit * cosine[:, None] - d) / length[:, None]
+    gradient = np.zeros((n, 3))
+    gradient[seg] -= 2.0 * shape_residual
+    gradient[seg + 1] += 2.0 * shape_residual
+    gradient += 2.0 * weights.alpha * (K.T @ (g[:, None] * (K @ points - problem.features)))
+    gradient += 2.0 * weights.beta * g[:, None] * (points - problem.initial)
+    return NewtonSystem(gradient, diagonal, upper, coupling)

@@ -1,0 +1,91 @@
+"""Table 3's root density change: roots per scalp triangle area before and after a relocation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hairport.solver.hairline.baselines import _check_points, _check_triangles, _index_array, _refuse
+
+
+@dataclass(frozen=True, eq=False)
+class DensityChange:
+    """Relative change of the hair-root density per scalp triangle (Table 3).
+
+    Attributes
+    ----------
+    l1 : float
+        Mean of ``|changes|`` (0.0 when no triangle holds a root).
+    linf : float
+        Largest ``|changes|`` (0.0 when no triangle holds a root).
+    changes : (t,) float64
+        ``A / A' - 1`` per triangle holding roots (rest over deformed 3D area); ``inf`` for
+        a triangle collapsed to zero area.
+    triangles : (t,) int64
+        The triangles holding roots, ascending ids.
+    """
+
+    l1: float
+    linf: float
+    changes: np.ndarray
+    triangles: np.ndarray
+
+
+def _areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    corners = points[triangles]
+    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+
+
+def density_change(
+    rest: np.ndarray, deformed: np.ndarray, triangles: np.ndarray, root_triangles: np.ndarray
+) -> DensityChange:
+    """Table 3's density change of the hair roots between the rest and the deformed scalp.
+
+    A triangle holding ``c >= 1`` roots has density ``c / A`` at rest and ``c / A'`` after
+    the relocation (roots keep their triangle), a relative change of ``A / A' - 1``
+    (positive where the scalp was compressed). Triangles without roots (0/0) are left out.
+
+    Parameters
+    ----------
+    rest : (n, 3) float64
+        Rest scalp vertices (m).
+    deformed : (n, 3) float64
+        Deformed scalp vertices (m).
+    triangles : (m, 3) int64
+        Scalp triangles.
+    root_triangles : (R,) int64
+        The scalp triangle holding each root; ``-1`` for a root outside the scalp (ignored).
+
+    Returns
+    -------
+    density : DensityChange
+        ``linf`` and ``l1`` are ``inf`` when a triangle holding roots collapsed to zero area.
+
+    Raises
+    ------
+    InputError
+        Bad shapes or ids, non-finite positions, or a triangle holding roots with zero
+        rest area.
+    """
+    source = "density_change"
+    rest = _check_points(rest, 3, "rest", source)
+    deformed = _check_points(deformed, 3, "deformed", source)
+    if deformed.shape != rest.shape:
+        raise _refuse(f"deformed {deformed.shape} and rest {rest.shape} differ in shape", source)
+    triangles = _check_triangles(triangles, len(rest), source)
+    root_triangles = _index_array(root_triangles, 1, "root_triangles", source)
+    if root_triangles.size and (root_triangles.min() < -1 or root_triangles.max() >= len(triangles)):
+        raise _refuse(f"root_triangles must lie in -1 .. {len(triangles) - 1}", source)
+
+    held = np.flatnonzero(np.bincount(root_triangles[root_triangles >= 0], minlength=len(triangles)))
+    if held.size == 0:
+        return DensityChange(0.0, 0.0, np.zeros(0), np.zeros(0, dtype=np.int64))
+    before = _areas(rest, triangles[held])
+    if (before <= 0).any():
+        raise _refuse(f"{int((before <= 0).sum())} scalp triangles holding roots have zero rest area", source)
+    after = _areas(deformed, triangles[held])
+    with np.errstate(divide="ignore"):
+        changes = before / after - 1.0
+    magnitude = np.abs(changes)
+    return DensityChange(float(magnitude.mean()), float(magnitude.max()), changes, held)

@@ -1,0 +1,1 @@
+"""File formats: hair and characters, one module per format behind a registry."""

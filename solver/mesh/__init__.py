@@ -1,0 +1,1 @@
+"""Triangle-mesh queries and topology: closest points, rays, distance grids, adjacency, charts."""

@@ -1,0 +1,96 @@
+"""Closest-face and ray backends behind :class:`.query.MeshQuery`: libigl AABB (default), fcpw (opt-in), embree rays."""
+
+from __future__ import annotations
+
+from operator import attrgetter
+
+import igl
+import numpy as np
+
+#: face-search backends for :meth:`MeshQuery.signed_distance`, the first importable one is
+#: used: ``("fcpw", "igl")`` opts in to fcpw (float32)
+CLOSEST_FACE_BACKENDS = ("igl",)
+
+
+_PRIMITIVE_INDEX = attrgetter("primitive_index")
+
+#: |cos| between a ray and the normal of its hit face at or below which the hit is dropped as
+#: grazing (trimesh's ``planes_lines`` tolerance, which the previous implementation applied)
+_PARALLEL = 1e-5
+
+
+class _FcpwFaces:
+    """Closest face by fcpw's vectorised BVH (float32; coordinates centred first)."""
+
+    exact = False
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        import fcpw
+
+        self._fcpw = fcpw
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        self._center = 0.5 * (lo + hi)
+        scene = fcpw.scene_3D()
+        scene.set_object_count(1)
+        scene.set_object_vertices(np.asfortranarray(vertices - self._center, dtype=np.float32), 0)
+        scene.set_object_triangles(np.asfortranarray(faces, dtype=np.int32), 0)
+        scene.build(fcpw.aggregate_type.bvh_surface_area, True, False, False)
+        self._scene = scene
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, None]:
+        """Face holding the closest point (no closest point: float32 would not do)."""
+        n = len(points)
+        interactions = self._fcpw.interaction_3D_list()
+        self._scene.find_closest_points(
+            np.asfortranarray(points - self._center, dtype=np.float32),
+            np.full(n, np.inf, dtype=np.float32),
+            interactions,
+            False,
+        )
+        faces = np.fromiter(map(_PRIMITIVE_INDEX, interactions), dtype=np.int64, count=n)
+        return np.maximum(faces, 0), None  # -1 only for non-finite points, whose results are NaN anyway
+
+
+class _EmbreeFaces:
+    """First face hit by each ray, by Embree (float32; coordinates centred first)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        self._center = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+        self._scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(scene=self._scene, vertices=(vertices - self._center).astype(np.float32), indices=faces.astype(np.int32))
+
+    def first_faces(self, origins: np.ndarray, unit: np.ndarray) -> np.ndarray:
+        """(N,) int64 face index, ``-1`` where the ray misses."""
+        first = self._scene.run((origins - self._center).astype(np.float32), unit.astype(np.float32))
+        return np.asarray(first, dtype=np.int64)
+
+
+class _IglFaces:
+    """Closest face by libigl's AABB tree (float64)."""
+
+    exact = True
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self._vertices, self._faces = vertices, faces
+        self._tree = igl.AABB()
+        self._tree.init(vertices, faces)
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Face holding the closest point, and the closest point."""
+        _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
+        return np.maximum(faces.astype(np.int64), 0), closest
+
+
+_FACE_INDEXES = {"fcpw": _FcpwFaces, "igl": _IglFaces}
+
+
+def _closest_face_index(vertices: np.ndarray, faces: np.ndarray, backends=None):
+    for name in backends or CLOSEST_FACE_BACKENDS:
+        try:
+            return _FACE_INDEXES[name](vertices, faces)
+        except ImportError:
+            continue
+    raise ImportError(f"no closest-point backend available among {backends or CLOSEST_FACE_BACKENDS}")

@@ -1,0 +1,175 @@
+"""The strand hairstyle container.
+
+Convention: a hairstyle of S strands and N particles stores all particle positions in one
+array ``points (N, 3) float64`` (meters) and the strand boundaries in ``offsets (S+1,) int64``
+(compressed sparse rows): strand ``s`` is ``points[offsets[s]:offsets[s+1]]``, root first.
+Every strand has at least two particles. Optional per-particle attributes (``thickness``,
+``color``) travel with the points and are carried through retargeting unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hairport.solver.model.errors import InputError
+
+MIN_PARTICLES_PER_STRAND = 2
+
+
+@dataclass(frozen=True, eq=False)
+class Hair:
+    """A strand hairstyle in CSR layout.
+
+    Attributes
+    ----------
+    points : (N, 3) float64
+        Particle positions in meters, strands concatenated, root first.
+    offsets : (S+1,) int64
+        ``offsets[0] == 0``, ``offsets[-1] == N``, strictly increasing by at least 2.
+    thickness : (N,) float64 or None
+        Per-particle strand thickness in meters (from ``.hair`` files).
+    color : (N, 3) float64 or None
+        Per-particle RGB in [0, 1].
+    """
+
+    points: np.ndarray
+    offsets: np.ndarray
+    thickness: np.ndarray | None = field(default=None)
+    color: np.ndarray | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", np.ascontiguousarray(self.points, dtype=np.float64))
+        object.__setattr__(self, "offsets", np.ascontiguousarray(self.offsets, dtype=np.int64))
+        validate_layout(self.points, self.offsets)
+        n = len(self.points)
+        if self.thickness is not None:
+            thickness = np.ascontiguousarray(self.thickness, dtype=np.float64)
+            if thickness.shape != (n,):
+                raise InputError(f"thickness has shape {thickness.shape}, expected ({n},)")
+            object.__setattr__(self, "thickness", thickness)
+        if self.color is not None:
+            color = np.ascontiguousarray(self.color, dtype=np.float64)
+            if color.shape != (n, 3):
+                raise InputError(f"color has shape {color.shape}, expected ({n}, 3)")
+            object.__setattr__(self, "color", color)
+
+    @classmethod
+    def from_strands(cls, strands: list[np.ndarray]) -> "Hair":
+        """Build from a list of ``(n_s, 3)`` arrays (convenience for small inputs and tests)."""
+        counts = np.array([len(s) for s in strands], dtype=np.int64)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        points = np.concatenate(strands) if strands else np.zeros((0, 3))
+        return cls(points, offsets)
+
+    @property
+    def n_strands(self) -> int:
+        return len(self.offsets) - 1
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.points)
+
+    @property
+    def counts(self) -> np.ndarray:
+        """(S,) int64 particles per strand."""
+        return np.diff(self.offsets)
+
+    @property
+    def roots(self) -> np.ndarray:
+        """(S,) int64 index of each strand's root particle."""
+        return self.offsets[:-1]
+
+    @property
+    def strand_of(self) -> np.ndarray:
+        """(N,) int64 strand index of every particle."""
+        return np.repeat(np.arange(self.n_strands, dtype=np.int64), self.counts)
+
+    @property
+    def is_root(self) -> np.ndarray:
+        """(N,) bool."""
+        mask = np.zeros(self.n_particles, dtype=bool)
+        mask[self.roots] = True
+        return mask
+
+    @property
+    def index_in_strand(self) -> np.ndarray:
+        """(N,) int64 position of each particle along its strand (root = 0)."""
+        return np.arange(self.n_particles, dtype=np.int64) - np.repeat(self.offsets[:-1], self.counts)
+
+    @property
+    def segments(self) -> np.ndarray:
+        """(N-S, 2) int64 particle index pairs (a, a+1) of every segment, root side first."""
+        start = np.ones(self.n_particles, dtype=bool)
+        start[self.offsets[1:] - 1] = False  # the tip starts no segment
+        a = np.flatnonzero(start)
+        return np.stack([a, a + 1], axis=1)
+
+    def with_points(self, points: np.ndarray) -> "Hair":
+        """Same layout and attributes, new positions ``(N, 3)``."""
+        return Hair(points, self.offsets, self.thickness, self.color)
+
+    def strand(self, s: int) -> np.ndarray:
+        return self.points[self.offsets[s] : self.offsets[s + 1]]
+
+    def subset(self, strand_ids: np.ndarray) -> "Hair":
+        """The hairstyle made of the given strands, in the given order."""
+        strand_ids = np.asarray(strand_ids, dtype=np.int64)
+        counts = self.counts[strand_ids]
+        index = particle_indices(self.offsets, strand_ids)
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        return Hair(
+            self.points[index],
+            offsets,
+            None if self.thickness is None else self.thickness[index],
+            None if self.color is None else self.color[index],
+        )
+
+
+def particle_indices(offsets: np.ndarray, strand_ids: np.ndarray) -> np.ndarray:
+    """Particle indices of the given strands, concatenated.
+
+    Parameters
+    ----------
+    offsets : (S+1,) int64
+    strand_ids : (K,) int64
+
+    Returns
+    -------
+    index : (sum of counts,) int64
+    """
+    starts = offsets[strand_ids]
+    counts = offsets[strand_ids + 1] - starts
+    total = int(counts.sum())
+    run_start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    return np.repeat(starts - run_start, counts) + np.arange(total, dtype=np.int64)
+
+
+def validate_layout(points: np.ndarray, offsets: np.ndarray, source: str | None = None) -> None:
+    """Check a CSR hairstyle: shapes, finite coordinates, strands of >= 2 particles.
+
+    Raises
+    ------
+    InputError
+    """
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise InputError(f"points must have shape (N, 3), got {points.shape}", source, "bad_shape")
+    if offsets.ndim != 1 or len(offsets) < 1:
+        raise InputError("offsets must be a 1-D array with at least one entry", source, "bad_shape")
+    if offsets[0] != 0 or offsets[-1] != len(points):
+        raise InputError(
+            f"offsets must start at 0 and end at the particle count {len(points)}", source, "bad_offsets"
+        )
+    counts = np.diff(offsets)
+    if len(counts) and counts.min() < MIN_PARTICLES_PER_STRAND:
+        bad = int(np.argmax(counts < MIN_PARTICLES_PER_STRAND))
+        raise InputError(
+            f"strand {bad} has {int(counts[bad])} particle(s); every strand needs at least "
+            f"{MIN_PARTICLES_PER_STRAND}",
+            source,
+            "short_strand",
+        )
+    if not np.isfinite(points).all():
+        bad = int(np.argmax(~np.isfinite(points).all(axis=1)))
+        raise InputError(f"particle {bad} has a non-finite coordinate (NaN or inf)", source, "non_finite")

@@ -1,0 +1,1 @@
+"""Pictures of results (PIL); optional, never imported by the pipeline."""
