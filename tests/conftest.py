@@ -1,5 +1,11 @@
-"""Fixtures shared by the hairline test modules: the MakeHuman average female and the scalp
-of a 300-strand "short" groom on her (seed 0)."""
+"""Fixtures shared by the test modules: a private Redis server for the service tests, and for
+the hairline tests the MakeHuman average female with the scalp of a 300-strand "short" groom
+on her (seed 0)."""
+
+import shutil
+import socket
+import subprocess
+import time
 
 import pytest
 
@@ -8,6 +14,54 @@ from hairport.solver.hairline.scalp import extract_scalp
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+
+#: seconds the private Redis server may take to answer
+REDIS_START_SECONDS = 20
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def redis_url(tmp_path_factory):
+    """A Redis server of the tests' own, on a free port, nothing kept on disk; stopped at the end.
+
+    The tests never use a Redis they did not start (a shared one may hold other work)."""
+    import redis
+
+    server = shutil.which("redis-server")
+    if server is None:
+        pytest.fail("the service tests need redis-server on PATH (.ci/run installs it with apt-get)")
+    folder = tmp_path_factory.mktemp("redis")
+    port = free_port()
+    process = subprocess.Popen(
+        [server, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no", "--dir", str(folder),
+         "--logfile", str(folder / "redis.log")],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    url = f"redis://127.0.0.1:{port}/0"
+    client = redis.Redis.from_url(url)
+    deadline = time.monotonic() + REDIS_START_SECONDS
+    while True:
+        try:
+            client.ping()
+            break
+        except redis.ConnectionError:
+            if process.poll() is not None or time.monotonic() > deadline:
+                process.kill()
+                pytest.fail(f"redis-server did not start on port {port}: {(folder / 'redis.log').read_text()[-500:]}")
+            time.sleep(0.05)
+    yield url
+    client.close()
+    process.terminate()
+    try:
+        process.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
 
 
 @pytest.fixture(scope="session")

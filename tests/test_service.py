@@ -1,7 +1,7 @@
 """The HTTP API end to end: a real Redis, real Celery worker processes, the FastAPI app.
 
-The worker runs as a separate process (``hairport worker``) against Redis database
-:data:`REDIS_DB`; the API runs in-process through Starlette's test client. Inputs are the
+The worker runs as a separate process (``hairport worker``) against the tests' own Redis
+server (``redis_url`` in conftest.py); the API runs in-process through Starlette's test client. Inputs are the
 small toy characters and a 60-strand groom, so each job takes a few seconds.
 """
 
@@ -17,8 +17,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REDIS_DB = 14
-REDIS_URL = f"redis://127.0.0.1:6379/{REDIS_DB}"
 KEY, OTHER_KEY = "test-key-1", "test-key-2"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 OTHER = {"X-API-Key": OTHER_KEY}
@@ -27,40 +25,34 @@ VISIBILITY_TIMEOUT = 6
 JOB_TIMEOUT = 240
 
 
-def _env(storage: Path) -> dict:
+def _env(storage: Path, redis_url: str) -> dict:
     env = dict(os.environ)
     env.update(
-        HAIRPORT_REDIS_URL=REDIS_URL, HAIRPORT_STORAGE_DIR=str(storage), HAIRPORT_API_KEYS=f"{KEY},{OTHER_KEY}",
+        HAIRPORT_REDIS_URL=redis_url, HAIRPORT_STORAGE_DIR=str(storage), HAIRPORT_API_KEYS=f"{KEY},{OTHER_KEY}",
         HAIRPORT_VISIBILITY_TIMEOUT=str(VISIBILITY_TIMEOUT), HAIRPORT_INSECURE_DEV="false",
     )
     return env
 
 
 @pytest.fixture(scope="module")
-def redis_client():
-    import redis
-
-    client = redis.Redis.from_url(REDIS_URL)
-    try:
-        client.ping()
-    except redis.RedisError as error:
-        pytest.fail(f"Redis is needed at {REDIS_URL} ({error}); .ci/run starts it")
-    client.flushdb()
-    yield client
-    client.flushdb()
-
-
-@pytest.fixture(scope="module")
-def service(tmp_path_factory, redis_client):
-    """Storage folder, settings, the app, and a started worker process."""
+def service(tmp_path_factory, redis_url):
+    """Storage folder, settings, the app, and a started worker process (the environment is
+    restored afterwards)."""
     storage = tmp_path_factory.mktemp("service-storage")
-    os.environ.update({k: v for k, v in _env(storage).items() if k.startswith("HAIRPORT_")})
+    with pytest.MonkeyPatch.context() as patch:
+        for name, value in _env(storage, redis_url).items():
+            if name.startswith("HAIRPORT_"):
+                patch.setenv(name, value)
+        yield from _service(storage, redis_url)
+
+
+def _service(storage: Path, redis_url: str):
     from hairport.settings import Settings, get_settings
 
     get_settings.cache_clear()
     from hairport.worker.app import celery_app
 
-    celery_app.conf.broker_url = REDIS_URL
+    celery_app.conf.broker_url = redis_url
     celery_app.conf.broker_transport_options = {"visibility_timeout": VISIBILITY_TIMEOUT}
     from fastapi.testclient import TestClient
 
@@ -74,7 +66,7 @@ def service(tmp_path_factory, redis_client):
         process = subprocess.Popen(
             [sys.executable, "-m", "hairport.cli", "worker", "--concurrency", "1", "--hostname", f"{name}@%h",
              "--loglevel", "WARNING"],
-            env=_env(storage), stdout=subprocess.DEVNULL, stderr=open(storage / f"{name}.log", "wb"),
+            env=_env(storage, redis_url), stdout=subprocess.DEVNULL, stderr=open(storage / f"{name}.log", "wb"),
             start_new_session=True,
         )
         workers.append((name, process))
@@ -97,6 +89,7 @@ def service(tmp_path_factory, redis_client):
             process.wait(timeout=20)
         except subprocess.TimeoutExpired:
             os.killpg(process.pid, signal.SIGKILL)
+    get_settings.cache_clear()
 
 
 @pytest.fixture(scope="module")
