@@ -9,37 +9,27 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from functools import cached_property
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.active_set import StrandSolveReport
-from hairport.solver.adaptation.coupled import QP_BACKENDS, solve_hairstyle
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
-from hairport.solver.adaptation.guides import DEFAULT_GUIDES
+from hairport.solver.adaptation.coupled import solve_hairstyle
+from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.multiscale import (
-    DEFAULT_CHUNK_PARTICLES,
-    FineSource,
-    MultiscaleModel,
     MultiscaleReport,
     build_multiscale_model,
-    coarse_shape_model,
     default_workers,
-    fine_source,
     solve_multiscale,
 )
-from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
-from hairport.solver.adaptation.options import Cancelled, SolveOptions
+from hairport.solver.adaptation.options import SolveOptions
 from hairport.solver.adaptation.osqp_backend import SolveReport
 from hairport.solver.artifact import FORMAT_VERSION, load_adaptable, save_adaptable
-from hairport.solver.baselines import BASELINE_METHODS, parse_method, retarget_baseline
-from hairport.solver.body.skeleton_transfer import ensure_skeleton
+from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
-from hairport.solver.hairline.curve import HairlineCurve, parse_hairline_curve, read_hairline_curve
-from hairport.solver.hairline.edit import RELOCATION_METHODS, HairlineEdit, hairline_edit, hairline_edit_from_request
-from hairport.solver.hairline.presets import PRESETS as HAIRLINE_PRESETS
+from hairport.solver.hairline.curve import HairlineCurve
+from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.hairline.presets import parse_preset
 from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
 from hairport.solver.hairline.weights import adaptive_weights
@@ -47,16 +37,15 @@ from hairport.solver.io.character import MESH_EXTENSIONS as CHARACTER_MESH_EXTEN
 from hairport.solver.io.character import load_character
 from hairport.solver.io.hair import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
 from hairport.solver.mesh.distance_grid import DistanceGrid
-from hairport.solver.mesh.parameterization import PARAMETERIZATIONS
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.triangles import interpolate_barycentric
 from hairport.solver.metrics import hairstyle_metrics
-from hairport.solver.model.character import Character, Skeleton, check_same_topology
+from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
-from hairport.solver.options import ENERGY_TOLERANCE, METHODS, SOLVER_METHODS, PreprocessOptions, RetargetOptions
-from hairport.solver.transfer.anchors import ANCHOR_SIGMA, Anchors, compute_anchors, place_anchors
-from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands, strand_laplacian
+from hairport.solver.options import PreprocessOptions, RetargetOptions
+from hairport.solver.transfer.anchors import compute_anchors, place_anchors
+from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
 
 ProgressFn = Callable[[str, float, str], None]
 

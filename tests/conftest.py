@@ -6,6 +6,7 @@ import shutil
 import socket
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
 
@@ -14,6 +15,17 @@ from hairport.solver.hairline.scalp import extract_scalp
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+TESTS = Path(__file__).parent
+#: test folders whose tests carry their own marker; everything else is a unit test
+MARKED_FOLDERS = ("integration", "quality")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test by its folder: ``-m unit``, ``-m integration`` and ``-m quality`` select them."""
+    for item in items:
+        parts = Path(item.fspath).resolve().relative_to(TESTS.resolve()).parts
+        item.add_marker(parts[0] if parts[0] in MARKED_FOLDERS else "unit")
 
 
 #: seconds the private Redis server may take to answer
