@@ -1,19 +1,21 @@
-"""The FastAPI application: routers, errors as problem+json, CORS, storage, readiness."""
+"""The FastAPI application: routers, errors as problem+json, CORS, storage, task queue, readiness."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
 from hairport import __version__
+from hairport.repository import Repository
 from hairport.settings import Settings, get_settings
-from hairport.worker import jobs
-from hairport.worker.app import celery_app
+from hairport.storage import LocalStorage
+from hairport.worker.queue import QUEUES, TaskQueue, connect
 
 from . import errors
 from .auth import check_configuration
-from .routers import characters, hairstyles, health, retargets
-from .routers import jobs as jobs_router
+from .routers import characters, hairstyles, health, jobs, retargets
 
 DESCRIPTION = """Retarget strand hairstyles between characters of one mesh topology.
 
@@ -22,9 +24,10 @@ results. Every error is `application/problem+json` with a stable `code`. Authent
 `Authorization: Bearer <key>` or `X-API-Key: <key>`; what a key creates is invisible to other keys.
 """
 
-
 #: multipart framing allowed on top of the upload limit (boundaries, part headers, small fields)
 MULTIPART_OVERHEAD_BYTES = 64 * 1024
+#: seconds a readiness check waits for Redis and for a worker's answer
+READY_TIMEOUT_SECONDS = 1.0
 
 
 class ContentLengthLimit:
@@ -46,15 +49,46 @@ class ContentLengthLimit:
         await self.app(scope, receive, send)
 
 
-def create_app(settings: Settings | None = None, readiness=None, queue_depths=None) -> FastAPI:
-    """The API. ``readiness``/``queue_depths`` default to checks against the Redis broker."""
+def redis_checks(redis_url: str, queue: TaskQueue) -> tuple[Callable[[], dict], Callable[[], dict]]:
+    """Readiness (Redis answers, a worker answers) and queue depths against a Redis broker."""
+    import redis
+
+    client = redis.Redis.from_url(redis_url, socket_timeout=READY_TIMEOUT_SECONDS,
+                                  socket_connect_timeout=READY_TIMEOUT_SECONDS)
+
+    def readiness() -> dict:
+        try:
+            redis_ok = bool(client.ping())
+        except redis.RedisError:
+            return {"redis": False, "worker": False}
+        try:
+            workers = queue.ping_workers(READY_TIMEOUT_SECONDS)
+        except Exception:  # noqa: BLE001 - any broker trouble means not ready
+            workers = []
+        return {"redis": redis_ok, "worker": bool(workers)}
+
+    def queue_depths() -> dict:
+        try:
+            return {name: int(client.llen(name)) for name in QUEUES}
+        except redis.RedisError:
+            return {}
+
+    return readiness, queue_depths
+
+
+def create_app(settings: Settings | None = None, readiness=None, queue_depths=None,
+               queue: TaskQueue | None = None) -> FastAPI:
+    """The API. ``queue`` defaults to the Celery app of the configured Redis; ``readiness`` and
+    ``queue_depths`` default to checks against that Redis."""
     settings = settings or get_settings()
     check_configuration(settings)
     app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION)
     app.state.settings = settings
-    app.state.storage = jobs.get_storage(settings)
+    app.state.storage = LocalStorage(settings.storage_dir.resolve())
+    app.state.repository = Repository(app.state.storage)
+    app.state.queue = queue or connect(settings.redis_url)
     if readiness is None or queue_depths is None:
-        redis_readiness, redis_depths = health.redis_checks(settings.redis_url, celery_app)
+        redis_readiness, redis_depths = redis_checks(settings.redis_url, app.state.queue)
         readiness, queue_depths = readiness or redis_readiness, queue_depths or redis_depths
     app.state.readiness = readiness
     app.state.queue_depths = queue_depths
@@ -63,6 +97,6 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     if settings.cors_origin_list:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origin_list, allow_methods=["*"],
                            allow_headers=["*"], expose_headers=["Location"])
-    for router in (characters.router, hairstyles.router, retargets.router, jobs_router.router, health.router):
+    for router in (characters.router, hairstyles.router, retargets.router, jobs.router, health.router):
         app.include_router(router)
     return app

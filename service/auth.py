@@ -11,11 +11,10 @@ import hashlib
 import hmac
 from typing import Annotated
 
-from fastapi import Depends, Header
+from fastapi import Depends, Header, Request
 
 from hairport.settings import Settings
 
-from .deps import SettingsDep
 from .errors import Problem
 
 DEV_OWNER = "dev"
@@ -26,11 +25,12 @@ def owner_of(key: str) -> str:
 
 
 def current_owner(
-    settings: SettingsDep,
+    request: Request,
     authorization: Annotated[str | None, Header()] = None,
     x_api_key: Annotated[str | None, Header()] = None,
 ) -> str:
     """The owner of the request's key; 401 without a valid one."""
+    settings: Settings = request.app.state.settings
     key = x_api_key
     if authorization:
         scheme, _, token = authorization.partition(" ")

@@ -1,4 +1,5 @@
-"""Dependencies shared by the routers (``Annotated`` aliases)."""
+"""Dependencies of the routes (``Annotated`` aliases): settings, storage, records, the task
+queue, the caller, and the caller's own characters, hairstyles and jobs (404 for anything else)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,18 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 
+from hairport.records import CharacterRecord, HairstyleRecord, JobRecord, Record
+from hairport.repository import Repository
 from hairport.settings import Settings
-from hairport.worker.storage import LocalStorage
+from hairport.storage import LocalStorage
+from hairport.worker.queue import TaskQueue
+
+from .auth import Owner
+from .errors import Problem
+
+#: longest id accepted in a path; anything else cannot exist
+MAX_ID_CHARS = 64
+HEX = frozenset("0123456789abcdef")
 
 
 def get_app_settings(request: Request) -> Settings:
@@ -18,16 +29,41 @@ def get_app_storage(request: Request) -> LocalStorage:
     return request.app.state.storage
 
 
+def get_repository(request: Request) -> Repository:
+    return request.app.state.repository
+
+
+def get_queue(request: Request) -> TaskQueue:
+    return request.app.state.queue
+
+
 SettingsDep = Annotated[Settings, Depends(get_app_settings)]
 StorageDep = Annotated[LocalStorage, Depends(get_app_storage)]
+RepositoryDep = Annotated[Repository, Depends(get_repository)]
+QueueDep = Annotated[TaskQueue, Depends(get_queue)]
 
 
-def owned_record(storage: LocalStorage, kind: str, owner: str, record_id: str, noun: str) -> dict:
+def owned(repository: Repository, model: type[Record], owner: str, record_id: str, noun: str):
     """The record if ``owner`` owns it; 404 otherwise (also for ids that cannot exist)."""
-    from .errors import Problem
-
-    is_id = 0 < len(record_id) <= 64 and all(c in "0123456789abcdef" for c in record_id)
-    record = storage.get_record(kind, record_id) if is_id else None
-    if record is None or record.get("owner") != owner:
+    is_id = 0 < len(record_id) <= MAX_ID_CHARS and set(record_id) <= HEX
+    record = repository.get(model, record_id) if is_id else None
+    if record is None or record.owner != owner:
         raise Problem(404, "not_found", f"no {noun} {record_id}")
     return record
+
+
+def owned_character(character_id: str, owner: Owner, repository: RepositoryDep) -> CharacterRecord:
+    return owned(repository, CharacterRecord, owner, character_id, "character")
+
+
+def owned_hairstyle(hairstyle_id: str, owner: Owner, repository: RepositoryDep) -> HairstyleRecord:
+    return owned(repository, HairstyleRecord, owner, hairstyle_id, "hairstyle")
+
+
+def owned_job(job_id: str, owner: Owner, repository: RepositoryDep) -> JobRecord:
+    return owned(repository, JobRecord, owner, job_id, "job")
+
+
+OwnedCharacter = Annotated[CharacterRecord, Depends(owned_character)]
+OwnedHairstyle = Annotated[HairstyleRecord, Depends(owned_hairstyle)]
+OwnedJob = Annotated[JobRecord, Depends(owned_job)]

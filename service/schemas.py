@@ -1,4 +1,8 @@
-"""Request and response bodies of the HTTP API."""
+"""Request and response bodies of the HTTP API.
+
+Choices and defaults are derived from the solver's and the records' own definitions (formats,
+units, methods, presets, options, job states), so the API cannot drift from what runs.
+"""
 
 from __future__ import annotations
 
@@ -6,18 +10,32 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from hairport.solver import pipeline
+from hairport import solver
+from hairport.records import (
+    SUCCEEDED,
+    CharacterRecord,
+    ErrorInfo,
+    HairstyleRecord,
+    JobRecord,
+    JobState,
+    PreprocessingState,
+)
 
-HairFormat = Literal["data", "hair", "ply", "npz", "obj"]
-JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
-HairlinePresetName = Literal[pipeline.HAIRLINE_PRESETS]
+HairFormat = Literal[solver.HAIR_FORMATS]
+Units = Literal[solver.UNITS]
+HairlinePresetName = Literal[solver.HAIRLINE_PRESETS]
+#: the hair format of a result unless the request names one
+DEFAULT_OUTPUT_FORMAT = "data"
 #: most points of a drawn hairline accepted in a request
 MAX_CURVE_POINTS = 10_000
+#: the most outer iterations a request may ask for
+MAX_ITERATIONS_LIMIT = 1000
+_RETARGET = solver.RetargetOptions()
+_PREPROCESS = solver.PreprocessOptions()
+_HAIRLINE = solver.HairlineEdit(preset=solver.HAIRLINE_PRESETS[0])
 
-
-class ErrorInfo(BaseModel):
-    code: str
-    message: str
+__all__ = ["CharacterOut", "ErrorInfo", "HairFormat", "HairlineIn", "HairstyleOut", "JobOut", "JobPage", "JobState",
+           "JobsCreated", "PreprocessingOut", "RetargetIn", "RetargetOptionsIn", "Units"]
 
 
 class CharacterOut(BaseModel):
@@ -31,9 +49,17 @@ class CharacterOut(BaseModel):
     skeleton_sha256: str | None = None
     created_at: float
 
+    @classmethod
+    def of(cls, record: CharacterRecord) -> CharacterOut:
+        return cls(
+            id=record.id, vertices=record.vertices, faces=record.faces, bones=record.bones,
+            has_skeleton=bool(record.bones), units=record.units or "m", sha256=record.mesh.sha256,
+            skeleton_sha256=record.skeleton.sha256 if record.skeleton else None, created_at=record.created_at,
+        )
+
 
 class PreprocessingOut(BaseModel):
-    state: Literal["queued", "running", "ready", "failed"]
+    state: PreprocessingState
     error: ErrorInfo | None = None
 
 
@@ -49,6 +75,14 @@ class HairstyleOut(BaseModel):
     preprocessing: PreprocessingOut
     created_at: float
 
+    @classmethod
+    def of(cls, record: HairstyleRecord, preprocessing: PreprocessingOut) -> HairstyleOut:
+        return cls(
+            id=record.id, source_character_id=record.source_character_id, strands=record.strands,
+            particles=record.particles, sha256=record.hair.sha256, format=record.format, units=record.units,
+            options=record.options.model_dump(), preprocessing=preprocessing, created_at=record.created_at,
+        )
+
 
 class RetargetOptionsIn(BaseModel):
     """Solver options (Table 1, meters). ``guides`` and ``k`` default to the hairstyle's; other
@@ -56,16 +90,16 @@ class RetargetOptionsIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    method: str = "multiscale"
+    method: str = _RETARGET.method
     guides: int | None = Field(None, ge=1, description="guide strands of the multi-scale solve")
     k: int | None = Field(None, ge=1, description="inter-strand neighbours per particle (Eq. 8)")
-    alpha: float = 3e3
-    beta: float = 1e3
-    eps_c: float = 5e-4
-    eps_s: float = 0.3
-    max_iterations: int = Field(30, ge=1, le=1000)
-    step_tolerance: float = 1e-5
-    qp_backend: Literal["active-set", "osqp"] = "active-set"
+    alpha: float = _RETARGET.alpha
+    beta: float = _RETARGET.beta
+    eps_c: float = _RETARGET.eps_c
+    eps_s: float = _RETARGET.eps_s
+    max_iterations: int = Field(_RETARGET.max_iterations, ge=1, le=MAX_ITERATIONS_LIMIT)
+    step_tolerance: float = _RETARGET.step_tolerance
+    qp_backend: Literal[solver.QP_BACKENDS] = _RETARGET.qp_backend
 
 
 class HairlineCurveIn(BaseModel):
@@ -73,7 +107,7 @@ class HairlineCurveIn(BaseModel):
     current one to start from)."""
 
     model_config = ConfigDict(extra="forbid")
-    units: Literal["m", "dm", "cm", "mm"] = "m"
+    units: Units = "m"
     points: list[list[float]] = Field(min_length=3, max_length=MAX_CURVE_POINTS,
                                       description="[x, y, z] points on the target's head")
     turning_points: list[int] = Field(default_factory=list, max_length=MAX_CURVE_POINTS,
@@ -85,11 +119,11 @@ class HairlineIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     preset: HairlinePresetName | None = None
-    amount: float = Field(1.0, ge=0.0, le=1.0, description="strength of the preset (0: no change)")
+    amount: float = Field(_HAIRLINE.amount, ge=0.0, le=1.0, description="strength of the preset (0: no change)")
     curve: HairlineCurveIn | None = None
-    method: Literal[pipeline.RELOCATION_METHODS] = Field(
-        "membrane", description="how the roots follow: the embedded membrane, or a Sec. 7.5 baseline")
-    parameterization: Literal[pipeline.PARAMETERIZATIONS] = "harmonic"
+    method: Literal[solver.RELOCATION_METHODS] = Field(
+        _HAIRLINE.method, description="how the roots follow: the embedded membrane, or a Sec. 7.5 baseline")
+    parameterization: Literal[solver.PARAMETERIZATIONS] = _HAIRLINE.parameterization
 
 
 class RetargetIn(BaseModel):
@@ -99,7 +133,7 @@ class RetargetIn(BaseModel):
     target_character_ids: list[str] = Field(min_length=1)
     options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
     hairline: HairlineIn | None = None
-    output_format: HairFormat = "data"
+    output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
 
 
 class JobOut(BaseModel):
@@ -121,6 +155,15 @@ class JobOut(BaseModel):
     metrics: dict | None = None
     error: ErrorInfo | None = None
     links: dict[str, str] = Field(default_factory=dict)
+
+    @classmethod
+    def of(cls, record: JobRecord) -> JobOut:
+        base = f"/v1/jobs/{record.id}"
+        links = {"self": base}
+        if record.state == SUCCEEDED:
+            links.update(result=f"{base}/result", preview=f"{base}/preview.png", report=f"{base}/report")
+        fields = {name: getattr(record, name) for name in cls.model_fields if name != "links"}
+        return cls(**fields, links=links)
 
 
 class JobsCreated(BaseModel):

@@ -1,4 +1,4 @@
-"""Streaming uploads into the storage, and validation through ``solver.pipeline``."""
+"""Streaming uploads into the storage, and validation of what they hold through the solver's readers."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import PurePosixPath
 from fastapi import UploadFile
 from starlette.concurrency import run_in_threadpool
 
+from hairport import solver
 from hairport.settings import Settings
-from hairport.solver import pipeline
-from hairport.worker.storage import LocalStorage, UploadTooLarge, iter_upload
+from hairport.storage import LocalStorage, UploadTooLarge, iter_upload
 
 from .errors import Problem
 
@@ -32,7 +32,7 @@ async def store_upload(storage: LocalStorage, upload: UploadFile, settings: Sett
                       f"{field}: upload larger than the limit of {error.limit:,} bytes") from None
 
 
-def input_problem(error: pipeline.InputError, field: str) -> Problem:
+def input_problem(error: solver.InputError, field: str) -> Problem:
     """413 for inputs above the configured limits, 422 for every other bad input.
 
     The detail names the request field, never a storage path."""
@@ -44,5 +44,11 @@ async def validated(call, field: str, *args, **kwargs):
     """Run a loader in a thread; bad input becomes a problem response."""
     try:
         return await run_in_threadpool(call, *args, **kwargs)
-    except pipeline.InputError as error:
+    except solver.InputError as error:
         raise input_problem(error, field) from None
+
+
+def check_units(units: str | None) -> None:
+    """422 ``bad_units`` for units the readers do not know (``None``: the file's or meters)."""
+    if units is not None and units not in solver.UNITS:
+        raise Problem(422, "bad_units", f"units must be one of {', '.join(solver.UNITS)}")

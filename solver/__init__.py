@@ -1,1 +1,86 @@
-"""The numerical core of hairport: pure functions over numpy arrays (no web, no queue)."""
+"""hairport's numerical core: retarget a strand hairstyle to another body of the same topology.
+
+This module is the public face of the solver: the command line, the worker, the service and
+the benchmarks import from here and from nowhere else in ``hairport.solver`` (the fixtures of
+:mod:`hairport.solver.synthetic` and the pictures of :mod:`hairport.solver.render` are their
+own sub-packages). The folder ``solver/`` is installed as ``hairport.solver``.
+
+The stages (paper sections): :func:`preprocess` (source only: anchors Eq. 2, guides and
+neighbours Eq. 8-9/14) gives an :class:`AdaptableHairstyle`; :func:`retarget` adapts it to a
+target (initial transfer Eq. 3-6, optional hairline edit Sec. 6, shape adaptation Eq. 1 by
+the multi-scale solve Sec. 5, or a baseline) and measures the result.
+
+Names are loaded on first use (PEP 562 module ``__getattr__``): importing a single solver
+module, or starting the command line, does not pull in the whole numerical stack.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+#: public name -> (module, name in that module)
+_EXPORTS = {
+    "ARTIFACT_EXTENSION": ("hairport.solver.artifact", "EXTENSION"),
+    "ARTIFACT_FORMAT_VERSION": ("hairport.solver.artifact", "FORMAT_VERSION"),
+    "AdaptableHairstyle": ("hairport.solver.adaptable", "AdaptableHairstyle"),
+    "BASELINE_METHODS": ("hairport.solver.baselines", "BASELINE_METHODS"),
+    "Cancelled": ("hairport.solver.adaptation.options", "Cancelled"),
+    "Character": ("hairport.solver.model.character", "Character"),
+    "DEFAULT_GUIDES": ("hairport.solver.adaptation.guides", "DEFAULT_GUIDES"),
+    "FILE_MODE": ("hairport.solver.model.files", "FILE_MODE"),
+    "HAIRLINE_PRESETS": ("hairport.solver.hairline.presets", "PRESETS"),
+    "HAIR_FORMATS": ("hairport.solver.io.hair", "SUPPORTED_FORMATS"),
+    "Hair": ("hairport.solver.model.hair", "Hair"),
+    "HairlineEdit": ("hairport.solver.hairline.edit", "HairlineEdit"),
+    "InputError": ("hairport.solver.model.errors", "InputError"),
+    "MESH_EXTENSIONS": ("hairport.solver.io.character", "MESH_EXTENSIONS"),
+    "METERS_PER_UNIT": ("hairport.solver.model.units", "METERS_PER_UNIT"),
+    "METHODS": ("hairport.solver.options", "METHODS"),
+    "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
+    "PreprocessOptions": ("hairport.solver.options", "PreprocessOptions"),
+    "ProgressFn": ("hairport.solver.model.progress", "ProgressFn"),
+    "QP_BACKENDS": ("hairport.solver.adaptation.coupled", "QP_BACKENDS"),
+    "RELOCATION_METHODS": ("hairport.solver.hairline.edit", "RELOCATION_METHODS"),
+    "ReadLimits": ("hairport.solver.io.hair", "ReadLimits"),
+    "RetargetOptions": ("hairport.solver.options", "RetargetOptions"),
+    "RetargetResult": ("hairport.solver.pipeline", "RetargetResult"),
+    "SOLVER_METHODS": ("hairport.solver.options", "SOLVER_METHODS"),
+    "Skeleton": ("hairport.solver.model.character", "Skeleton"),
+    "TEMP_SUFFIX": ("hairport.solver.model.files", "TEMP_SUFFIX"),
+    "UNITS": ("hairport.solver.model.units", "UNITS"),
+    "TopologyMismatch": ("hairport.solver.model.errors", "TopologyMismatch"),
+    "atomic_write": ("hairport.solver.model.files", "atomic_write"),
+    "atomic_write_bytes": ("hairport.solver.model.files", "atomic_write_bytes"),
+    "format_for_path": ("hairport.solver.io.hair", "format_for_path"),
+    "fsync_folder": ("hairport.solver.model.files", "fsync_folder"),
+    "hairline_document": ("hairport.solver.pipeline", "hairline_document"),
+    "hairline_edit": ("hairport.solver.hairline.edit", "hairline_edit"),
+    "hairline_edit_from_request": ("hairport.solver.hairline.edit", "hairline_edit_from_request"),
+    "load_adaptable": ("hairport.solver.artifact", "load_adaptable"),
+    "load_character": ("hairport.solver.io.character", "load_character"),
+    "no_progress": ("hairport.solver.model.progress", "no_progress"),
+    "penetrating_mask": ("hairport.solver.pipeline", "penetrating_mask"),
+    "preprocess": ("hairport.solver.pipeline", "preprocess"),
+    "read_hair": ("hairport.solver.io.hair", "read_hair"),
+    "rescaled": ("hairport.solver.model.progress", "rescaled"),
+    "resolve_skeleton_path": ("hairport.solver.io.character", "resolve_skeleton_path"),
+    "retarget": ("hairport.solver.pipeline", "retarget"),
+    "save_adaptable": ("hairport.solver.artifact", "save_adaptable"),
+    "unit_scale": ("hairport.solver.model.units", "unit_scale"),
+    "write_hair": ("hairport.solver.io.hair", "write_hair"),
+}
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    try:
+        module, attribute = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

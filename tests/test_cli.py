@@ -27,8 +27,8 @@ import pytest
 
 from hairport import cli
 from hairport.settings import get_settings
+from hairport import solver
 from hairport.solver import pipeline
-from hairport.solver.io import character as characterio
 from hairport.solver.io.character import load_character
 from hairport.solver.io.hair import read_hair, write_hair
 from hairport.solver.model.errors import InputError
@@ -269,7 +269,7 @@ def test_skeleton_with_unknown_parent(capsys, world, out, tmp_path):
 
 
 def test_unknown_output_format_refused_before_any_work(capsys, world, out, monkeypatch):
-    loads = call_log(monkeypatch, characterio, "load_character")
+    loads = call_log(monkeypatch, solver, "load_character")
     args = retarget_args(world, out, quiet=False, all_outputs=False)
     args[args.index("--out") + 1] = str(out / "result.foo")
     code, _, err = run(capsys, args)
@@ -282,7 +282,7 @@ def test_unknown_output_format_refused_before_any_work(capsys, world, out, monke
 def test_unknown_hair_format_refused_before_any_work(capsys, world, out, tmp_path, monkeypatch):
     hair = tmp_path / "hair.xyz"
     shutil.copy(world["dir"] / "hair.data", hair)
-    loads = call_log(monkeypatch, characterio, "load_character")
+    loads = call_log(monkeypatch, solver, "load_character")
     code, _, err = run(capsys, retarget_args(world, out, hair=hair, quiet=False))
     assert code == 2, err
     assert loads == [], "characters were loaded before the hair format was checked"
@@ -307,10 +307,10 @@ def test_missing_input_file(capsys, world, out, tmp_path, which):
 
 @pytest.mark.parametrize("method", ["warp-drive", "global+pushout", "root-translate+pullin", ""])
 def test_bad_method_lists_valid_methods(capsys, world, out, monkeypatch, method):
-    preprocessed = call_log(monkeypatch, pipeline, "preprocess")
+    preprocessed = call_log(monkeypatch, solver, "preprocess")
     code, _, err = run(capsys, retarget_args(world, out, method=method))
     line = assert_input_error(code, err, f"unknown method {method!r}", "+pushout")
-    for name in pipeline.METHODS:
+    for name in solver.METHODS:
         assert name in line, f"{name!r} not listed in {line!r}"
     assert preprocessed == [], "the method was checked only after preprocessing"
     assert_nothing_written(out)
@@ -624,7 +624,7 @@ def test_bad_hairline_curves_are_one_line_errors(capsys, human_world, out, tmp_p
 
 
 def test_bad_hairline_presets_are_refused_before_any_work(capsys, human_world, out, monkeypatch):
-    calls = call_log(monkeypatch, pipeline, "retarget")
+    calls = call_log(monkeypatch, solver, "retarget")
     code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "mohawk"))
     assert_input_error(code, err, "unknown hairline preset", "widows-peak")
     code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round:2"))

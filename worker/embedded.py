@@ -8,17 +8,18 @@ from __future__ import annotations
 
 import threading
 
-from .app import MEMORY_BROKER, QUEUES, celery_app
+from celery import Celery
+
+from .app import MEMORY_BROKER, QUEUES, celery_for
 
 
-def start_embedded_worker() -> threading.Thread:
-    """Point the Celery app at the in-memory transport and consume every queue in a thread."""
-    celery_app.conf.broker_url = MEMORY_BROKER
-    celery_app.conf.broker_transport_options = {}
-    controller = celery_app.WorkController(
+def start_embedded_worker() -> tuple[Celery, threading.Thread]:
+    """Consume every queue of the in-memory transport in a thread; the app to send tasks with, and the thread."""
+    app = celery_for(MEMORY_BROKER)
+    controller = app.WorkController(
         pool_cls="solo", concurrency=1, queues=list(QUEUES), without_heartbeat=True, without_mingle=True,
         without_gossip=True, hostname="hairport-embedded@localhost",
     )
     thread = threading.Thread(target=controller.start, name="hairport-embedded-worker", daemon=True)
     thread.start()
-    return thread
+    return app, thread

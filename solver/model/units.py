@@ -5,6 +5,8 @@ from __future__ import annotations
 from hairport.solver.model.errors import InputError
 
 METERS_PER_UNIT: dict[str, float] = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001}
+#: the length units files may be in
+UNITS: tuple[str, ...] = tuple(METERS_PER_UNIT)
 
 
 def unit_scale(units: str) -> float:

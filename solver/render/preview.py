@@ -23,8 +23,10 @@ from typing import Sequence
 import numpy as np
 from PIL import Image, ImageDraw
 
+from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.model.character import Character
 from hairport.solver.model.hair import Hair, particle_indices
+from hairport.solver.pipeline import RetargetResult, penetrating_mask
 
 #: panel size of one view in pixels (width, height)
 VIEW_SIZE_PX = (360, 480)
@@ -258,3 +260,13 @@ def _draw_strands(pil, hair: Hair, view, centre, scale, width, height, face_id, 
     flat = pixel.tolist()
     for first, last, color in zip(run_first.tolist(), run_last.tolist(), run_color):
         draw.line([tuple(q) for q in flat[first : last + 1]], fill=color, width=1)
+
+
+def write_result_preview(path: str | Path, adaptable: AdaptableHairstyle, result: RetargetResult,
+                         target: Character) -> None:
+    """PNG of a retarget: the source hairstyle on the source next to the result on the target, with
+    the result's particles inside the target in red."""
+    render_preview(path, [
+        (adaptable.hair, adaptable.source, None, "source"),
+        (result.hair, target, penetrating_mask(result.hair, target), f"result ({result.metrics['method']})"),
+    ])

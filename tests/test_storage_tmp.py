@@ -8,7 +8,7 @@ import tracemalloc
 
 import pytest
 
-from hairport.worker.storage import (
+from hairport.storage import (
     UPLOAD_CHUNK_BYTES,
     Blob,
     LocalStorage,

@@ -13,7 +13,11 @@ import sys
 import time
 from pathlib import Path
 
-from .outputs import OutputSet
+from hairport import solver
+from hairport.outputs import OutputSet
+from hairport.solver import InputError
+
+from .common import StageProgress
 
 #: metrics printed side by side, with their labels and formats
 TABLE_ROWS = (
@@ -28,15 +32,26 @@ TABLE_ROWS = (
 )
 
 
+def add_demo(sub) -> None:
+    p = sub.add_parser("demo", help="build two MakeHuman characters and a groom, retarget, write results")
+    p.add_argument("--out", default="hairport-demo", help="output folder (default ./hairport-demo)")
+    p.add_argument("--style", default="fringe", help="groom style: short, long, wavy, curly, fringe")
+    p.add_argument("--strands", type=int, default=200)
+    p.add_argument("--particles", type=int, default=20, help="particles per strand")
+    p.add_argument("--source-preset", default="average-female")
+    p.add_argument("--target-preset", default="heavy-male")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--hairline", default="widows-peak:0.7",
+                   help="also retarget with this hairline edit, PRESET[:AMOUNT] ('none' to skip)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(run=run_demo)
+
+
 def run_demo(args: argparse.Namespace) -> int:
-    from hairport.solver import pipeline
-    from hairport.solver.baselines import BASELINE_METHODS
-    from hairport.solver.io.hair import write_hair
+    # the fixtures and Pillow: loaded when the demo runs, not when the command line starts
     from hairport.solver.render.preview import render_preview
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character, write_character
-
-    from .cli import StageProgress
 
     progress = StageProgress(args.quiet)
     began = time.perf_counter()
@@ -44,26 +59,24 @@ def run_demo(args: argparse.Namespace) -> int:
     progress("characters", 0.0, f"building MakeHuman characters {args.source_preset!r} -> {args.target_preset!r}")
     for preset in (args.source_preset, args.target_preset):
         if preset not in PRESETS:
-            from hairport.solver.model.errors import InputError
-
             raise InputError(f"unknown preset {preset!r}; expected one of {', '.join(PRESETS)}", code="unknown_preset")
     source = build_character(PRESETS[args.source_preset])
     target = build_character(PRESETS[args.target_preset])
     progress("groom", 0.0, f"growing a {args.style} groom: {args.strands} strands x {args.particles} particles")
     hair = generate_groom(source, args.style, args.strands, args.particles, seed=args.seed)
 
-    adaptable = pipeline.preprocess(source, hair, progress=progress)
-    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(), progress=progress)
+    adaptable = solver.preprocess(source, hair, progress=progress)
+    result = solver.retarget(adaptable, target, solver.RetargetOptions(), progress=progress)
     edited = None
     if args.hairline != "none":
-        edit = pipeline.hairline_edit(preset=args.hairline)
-        edited = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(hairline=edit), progress=progress)
+        edit = solver.hairline_edit(preset=args.hairline)
+        edited = solver.retarget(adaptable, target, solver.RetargetOptions(hairline=edit), progress=progress)
 
     progress("baselines", 0.0, "running the baselines for comparison")
     baselines = {}
-    for name in BASELINE_METHODS:
+    for name in solver.BASELINE_METHODS:
         for method in (name, f"{name}+pushout"):
-            baselines[method] = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=method))
+            baselines[method] = solver.retarget(adaptable, target, solver.RetargetOptions(method=method))
     admissible = {m: r for m, r in baselines.items() if r.metrics["penetrating_particles"] == 0}
     pool = admissible or baselines
     best_name = min(pool, key=lambda m: pool[m].metrics["energy_total_per_particle"])
@@ -81,19 +94,19 @@ def run_demo(args: argparse.Namespace) -> int:
         # the character writer writes its own files atomically
         write_character(source, out / "source.obj", out / "source.skeleton.json")
         write_character(target, out / "target.obj", out / "target.skeleton.json")
-        outputs.add(out / "source_hair.hair", lambda p: write_hair(p, hair, format="hair"))
-        outputs.add(out / "result_hair.hair", lambda p: write_hair(p, result.hair, format="hair"))
+        outputs.add(out / "source_hair.hair", lambda p: solver.write_hair(p, hair, format="hair"))
+        outputs.add(out / "result_hair.hair", lambda p: solver.write_hair(p, result.hair, format="hair"))
         outputs.add(out / f"baseline_{best_name.replace('+', '_')}.hair",
-                    lambda p: write_hair(p, best.hair, format="hair"))
+                    lambda p: solver.write_hair(p, best.hair, format="hair"))
         panels = [
             (hair, source, None, f"source ({args.source_preset})"),
-            (result.hair, target, pipeline.penetrating_mask(result.hair, target), f"hairport ({result.metrics['method']})"),
-            (best.hair, target, pipeline.penetrating_mask(best.hair, target), f"best baseline: {best_name}"),
+            (result.hair, target, solver.penetrating_mask(result.hair, target), f"hairport ({result.metrics['method']})"),
+            (best.hair, target, solver.penetrating_mask(best.hair, target), f"best baseline: {best_name}"),
         ]
         if edited is not None:
             name = args.hairline.replace(":", "_")
-            outputs.add(out / f"result_hairline_{name}.hair", lambda p: write_hair(p, edited.hair, format="hair"))
-            panels.append((edited.hair, target, pipeline.penetrating_mask(edited.hair, target),
+            outputs.add(out / f"result_hairline_{name}.hair", lambda p: solver.write_hair(p, edited.hair, format="hair"))
+            panels.append((edited.hair, target, solver.penetrating_mask(edited.hair, target),
                            f"hairline {args.hairline}"))
         outputs.add_json(out / "report.json", report)
         outputs.add(out / "preview.png", lambda p: render_preview(p, panels))

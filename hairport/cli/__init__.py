@@ -1,0 +1,53 @@
+"""The ``hairport`` command line: the parser and ``main``.
+
+Commands live by topic: :mod:`.solve` (preprocess, retarget, hairline), :mod:`.demo`, and
+:mod:`.ops` (serve, worker, purge, openapi, assets). They import the solver, the service and
+the worker inside their functions on purpose: ``hairport --help`` and the light commands then
+start without loading the numerical stack or the web framework.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from hairport.solver import InputError
+
+from . import demo, ops, solve
+from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress
+
+__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "StageProgress", "build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="hairport", description="Retarget strand hairstyles between characters.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    solve.add_preprocess(sub)
+    solve.add_retarget(sub)
+    demo.add_demo(sub)
+    ops.add_assets(sub)
+    ops.add_serve(sub)
+    ops.add_worker(sub)
+    ops.add_purge(sub)
+    ops.add_openapi(sub)
+    solve.add_hairline(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except InputError as error:
+        print(f"hairport: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except FileNotFoundError as error:
+        print(f"hairport: error: {error.filename or error}: file not found", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:
+        print(f"hairport: error: {error.filename or 'output'}: {error.strerror or error}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print("hairport: interrupted", file=sys.stderr)
+        return 130

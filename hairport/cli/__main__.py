@@ -1,0 +1,7 @@
+"""``python -m hairport.cli``."""
+
+import sys
+
+from hairport.cli import main
+
+sys.exit(main())

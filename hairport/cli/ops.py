@@ -1,0 +1,128 @@
+"""Operations commands: ``serve``, ``worker``, ``purge``, ``openapi`` and ``assets fetch``.
+
+The web framework, Celery and the asset downloader are imported inside the commands that
+use them, so that the other commands start without them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from hairport.outputs import OutputSet
+from hairport.settings import Settings, get_settings
+
+from .common import EXIT_BAD_INPUT
+
+
+def add_assets(sub) -> None:
+    p = sub.add_parser("assets", help="manage the downloaded MakeHuman assets")
+    asub = p.add_subparsers(dest="assets_command", required=True)
+    f = asub.add_parser("fetch", help="download (once) and cache the CC0 MakeHuman assets")
+    f.add_argument("--cache-dir", help="cache folder (default: $HAIRPORT_CACHE_DIR or ~/.cache/hairport)")
+    f.set_defaults(run=cmd_assets_fetch)
+
+
+def cmd_assets_fetch(args: argparse.Namespace) -> int:
+    from hairport.solver.synthetic.assets import fetch_makehuman_assets
+
+    path = fetch_makehuman_assets(Path(args.cache_dir) if args.cache_dir else None)
+    print(path)
+    return 0
+
+
+def add_serve(sub) -> None:
+    p = sub.add_parser("serve", help="run the HTTP API (uvicorn)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000)
+    p.add_argument("--embedded", action="store_true",
+                   help="run a worker inside the server on an in-memory queue (no Redis; for a laptop)")
+    p.set_defaults(run=cmd_serve)
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from hairport.service.app import create_app
+    from hairport.service.auth import check_configuration
+    from hairport.worker.queue import TaskQueue
+
+    try:
+        check_configuration(get_settings())
+    except RuntimeError as error:
+        print(f"hairport: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.embedded:
+        from hairport.worker.embedded import start_embedded_worker
+
+        celery, thread = start_embedded_worker()
+        app = create_app(readiness=lambda: {"redis": True, "worker": thread.is_alive()}, queue_depths=lambda: {},
+                         queue=TaskQueue(celery))
+    else:
+        app = create_app()
+    uvicorn.run(app, host=args.host, port=args.port)
+    return 0
+
+
+def add_worker(sub) -> None:
+    p = sub.add_parser("worker", help="run a Celery worker against HAIRPORT_REDIS_URL")
+    p.add_argument("--queues", default="preprocess,retarget", help="comma-separated queues to consume")
+    p.add_argument("--concurrency", type=int, default=1, help="jobs run at once (processes)")
+    p.add_argument("--loglevel", default="INFO")
+    p.add_argument("--hostname", default="hairport@%h", help="worker name (%%h: host name)")
+    p.set_defaults(run=cmd_worker)
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    from hairport.worker.app import configured_celery
+
+    configured_celery().worker_main(["worker", "-Q", args.queues, "-c", str(args.concurrency), "--loglevel", args.loglevel,
+                              "-n", args.hostname])
+    return 0
+
+
+def add_purge(sub) -> None:
+    p = sub.add_parser("purge", help="delete stored files and records older than HAIRPORT_RETENTION_DAYS")
+    p.set_defaults(run=cmd_purge)
+
+
+def cmd_purge(args: argparse.Namespace) -> int:
+    from hairport.repository import Repository
+    from hairport.storage import LocalStorage, retention_seconds
+
+    settings = get_settings()
+    removed = Repository(LocalStorage(settings.storage_dir)).purge(retention_seconds(settings.retention_days))
+    print(f"removed {removed} files older than {settings.retention_days:g} days from {settings.storage_dir}")
+    return 0
+
+
+def add_openapi(sub) -> None:
+    p = sub.add_parser("openapi", help="print or write the OpenAPI contract of the HTTP API (YAML)")
+    p.add_argument("--out", help="write here instead of standard output")
+    p.set_defaults(run=cmd_openapi)
+
+
+def openapi_yaml() -> str:
+    """The API's OpenAPI document as YAML (what openapi.yaml holds)."""
+    import tempfile
+
+    import yaml
+
+    from hairport.service.app import create_app
+
+    with tempfile.TemporaryDirectory(prefix="hairport-openapi-") as storage:  # the app needs a storage folder
+        app = create_app(Settings(insecure_dev=True, storage_dir=storage), readiness=lambda: {},
+                         queue_depths=lambda: {})
+        return yaml.safe_dump(app.openapi(), sort_keys=False, allow_unicode=True)
+
+
+def cmd_openapi(args: argparse.Namespace) -> int:
+    text = openapi_yaml()
+    if args.out:
+        with OutputSet() as outputs:
+            outputs.add(args.out, lambda path: path.write_text(text))
+            outputs.commit()
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -1,0 +1,166 @@
+"""``hairport preprocess``, ``hairport retarget`` and ``hairport hairline``: the solver on files."""
+
+from __future__ import annotations
+
+import argparse
+
+from hairport import solver
+from hairport.outputs import OutputSet
+from hairport.settings import get_settings
+from hairport.solver import InputError
+
+from .common import (
+    StageProgress,
+    adaptable_from_args,
+    add_source_arguments,
+    add_units,
+    check_source_arguments,
+    load_source,
+    load_target,
+    preprocess_options,
+)
+
+_DEFAULTS = solver.RetargetOptions()
+
+
+def add_preprocess(sub) -> None:
+    p = sub.add_parser("preprocess", help="compute the adaptable hairstyle of a source groom once (.hpa)")
+    add_source_arguments(p, required=True)
+    p.add_argument("--out", required=True, help=f"artifact file to write (extension {solver.ARTIFACT_EXTENSION})")
+    add_units(p)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(run=cmd_preprocess)
+
+
+def add_retarget(sub) -> None:
+    p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
+    p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
+    add_source_arguments(p, required=False)
+    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
+    p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
+    p.add_argument("--method", default=_DEFAULTS.method,
+                   help=f"one of {', '.join(solver.METHODS)}; baselines accept the suffix +pushout "
+                        f"(default: {_DEFAULTS.method})")
+    p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
+    p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
+    add_units(p)
+    p.add_argument("--alpha", type=float, default=_DEFAULTS.alpha, help="inter-strand weight (Eq. 1)")
+    p.add_argument("--beta", type=float, default=_DEFAULTS.beta, help="hair-body weight (Eq. 1)")
+    p.add_argument("--eps-c", type=float, default=_DEFAULTS.eps_c, help="clearance to the body in meters (Eq. 13)")
+    p.add_argument("--max-iterations", type=int, default=_DEFAULTS.max_iterations, help="cap on outer solver iterations")
+    p.add_argument("--workers", type=int, default=None, help="processes for the multi-scale fine level (default: CPUs)")
+    p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver.QP_BACKENDS,
+                   help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
+    add_hairline_arguments(p)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(run=cmd_retarget)
+
+
+def add_hairline_arguments(p: argparse.ArgumentParser) -> None:
+    edit = p.add_mutually_exclusive_group()
+    edit.add_argument("--hairline", metavar="PRESET[:AMOUNT]",
+                      help=f"edit the front hairline: one of {', '.join(solver.HAIRLINE_PRESETS)}, "
+                           "amount in [0, 1] (default 1)")
+    edit.add_argument("--hairline-curve", metavar="FILE.json",
+                      help='edit the front hairline to a drawn curve: {"units": "m", "points": [[x, y, z], ...], '
+                           '"turning_points": [i, ...]} (see `hairport hairline`)')
+    p.add_argument("--hairline-method", default=solver.HairlineEdit.method, choices=solver.RELOCATION_METHODS,
+                   help="how the roots follow the hairline: the embedded membrane (default) or a baseline")
+    p.add_argument("--parameterization", default=solver.HairlineEdit.parameterization,
+                   choices=solver.PARAMETERIZATIONS,
+                   help=f"head parameterization the scalp moves in (default {solver.HairlineEdit.parameterization})")
+
+
+def add_hairline(sub) -> None:
+    p = sub.add_parser("hairline", help="write a target's current front hairline (or a preset's edit) as curve JSON")
+    p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
+    add_source_arguments(p, required=False)
+    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--target-skeleton", help="skeleton JSON of the target")
+    p.add_argument("--preset", metavar="PRESET[:AMOUNT]", help="write this preset's edit instead of the current hairline")
+    p.add_argument("--out", required=True, help="curve JSON to write")
+    add_units(p)
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(run=cmd_hairline)
+
+
+def hairline_edit(args: argparse.Namespace) -> solver.HairlineEdit | None:
+    if args.hairline is None and args.hairline_curve is None:
+        return None
+    return solver.hairline_edit(preset=args.hairline, curve_path=args.hairline_curve,
+                                method=args.hairline_method, parameterization=args.parameterization)
+
+
+def cmd_preprocess(args: argparse.Namespace) -> int:
+    settings = get_settings()
+    progress = StageProgress(args.quiet)
+    if not args.out.endswith(solver.ARTIFACT_EXTENSION):
+        raise InputError(f"the artifact file must end in {solver.ARTIFACT_EXTENSION}", args.out, "unknown_format")
+    solver.format_for_path(args.hair)
+    options = preprocess_options(args)
+    source, hair = load_source(args, settings, progress)
+    adaptable = solver.preprocess(source, hair, options, progress=progress)
+    with OutputSet() as outputs:
+        outputs.add(args.out, lambda path: solver.save_adaptable(adaptable, path))
+        outputs.commit()
+    print(f"{args.out}: {hair.n_strands} strands, {hair.n_particles} particles, "
+          f"{len(adaptable.multiscale.guides)} guides")
+    return 0
+
+
+def cmd_retarget(args: argparse.Namespace) -> int:
+    from hairport.solver.render.preview import write_result_preview  # Pillow: only when a preview is asked for
+
+    settings = get_settings()
+    progress = StageProgress(args.quiet)
+    units = args.units or "m"
+    check_source_arguments(args)
+    out_format = solver.format_for_path(args.out)  # refuse unknown formats and options before any work
+    if args.hair:
+        solver.format_for_path(args.hair)
+    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
+                                     max_iterations=args.max_iterations, workers=args.workers,
+                                     qp_backend=args.qp_backend, hairline=hairline_edit(args))
+    options.validate()
+    adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)
+    inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
+    target = load_target(args, settings)
+    result = solver.retarget(adaptable, target, options, progress=progress)
+    hair = adaptable.hair
+    report = result.report()
+    report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
+    report["inputs"] = {**inputs, "target": args.target, "strands": hair.n_strands, "particles": hair.n_particles,
+                        "guides": len(adaptable.multiscale.guides), "units": units}
+    with OutputSet() as outputs:
+        outputs.add(args.out, lambda path: solver.write_hair(path, result.hair, units=units, format=out_format))
+        if args.report:
+            outputs.add_json(args.report, report)
+        if args.preview:
+            outputs.add(args.preview, lambda path: write_result_preview(path, adaptable, result, target))
+        written = outputs.commit()
+    m = result.metrics
+    progress("done", 1.0, f"wrote {', '.join(str(p) for p in written)}")
+    print(f"penetrating particles {m['penetrating_particles']}, mean segment angle "
+          f"{m['mean_segment_angle_rad']:.4f} rad, inter-strand error {m['interstrand_error_m']:.2e} m, "
+          f"max root error {m['root_to_target_max']:.1e} m")
+    if "hairline" in m:
+        h = m["hairline"]
+        print(f"hairline {h['edit']} ({h['method']}): {h['roots_moved']} roots moved (largest "
+              f"{100 * h['max_travel_m']:.2f} cm), density change L1 {h['density_change_l1']:.3f} "
+              f"Linf {h['density_change_linf']:.3f}, relocation {h['seconds']:.2f} s")
+    return 0
+
+
+def cmd_hairline(args: argparse.Namespace) -> int:
+    settings = get_settings()
+    progress = StageProgress(args.quiet)
+    adaptable, _ = adaptable_from_args(args, settings, progress)
+    target = load_target(args, settings)
+    document = solver.hairline_document(adaptable, target, args.preset)
+    with OutputSet() as outputs:
+        outputs.add_json(args.out, document)
+        outputs.commit()
+    print(f"{args.out}: front hairline of {len(document['points'])} points, turning points "
+          f"{document['turning_points']}")
+    return 0

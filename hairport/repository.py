@@ -1,0 +1,221 @@
+"""Typed access to the records in the shared storage, the job index, and preprocessing claims.
+
+The API and the worker read and write records only through :class:`Repository`, which turns
+storage documents into :mod:`hairport.records` models and back, keeps the job index in step
+with the job records, and decides who runs a hairstyle's preprocessing.
+
+The job index (one empty file per job, ``index/jobs/<owner>/<created>-<job id>.<state>``) is
+renamed under the job record's lock whenever the state changes, so listing an owner's jobs
+(newest first, optionally by state, with a total) reads only the directory and the records of
+the page asked for.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import TypeVar
+
+from hairport.records import (
+    FAILED,
+    JOB_STATES,
+    QUEUED,
+    READY,
+    RUNNING,
+    ArtifactRecord,
+    CharacterRecord,
+    ErrorInfo,
+    HairstyleRecord,
+    JobRecord,
+    PreprocessingRecord,
+    PreprocessSettings,
+    PurgeClock,
+    Record,
+    artifact_key,
+    now,
+)
+from hairport.storage import LocalStorage
+
+R = TypeVar("R", bound=Record)
+
+JOB_INDEX = "jobs"
+#: digits of the microsecond creation time that starts a job's index key (sorts until year 5138)
+INDEX_TIME_DIGITS = 17
+PURGE_CLOCK_ID = "purge"
+
+
+def job_index_key(job: JobRecord) -> str:
+    """The job's index key: its creation time (µs, zero-padded) then its id, so that names sort by age."""
+    return f"{round(job.created_at * 1e6):0{INDEX_TIME_DIGITS}d}-{job.id}"
+
+
+class Repository:
+    """Typed records over a :class:`hairport.storage.LocalStorage`."""
+
+    def __init__(self, storage: LocalStorage):
+        self.storage = storage
+
+    # ---------------------------------------------------------------- any record
+
+    def get(self, model: type[R], record_id: str) -> R | None:
+        document = self.storage.get_record(model.KIND, record_id)
+        return None if document is None else model.model_validate(document)
+
+    def exists(self, model: type[Record], record_id: str) -> bool:
+        return self.storage.has_record(model.KIND, record_id)
+
+    def put(self, record: Record, record_id: str) -> None:
+        self.storage.put_record(record.KIND, record_id, record.model_dump(mode="json"))
+
+    def update(self, model: type[R], record_id: str, change: Callable[[R], R | None]) -> R | None:
+        """Read-modify-write under the record's lock; ``change`` returns the new record or None (no write)."""
+
+        def apply(document: dict) -> dict | None:
+            new = change(model.model_validate(document))
+            return None if new is None else new.model_dump(mode="json")
+
+        document = self.storage.update_record(model.KIND, record_id, apply)
+        return None if document is None else model.model_validate(document)
+
+    # ---------------------------------------------------------------- jobs
+
+    def create_job(self, job: JobRecord) -> None:
+        """Store a new job and its index entry."""
+        self.storage.put_record(job.KIND, job.id, job.model_dump(mode="json"), written=self._reindex)
+
+    def job(self, job_id: str) -> JobRecord | None:
+        return self.get(JobRecord, job_id)
+
+    def change_job(self, job_id: str, change: Callable[[JobRecord], JobRecord | None]) -> JobRecord | None:
+        """Read-modify-write of a job under its lock (``updated_at`` set, the index kept in step)."""
+
+        def apply(document: dict) -> dict | None:
+            new = change(JobRecord.model_validate(document))
+            if new is None:
+                return None
+            new.updated_at = now()
+            return new.model_dump(mode="json")
+
+        document = self.storage.update_record(JobRecord.KIND, job_id, apply, written=self._reindex)
+        return None if document is None else JobRecord.model_validate(document)
+
+    def set_job(self, job_id: str, **fields) -> JobRecord | None:
+        """Set fields of a job (validated), under its lock; the new record, or None if it is gone."""
+
+        def change(job: JobRecord) -> JobRecord:
+            return job.model_validate({**job.model_dump(), **fields})
+
+        return self.change_job(job_id, change)
+
+    def list_jobs(self, owner: str, state: str | None = None, limit: int = 50,
+                  offset: int = 0) -> tuple[list[JobRecord], int]:
+        """``owner``'s jobs newest first (optionally in one state): the page and the total count.
+
+        Only the index (names) and the page's records are read."""
+        entries = self.storage.index_entries(JOB_INDEX, owner)
+        keys = sorted((key for key, tag in entries if state is None or tag == state), reverse=True)
+        page = []
+        for key in keys[offset:offset + limit]:
+            job = self.job(key.split("-", 1)[1])
+            if job is not None:
+                page.append(job)
+        return page, len(keys)
+
+    def job_counts(self) -> dict[str, int]:
+        """Jobs by state over every owner, from the index."""
+        counts = dict.fromkeys(JOB_STATES, 0)
+        for owner in self.storage.index_groups(JOB_INDEX):
+            for _, tag in self.storage.index_entries(JOB_INDEX, owner):
+                counts[tag] = counts.get(tag, 0) + 1
+        return counts
+
+    def jobs_in_state(self, state: str) -> Iterator[JobRecord]:
+        """Every job in ``state`` (reads those records only)."""
+        for owner in self.storage.index_groups(JOB_INDEX):
+            for key, tag in self.storage.index_entries(JOB_INDEX, owner):
+                job = self.job(key.split("-", 1)[1]) if tag == state else None
+                if job is not None:
+                    yield job
+
+    def _reindex(self, old: dict | None, new: dict) -> None:
+        job = JobRecord.model_validate(new)
+        old_state = None if old is None else old.get("state")
+        if old_state != job.state:
+            self.storage.index_put(JOB_INDEX, job.owner, job_index_key(job), job.state, old_tag=old_state)
+
+    def prune_job_index(self) -> int:
+        """Drop index entries whose job record is gone (purged); how many."""
+        dropped = 0
+        for owner in self.storage.index_groups(JOB_INDEX):
+            for key, _ in self.storage.index_entries(JOB_INDEX, owner):
+                if not self.exists(JobRecord, key.split("-", 1)[1]):
+                    self.storage.index_drop(JOB_INDEX, owner, key)
+                    dropped += 1
+        return dropped
+
+    # ---------------------------------------------------------------- preprocessing
+
+    def artifact(self, key: str) -> ArtifactRecord | None:
+        return self.get(ArtifactRecord, key)
+
+    def variant_key(self, hairstyle: HairstyleRecord, options: PreprocessSettings, format_version: int) -> str:
+        """The artifact key of a hairstyle preprocessed with other options (e.g. another guide count)."""
+        character = self.get(CharacterRecord, hairstyle.source_character_id)
+        return artifact_key(character, hairstyle.hair.sha256, hairstyle.units, options, format_version)
+
+    def preprocessing_status(self, hairstyle: HairstyleRecord, key: str | None = None) -> PreprocessingRecord:
+        """The state of a hairstyle's preprocessing (its own, or of the variant ``key``), shared by every
+        hairstyle of the same inputs."""
+        key = key or hairstyle.artifact_key
+        if self.exists(ArtifactRecord, key):
+            return PreprocessingRecord(key=key, state=READY)
+        status = self.get(PreprocessingRecord, key)
+        return status if status is not None else PreprocessingRecord(key=key, state=QUEUED)
+
+    def claim_preprocessing(self, key: str, stale_after: float) -> bool:
+        """Whether the caller should start preprocessing ``key``: no artifact yet, and no run under way
+        (a queued or running claim older than ``stale_after`` seconds, or a failed one, is taken over)."""
+        if self.exists(ArtifactRecord, key):
+            return False
+        if not self.exists(PreprocessingRecord, key):
+            self.put(PreprocessingRecord(key=key, state=FAILED), key)
+        claimed = False
+
+        def claim(status: PreprocessingRecord) -> PreprocessingRecord | None:
+            nonlocal claimed
+            if status.state in (QUEUED, RUNNING) and now() - status.updated_at < stale_after:
+                return None
+            claimed = True
+            return PreprocessingRecord(key=key, state=QUEUED, updated_at=now())
+
+        self.update(PreprocessingRecord, key, claim)
+        return claimed
+
+    def set_preprocessing(self, key: str, state: str, error: ErrorInfo | None = None,
+                          seconds: float | None = None) -> None:
+        self.put(PreprocessingRecord(key=key, state=state, error=error, seconds=seconds, updated_at=now()), key)
+
+    # ---------------------------------------------------------------- retention
+
+    def purge_if_due(self, older_than_seconds: float, interval_seconds: float) -> int | None:
+        """Purge at most every ``interval_seconds`` (the clock is shared by all workers); files removed,
+        or None when it was not due."""
+        due = False
+
+        def claim(clock: PurgeClock) -> PurgeClock | None:
+            nonlocal due
+            if now() - clock.last_purge < interval_seconds:
+                return None
+            due = True
+            return PurgeClock(last_purge=now())
+
+        if not self.exists(PurgeClock, PURGE_CLOCK_ID):
+            self.put(PurgeClock(), PURGE_CLOCK_ID)
+        self.update(PurgeClock, PURGE_CLOCK_ID, claim)
+        return self.purge(older_than_seconds) if due else None
+
+    def purge(self, older_than_seconds: float) -> int:
+        """Remove what is older than the retention (see :meth:`hairport.storage.LocalStorage.purge`), then the
+        index entries of purged jobs; files removed."""
+        removed = self.storage.purge(older_than_seconds)
+        self.prune_job_index()
+        return removed

@@ -1,0 +1,1 @@
+"""What the routes do, one function per operation: the routes validate, call one of these, return a model."""

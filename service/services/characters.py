@@ -1,0 +1,45 @@
+"""Characters: a body mesh and its skeleton, stored content-addressed per owner."""
+
+from __future__ import annotations
+
+from fastapi import UploadFile
+
+from hairport import solver
+from hairport.records import BlobRef, CharacterRecord, digest, now, owned_id
+from hairport.repository import Repository
+from hairport.settings import Settings
+
+from ..uploads import check_units, extension_of, store_upload, validated
+
+SKELETON_SUFFIX = ".json"
+
+
+async def create_character(repository: Repository, settings: Settings, owner: str, mesh: UploadFile,
+                           skeleton: UploadFile | None, units: str | None) -> CharacterRecord:
+    """Store and validate an uploaded character; the same upload twice gives the same record."""
+    check_units(units)
+    suffix = extension_of(mesh, solver.MESH_EXTENSIONS, "mesh")
+    if skeleton is not None:
+        extension_of(skeleton, (SKELETON_SUFFIX,), "skeleton")
+    storage = repository.storage
+    mesh_blob = await store_upload(storage, mesh, settings, suffix, "mesh")
+    skeleton_blob = await store_upload(storage, skeleton, settings, SKELETON_SUFFIX, "skeleton") if skeleton else None
+    character_id = owned_id(owner, digest(
+        "character", mesh_blob.sha256, suffix, skeleton_blob.sha256 if skeleton_blob else None, units))
+    existing = repository.get(CharacterRecord, character_id)
+    if existing is not None:
+        return existing
+    character = await validated(
+        solver.load_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
+        units=units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
+        max_bytes=settings.max_upload_bytes,
+    )
+    record = CharacterRecord(
+        id=character_id, owner=owner, created_at=now(),
+        mesh=BlobRef(sha256=mesh_blob.sha256, suffix=suffix, size=mesh_blob.size),
+        skeleton=BlobRef(sha256=skeleton_blob.sha256, suffix=SKELETON_SUFFIX) if skeleton_blob else None,
+        units=units, vertices=int(character.n_vertices), faces=int(character.n_faces),
+        bones=list(character.skeleton.names) if character.skeleton is not None else [],
+    )
+    repository.put(record, character_id)
+    return record

@@ -1,0 +1,85 @@
+"""Hairstyles: a hair file made for a source character; preprocessing runs once per content."""
+
+from __future__ import annotations
+
+from fastapi import UploadFile
+
+from hairport import solver
+from hairport.records import (
+    FAILED,
+    QUEUED,
+    BlobRef,
+    CharacterRecord,
+    HairstyleRecord,
+    PreprocessSettings,
+    artifact_key,
+    now,
+    owned_id,
+)
+from hairport.repository import Repository
+from hairport.settings import Settings
+from hairport.worker.queue import TaskQueue
+
+from ..deps import owned
+from ..errors import Problem
+from ..schemas import HairstyleOut, PreprocessingOut
+from ..uploads import check_units, extension_of, input_problem, store_upload, validated
+
+
+def preprocessing_settings(k: int, guides: int | None) -> PreprocessSettings:
+    """Validated preprocessing options (``guides=None``: the solver's default)."""
+    options = solver.PreprocessOptions(k=k, guides=solver.DEFAULT_GUIDES if guides is None else guides)
+    try:
+        options.validate()
+    except solver.InputError as error:
+        raise input_problem(error, "options") from None
+    return PreprocessSettings(k=options.k, guides=options.guides)
+
+
+async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: Settings, owner: str,
+                           source_character_id: str, hair: UploadFile, units: str, k: int,
+                           guides: int | None) -> HairstyleRecord:
+    """Store and validate an uploaded hair file for the owner's character, and start its
+    preprocessing unless an identical hairstyle was preprocessed already."""
+    check_units(units)
+    character: CharacterRecord = owned(repository, CharacterRecord, owner, source_character_id, "character")
+    if not character.bones:
+        raise Problem(422, "no_skeleton", "the source character needs a skeleton (skeleton JSON or glTF skin)")
+    options = preprocessing_settings(k, guides)
+    suffix = extension_of(hair, tuple(f".{name}" for name in solver.HAIR_FORMATS), "hair")
+    blob = await store_upload(repository.storage, hair, settings, suffix, "hair")
+    key = artifact_key(character, blob.sha256, units, options, solver.ARTIFACT_FORMAT_VERSION)
+    hairstyle_id = owned_id(character.owner, key)
+    record = repository.get(HairstyleRecord, hairstyle_id)
+    if record is None:
+        loaded = await validated(
+            solver.read_hair, "hair", blob.path, units=units,
+            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes),
+        )
+        record = HairstyleRecord(
+            id=hairstyle_id, owner=character.owner, created_at=now(), source_character_id=character.id,
+            hair=BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size), format=suffix[1:], units=units,
+            options=options, artifact_key=key, strands=int(loaded.n_strands), particles=int(loaded.n_particles),
+        )
+        repository.put(record, hairstyle_id)
+    start_preprocessing(repository, queue, settings, record)
+    return record
+
+
+def start_preprocessing(repository: Repository, queue: TaskQueue, settings: Settings, hairstyle: HairstyleRecord,
+                        variant: PreprocessSettings | None = None, key: str | None = None) -> bool:
+    """Send the preprocessing of a hairstyle (or of its ``variant`` under ``key``) unless it is done or
+    under way (a failed one is tried again); whether a task was sent."""
+    key = key or hairstyle.artifact_key
+    if repository.preprocessing_status(hairstyle, key).state not in (QUEUED, FAILED):
+        return False
+    # a queued or running claim older than a job's time limit plus redelivery is stale
+    if not repository.claim_preprocessing(key, settings.task_time_limit + settings.visibility_timeout):
+        return False
+    queue.send_preprocess(hairstyle.id, None if variant is None else variant.model_dump())
+    return True
+
+
+def hairstyle_out(repository: Repository, record: HairstyleRecord) -> HairstyleOut:
+    status = repository.preprocessing_status(record)
+    return HairstyleOut.of(record, PreprocessingOut(state=status.state, error=status.error))

@@ -1,0 +1,74 @@
+"""Jobs: listing, cancellation, and their output files (results converted to any hair format)."""
+
+from __future__ import annotations
+
+from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
+
+from hairport import solver
+from hairport.records import CANCELLED, QUEUED, SUCCEEDED, TERMINAL_STATES, BlobRef, JobRecord, now
+from hairport.repository import Repository
+from hairport.worker.queue import TaskQueue
+
+from ..errors import Problem
+
+#: media type of each result format
+MEDIA_TYPES = {name: "application/octet-stream" for name in solver.HAIR_FORMATS} | {"obj": "text/plain"}
+#: what a lossless copy of every result is kept as (other formats are converted from it)
+LOSSLESS_FORMAT = "npz"
+#: a stored result is read back whole, whatever the configured input limits
+UNLIMITED = solver.ReadLimits(2**62, 2**62, 2**62)
+
+
+def cancel_job(repository: Repository, queue: TaskQueue, job: JobRecord) -> JobRecord:
+    """Cancel a job: a queued one at once, a running one at its solver's next iteration."""
+    if job.state in TERMINAL_STATES:
+        return job
+
+    def change(current: JobRecord) -> JobRecord:
+        current.cancel_requested = True
+        if current.state == QUEUED:
+            current.state, current.stage, current.finished_at = CANCELLED, "cancelled", now()
+        return current
+
+    job = repository.change_job(job.id, change)
+    if job.state == CANCELLED and job.task_id:
+        queue.revoke(job.task_id)
+    return job
+
+
+def outputs_of(job: JobRecord) -> dict[str, BlobRef]:
+    """The job's stored outputs; 409 unless it succeeded."""
+    if job.state != SUCCEEDED:
+        raise Problem(409, "job_not_succeeded", f"job {job.id} is {job.state}; it has no outputs")
+    return job.outputs
+
+
+def blob_response(repository: Repository, ref: BlobRef, media_type: str, filename: str) -> FileResponse:
+    blob = repository.storage.blob(ref.sha256, ref.suffix)
+    if blob is None:
+        raise Problem(410, "gone", "this output was removed by the retention policy")
+    return FileResponse(blob.path, media_type=media_type, filename=filename)
+
+
+def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> FileResponse:
+    """The result in ``fmt`` (default: the job's): stored, or converted from the lossless copy and
+    streamed from a scratch folder that is removed after the response."""
+    outputs = outputs_of(job)
+    fmt = fmt or job.output_format
+    if fmt in outputs:
+        return blob_response(repository, outputs[fmt], MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
+    lossless = outputs[LOSSLESS_FORMAT]
+    source = repository.storage.blob(lossless.sha256, lossless.suffix)
+    if source is None:
+        raise Problem(410, "gone", "this output was removed by the retention policy")
+    work = repository.storage.work_dir()
+    folder = work.__enter__()
+    path = folder / f"result.{fmt}"
+    try:
+        solver.write_hair(path, solver.read_hair(source.path, limits=UNLIMITED), format=fmt)
+    except BaseException:
+        work.__exit__(None, None, None)
+        raise
+    return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=f"{job.id}.{fmt}",
+                        background=BackgroundTask(work.__exit__, None, None, None))

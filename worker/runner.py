@@ -1,0 +1,246 @@
+"""The job bodies: plain functions the Celery tasks wrap (and unit tests call).
+
+Each loads its inputs by record id, calls the solver's public face, stores the outputs and
+the record's new state. Bad input (:class:`hairport.solver.InputError`) fails the job at once
+with its message; transient errors (I/O, the broker) propagate for the task to retry. Outputs
+are written to a private work directory and stored only when everything succeeded, so a job
+that fails, is cancelled or loses its worker leaves no partial result.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import traceback
+from functools import lru_cache
+from pathlib import Path
+
+from celery.exceptions import SoftTimeLimitExceeded
+
+from hairport import solver
+from hairport.outputs import json_default
+from hairport.records import (
+    CANCELLED,
+    FAILED,
+    READY,
+    RUNNING,
+    SUCCEEDED,
+    TERMINAL_STATES,
+    ArtifactRecord,
+    BlobRef,
+    CharacterRecord,
+    ErrorInfo,
+    HairstyleRecord,
+    JobRecord,
+    PreprocessSettings,
+    now,
+)
+from hairport.repository import Repository
+from hairport.settings import Settings
+from hairport.solver.render.preview import write_result_preview
+from hairport.storage import Blob, retention_seconds
+
+#: a running job writes its progress at most this often (s)
+PROGRESS_INTERVAL_SECONDS = 0.5
+#: a worker purges expired files at most this often (s), after a job
+PURGE_INTERVAL_SECONDS = 3600.0
+#: a retarget waits for its hairstyle's preprocessing this many checks at most (then fails)
+PREPROCESS_POLL_LIMIT = 1800
+#: errors worth retrying: the task retries them with backoff, the job's state is left alone
+TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
+
+
+class PreprocessingPending(Exception):
+    """The job's hairstyle is still being preprocessed: run the job again later."""
+
+
+def limits(settings: Settings) -> dict:
+    return dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
+
+
+def blob_path(repository: Repository, ref: BlobRef | None) -> Path | None:
+    """The local path of a stored input, or an ``InputError`` (code ``gone``) if retention removed it."""
+    if ref is None:
+        return None
+    blob = repository.storage.blob(ref.sha256, ref.suffix)
+    if blob is None:
+        raise solver.InputError("a stored input is gone (purged by retention?)", ref.sha256[:12], "gone")
+    return blob.path
+
+
+def load_character(repository: Repository, settings: Settings, character_id: str) -> solver.Character:
+    """The character of a record, loaded from its stored files."""
+    record = repository.get(CharacterRecord, character_id)
+    if record is None:
+        raise solver.InputError(f"character {character_id} does not exist", code="not_found")
+    return solver.load_character(
+        blob_path(repository, record.mesh), skeleton_path=blob_path(repository, record.skeleton), units=record.units,
+        **limits(settings),
+    )
+
+
+@lru_cache(maxsize=2)
+def _adaptable(path: str) -> solver.AdaptableHairstyle:
+    # one worker process retargets one groom onto many bodies: keep the last artifacts loaded
+    return solver.load_adaptable(path)
+
+
+def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
+    """What a failed job or preprocessing reports: the problem of bad input, else the exception."""
+    if isinstance(error, solver.InputError):
+        # the problem only: the source of a stored input is a storage path, meaningless to the caller
+        return ErrorInfo(code=error.code or "bad_input", message=error.problem)
+    if isinstance(error, SoftTimeLimitExceeded):
+        return ErrorInfo(code="time_limit", message=f"the job ran over its time limit ({soft_time_limit:g} s)")
+    return ErrorInfo(code="internal", message=f"{type(error).__name__}: {error}")
+
+
+def stored(blob: Blob, suffix: str) -> BlobRef:
+    return BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size)
+
+
+def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str, options: dict | None = None) -> None:
+    """Compute (once) the adaptable hairstyle of a hairstyle record (with its options, or ``options``)."""
+    hairstyle = repository.get(HairstyleRecord, hairstyle_id)
+    if hairstyle is None:
+        return
+    if options is None:
+        variant, key = hairstyle.options, hairstyle.artifact_key
+    else:
+        variant = PreprocessSettings.model_validate(options)
+        key = repository.variant_key(hairstyle, variant, solver.ARTIFACT_FORMAT_VERSION)
+    if repository.exists(ArtifactRecord, key):
+        repository.set_preprocessing(key, READY)
+        return
+    repository.set_preprocessing(key, RUNNING)
+    began = time.perf_counter()
+    try:
+        source = load_character(repository, settings, hairstyle.source_character_id)
+        hair = solver.read_hair(
+            blob_path(repository, hairstyle.hair), units=hairstyle.units,
+            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes),
+        )
+        adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(**variant.model_dump()))
+        with repository.storage.work_dir() as work:
+            path = work / f"adaptable{solver.ARTIFACT_EXTENSION}"
+            solver.save_adaptable(adaptable, path)
+            blob = repository.storage.save_file(path, solver.ARTIFACT_EXTENSION)
+        repository.put(ArtifactRecord(
+            key=key, sha256=blob.sha256, suffix=solver.ARTIFACT_EXTENSION, size=blob.size,
+            format_version=solver.ARTIFACT_FORMAT_VERSION, seconds=time.perf_counter() - began,
+            guides=int(len(adaptable.multiscale.guides)), created_at=now(),
+        ), key)
+        repository.set_preprocessing(key, READY, seconds=time.perf_counter() - began)
+    except TRANSIENT_ERRORS:
+        raise
+    except Exception as error:  # noqa: BLE001 - every other failure is this hairstyle's, reported on it
+        repository.set_preprocessing(key, FAILED, error=error_info(error, settings.task_soft_time_limit))
+        if not isinstance(error, solver.InputError):
+            traceback.print_exc()
+
+
+class JobProgress:
+    """Writes a job's stage and progress to its record, at most every PROGRESS_INTERVAL_SECONDS,
+    and reads its cancellation flag as often (a :data:`hairport.solver.ProgressFn`)."""
+
+    def __init__(self, repository: Repository, job_id: str):
+        self.repository, self.job_id = repository, job_id
+        self.last_write = 0.0
+        self.last_check = 0.0
+        self.stage = None
+        self.cancelled = False
+
+    def __call__(self, stage: str, fraction: float, message: str) -> None:
+        moment = time.monotonic()
+        if stage != self.stage or moment - self.last_write >= PROGRESS_INTERVAL_SECONDS:
+            self.stage, self.last_write = stage, moment
+            self.repository.set_job(self.job_id, stage=stage, progress=round(float(fraction), 4), message=message)
+
+    def should_stop(self) -> bool:
+        moment = time.monotonic()
+        if moment - self.last_check >= PROGRESS_INTERVAL_SECONDS:
+            self.last_check = moment
+            job = self.repository.job(self.job_id)
+            self.cancelled = job is None or job.cancel_requested
+        return self.cancelled
+
+
+def run_retarget(repository: Repository, settings: Settings, job_id: str, worker: str, polls: int = 0) -> None:
+    """Retarget one hairstyle onto one target character (one job record).
+
+    Raises :class:`PreprocessingPending` while the hairstyle is being preprocessed (after
+    ``polls`` earlier checks; the job fails with ``preprocess_timeout`` after
+    :data:`PREPROCESS_POLL_LIMIT`)."""
+    job = repository.job(job_id)
+    if job is None or job.state in TERMINAL_STATES:
+        return
+    if job.cancel_requested:
+        repository.set_job(job_id, state=CANCELLED, finished_at=now())
+        return
+    hairstyle = repository.get(HairstyleRecord, job.hairstyle_id)
+    key = job.artifact_key
+    artifact = repository.artifact(key) if hairstyle is not None else None
+    if artifact is None:
+        status = repository.preprocessing_status(hairstyle, key) if hairstyle is not None else None
+        if status is None or status.state == FAILED:
+            reason = status.error.message if status is not None and status.error is not None else "it is gone"
+            repository.set_job(job_id, state=FAILED, finished_at=now(), error=ErrorInfo(
+                code="preprocess_failed", message=f"the hairstyle could not be preprocessed: {reason}"))
+            return
+        if polls >= PREPROCESS_POLL_LIMIT:
+            repository.set_job(job_id, state=FAILED, finished_at=now(), error=ErrorInfo(
+                code="preprocess_timeout", message="the hairstyle's preprocessing did not finish"))
+            return
+        repository.set_job(job_id, stage="waiting_for_preprocessing", progress=0.0)
+        raise PreprocessingPending(key)
+
+    repository.set_job(job_id, state=RUNNING, stage="loading", progress=0.0, attempts=job.attempts + 1,
+                       started_at=now(), error=None, worker=worker, worker_pid=os.getpid())
+    progress = JobProgress(repository, job_id)
+    began = time.perf_counter()
+    try:
+        outputs, result = _retarget_and_store(repository, settings, job, artifact, progress)
+        timings = {**result.timings, "job": time.perf_counter() - began}
+        repository.set_job(job_id, state=SUCCEEDED, stage="done", progress=1.0, message="done",
+                           finished_at=now(), metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
+        repository.purge_if_due(retention_seconds(settings.retention_days), PURGE_INTERVAL_SECONDS)
+    except solver.Cancelled:
+        repository.set_job(job_id, state=CANCELLED, stage="cancelled", finished_at=now())
+    except TRANSIENT_ERRORS:
+        raise
+    except Exception as error:  # noqa: BLE001 - the job fails with a reason; the worker lives on
+        repository.set_job(job_id, state=FAILED, finished_at=now(),
+                           error=error_info(error, settings.task_soft_time_limit))
+        if not isinstance(error, (solver.InputError, SoftTimeLimitExceeded)):
+            traceback.print_exc()
+
+
+def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
+                        progress: JobProgress) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
+    adaptable = _adaptable(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
+    target = load_character(repository, settings, job.target_character_id)
+    edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
+    options = solver.RetargetOptions(**job.options, workers=settings.solver_workers, hairline=edit)
+    result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop)
+    progress("storing", 0.99, "writing outputs")
+    outputs = {}
+    report = {**result.report(), "job": {"id": job.id, "hairstyle_id": job.hairstyle_id,
+                                          "target_character_id": job.target_character_id}}
+    storage = repository.storage
+    with storage.work_dir() as work:
+        for fmt in sorted({"npz", job.output_format}):
+            path = work / f"result.{fmt}"
+            solver.write_hair(path, result.hair, format=fmt)
+            outputs[fmt] = stored(storage.save_file(path, f".{fmt}"), f".{fmt}")
+        path = work / "report.json"
+        path.write_text(json.dumps(report, indent=2, default=json_default) + "\n")
+        outputs["report"] = stored(storage.save_file(path, ".json"), ".json")
+        path = work / "preview.png"
+        write_result_preview(path, adaptable, result, target)
+        outputs["preview"] = stored(storage.save_file(path, ".png"), ".png")
+    return outputs, result
+
+
+def _jsonable(document: dict) -> dict:
+    return json.loads(json.dumps(document, default=json_default))
