@@ -25,9 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hairport import cli
+from hairport import cli, solver
 from hairport.settings import get_settings
-from hairport import solver
 from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
 from hairport.solver.io.hair import read_hair, write_hair

@@ -1,0 +1,129 @@
+"""Typed records over the storage: the job index, listing by pages, preprocessing claims, purging."""
+
+import pytest
+
+from hairport.records import (
+    ArtifactRecord,
+    BlobRef,
+    CharacterRecord,
+    ErrorInfo,
+    HairstyleRecord,
+    JobRecord,
+    PreprocessingRecord,
+    PreprocessSettings,
+    artifact_key,
+)
+from hairport.repository import Repository, job_index_key
+from hairport.storage import LocalStorage
+
+
+@pytest.fixture
+def repository(tmp_path) -> Repository:
+    return Repository(LocalStorage(tmp_path, durable=False))
+
+
+def make_job(number: int, owner: str = "kowner", created_at: float | None = None) -> JobRecord:
+    return JobRecord(id=f"{number:032x}", owner=owner, hairstyle_id="h" * 32, target_character_id="c" * 32,
+                     options={}, preprocess_options=PreprocessSettings(k=5, guides=20), artifact_key="a" * 64,
+                     output_format="data", created_at=created_at if created_at is not None else 1000.0 + number,
+                     updated_at=0.0)
+
+
+def test_jobs_are_listed_newest_first_with_totals_and_states(repository):
+    for number in range(10):
+        repository.create_job(make_job(number))
+    repository.create_job(make_job(99, owner="kother"))
+    for number in (1, 4, 7):
+        repository.set_job(f"{number:032x}", state="succeeded")
+    repository.set_job(f"{2:032x}", state="running")
+    page, total = repository.list_jobs("kowner", limit=3)
+    assert total == 10 and [job.id for job in page] == [f"{n:032x}" for n in (9, 8, 7)]
+    page, total = repository.list_jobs("kowner", limit=3, offset=8)
+    assert total == 10 and [job.id for job in page] == [f"{n:032x}" for n in (1, 0)]
+    page, total = repository.list_jobs("kowner", state="succeeded")
+    assert total == 3 and [job.id for job in page] == [f"{n:032x}" for n in (7, 4, 1)]
+    assert all(job.state == "succeeded" for job in page)
+    assert repository.list_jobs("kowner", state="cancelled") == ([], 0)
+    assert repository.list_jobs("nobody") == ([], 0)
+    assert repository.job_counts() == {"queued": 7, "running": 1, "succeeded": 3, "failed": 0, "cancelled": 0}
+    assert sorted(job.id for job in repository.jobs_in_state("succeeded")) == [f"{n:032x}" for n in (1, 4, 7)]
+
+
+def test_a_page_reads_only_its_own_records(repository, monkeypatch):
+    for number in range(50):
+        repository.create_job(make_job(number))
+    reads = []
+    original = repository.storage.get_record
+    monkeypatch.setattr(repository.storage, "get_record", lambda kind, rid: reads.append(rid) or original(kind, rid))
+    page, total = repository.list_jobs("kowner", limit=2, offset=10)
+    assert total == 50 and len(page) == 2 and len(reads) == 2
+
+
+def test_index_follows_every_state_change_and_drops_purged_jobs(repository):
+    job = make_job(1)
+    repository.create_job(job)
+    folder = repository.storage.root / "index" / "jobs" / "kowner"
+    for state in ("running", "running", "failed", "running", "succeeded"):
+        repository.set_job(job.id, state=state, progress=0.5)
+        assert sorted(p.name for p in folder.iterdir()) == [f"{job_index_key(job)}.{state}"]
+    assert repository.job(job.id).updated_at > 0
+    repository.storage.delete_record("jobs", job.id)
+    assert repository.prune_job_index() == 1 and list(folder.iterdir()) == []
+    assert repository.set_job(job.id, state="failed") is None
+
+
+def test_index_keys_sort_by_creation_time():
+    assert job_index_key(make_job(1, created_at=9.5)) < job_index_key(make_job(0, created_at=10.0))
+    assert job_index_key(make_job(1, created_at=10.0)).startswith("00000000010000000-")
+
+
+def test_set_job_validates_its_fields(repository):
+    repository.create_job(make_job(3))
+    done = repository.set_job(f"{3:032x}", state="failed", error=ErrorInfo(code="bad_input", message="no"))
+    assert done.error.code == "bad_input" and repository.job(f"{3:032x}").error.message == "no"
+    with pytest.raises(ValueError):
+        repository.set_job(f"{3:032x}", state="exploded")
+    assert repository.job(f"{3:032x}").state == "failed"
+
+
+def hairstyle_and_character(repository) -> tuple[HairstyleRecord, CharacterRecord]:
+    character = CharacterRecord(id="c" * 32, owner="kowner", created_at=0.0, mesh=BlobRef(sha256="a" * 64),
+                                vertices=3, faces=1, bones=["head"])
+    options = PreprocessSettings(k=5, guides=20)
+    key = artifact_key(character, "b" * 64, "m", options, 1)
+    hairstyle = HairstyleRecord(id="h" * 32, owner="kowner", created_at=0.0, source_character_id=character.id,
+                                hair=BlobRef(sha256="b" * 64, suffix=".data"), format="data", units="m",
+                                options=options, artifact_key=key, strands=2, particles=4)
+    repository.put(character, character.id)
+    repository.put(hairstyle, hairstyle.id)
+    return hairstyle, character
+
+
+def test_preprocessing_status_and_claims(repository):
+    hairstyle, _ = hairstyle_and_character(repository)
+    key = hairstyle.artifact_key
+    assert repository.preprocessing_status(hairstyle).state == "queued"
+    assert repository.claim_preprocessing(key, stale_after=60.0) is True
+    assert repository.claim_preprocessing(key, stale_after=60.0) is False  # under way
+    assert repository.claim_preprocessing(key, stale_after=0.0) is True  # stale: taken over
+    repository.set_preprocessing(key, "failed", error=ErrorInfo(code="truncated", message="cut"))
+    status = repository.preprocessing_status(hairstyle)
+    assert status.state == "failed" and status.error.code == "truncated"
+    assert repository.claim_preprocessing(key, stale_after=60.0) is True  # a failed run is tried again
+    repository.put(ArtifactRecord(key=key, sha256="f" * 64, size=1, format_version=1, seconds=0.1, guides=20,
+                                  created_at=0.0), key)
+    assert repository.preprocessing_status(hairstyle) == PreprocessingRecord(key=key, state="ready")
+    assert repository.claim_preprocessing(key, stale_after=0.0) is False
+
+
+def test_variant_key_is_the_artifact_key_of_the_other_options(repository):
+    hairstyle, character = hairstyle_and_character(repository)
+    assert repository.variant_key(hairstyle, hairstyle.options, 1) == hairstyle.artifact_key
+    other = PreprocessSettings(k=5, guides=10)
+    assert repository.variant_key(hairstyle, other, 1) == artifact_key(character, "b" * 64, "m", other, 1)
+
+
+def test_purge_runs_at_most_once_per_interval(repository):
+    assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=3600.0) == 0
+    assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=3600.0) is None
+    assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=0.0) == 0
