@@ -1,0 +1,39 @@
+"""``/v1/characters``: uploads validated and content-addressed per key."""
+
+import pytest
+
+from hairport.solver.synthetic import toy
+from hairport.solver.synthetic.makehuman import write_character
+
+from ..conftest import AUTH
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("characters")
+    write_character(toy.toy_character(name="toy"), folder / "toy.obj", folder / "toy.skeleton.json")
+    return {"mesh": (folder / "toy.obj").read_bytes(), "skeleton": (folder / "toy.skeleton.json").read_bytes()}
+
+
+def test_upload_twice_gives_one_character(client, files):
+    upload = {"mesh": ("toy.obj", files["mesh"]), "skeleton": ("toy.skeleton.json", files["skeleton"])}
+    first = client.post("/v1/characters", headers=AUTH, files=upload)
+    second = client.post("/v1/characters", headers=AUTH, files=upload)
+    assert first.status_code == second.status_code == 201 and first.json() == second.json()
+    body = first.json()
+    assert body["vertices"] == 3842 and body["has_skeleton"] and "head" in body["bones"]
+    assert client.get(f"/v1/characters/{body['id']}", headers=AUTH).json() == body
+    without_skeleton = client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"])},
+                                   data={"units": "m"})
+    assert without_skeleton.status_code == 201 and without_skeleton.json()["id"] != body["id"]
+    assert without_skeleton.json()["bones"] == [] and without_skeleton.json()["units"] == "m"
+
+
+def test_bad_uploads(client, files):
+    assert client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.stl", files["mesh"])}).json()["code"] == \
+        "unknown_format"
+    assert client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"])},
+                       data={"units": "ft"}).json()["code"] == "bad_units"
+    cut = client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"][:5000])})
+    assert cut.status_code == 422 and cut.json()["detail"].startswith("mesh: ")
+    assert client.get("/v1/characters/" + "0" * 32, headers=AUTH).status_code == 404

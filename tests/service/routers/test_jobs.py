@@ -1,0 +1,48 @@
+"""``/v1/jobs``: listing from the index, one job, outputs of unfinished jobs, cancelling a queued job."""
+
+from hairport.records import JobRecord, PreprocessSettings, now
+from hairport.service.auth import owner_of
+
+from ..conftest import AUTH, KEY
+
+
+def add_jobs(client, count: int) -> list[str]:
+    repository = client.app.state.repository
+    ids = []
+    for number in range(count):
+        job = JobRecord(id=f"{number + 1:032x}", owner=owner_of(KEY), hairstyle_id="h" * 32,
+                        target_character_id="c" * 32, options={}, preprocess_options=PreprocessSettings(k=5, guides=9),
+                        artifact_key="a" * 64, output_format="ply", created_at=now() + number, updated_at=now(),
+                        task_id=f"task-{number}")
+        repository.create_job(job)
+        ids.append(job.id)
+    return ids
+
+
+def test_listing_pages_and_filters(client):
+    ids = add_jobs(client, 5)
+    client.app.state.repository.set_job(ids[0], state="failed")
+    page = client.get("/v1/jobs", headers=AUTH, params={"limit": 2}).json()
+    assert [job["id"] for job in page["jobs"]] == [ids[4], ids[3]] and page["total"] == 5 and page["next_offset"] == 2
+    last = client.get("/v1/jobs", headers=AUTH, params={"limit": 2, "offset": 4}).json()
+    assert [job["id"] for job in last["jobs"]] == [ids[0]] and last["next_offset"] is None
+    failed = client.get("/v1/jobs", headers=AUTH, params={"state": "failed"}).json()
+    assert failed["total"] == 1 and failed["jobs"][0]["links"] == {"self": f"/v1/jobs/{ids[0]}"}
+    assert client.get("/v1/jobs", headers=AUTH, params={"state": "paused"}).status_code == 422
+
+
+def test_outputs_of_an_unfinished_job_are_409(client):
+    job_id = add_jobs(client, 1)[0]
+    assert client.get(f"/v1/jobs/{job_id}", headers=AUTH).json()["state"] == "queued"
+    for tail in ("result", "preview.png", "report"):
+        response = client.get(f"/v1/jobs/{job_id}/{tail}", headers=AUTH)
+        assert response.status_code == 409 and response.json()["code"] == "job_not_succeeded"
+
+
+def test_cancelling_a_queued_job(client):
+    job_id = add_jobs(client, 1)[0]
+    cancelled = client.delete(f"/v1/jobs/{job_id}", headers=AUTH).json()
+    assert cancelled["state"] == "cancelled" and cancelled["stage"] == "cancelled" and cancelled["finished_at"]
+    again = client.delete(f"/v1/jobs/{job_id}", headers=AUTH).json()
+    assert again == cancelled
+    assert client.get("/v1/jobs", headers=AUTH, params={"state": "cancelled"}).json()["total"] == 1

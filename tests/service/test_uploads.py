@@ -1,0 +1,43 @@
+"""Uploads: extensions, units, limits, and solver errors turned into problems naming the field."""
+
+import asyncio
+import io
+
+import pytest
+from starlette.datastructures import UploadFile
+
+from hairport import solver
+from hairport.service.errors import Problem
+from hairport.service.uploads import check_units, extension_of, input_problem, validated
+
+
+def upload(name: str) -> UploadFile:
+    return UploadFile(io.BytesIO(b""), filename=name)
+
+
+def test_extensions_and_units():
+    assert extension_of(upload("Body.OBJ"), (".obj", ".ply"), "mesh") == ".obj"
+    for name in ("body.stl", "body", "", "../x/.obj.exe"):
+        with pytest.raises(Problem) as refused:
+            extension_of(upload(name), (".obj",), "mesh")
+        assert (refused.value.status, refused.value.code) == (415, "unknown_format")
+    check_units(None)
+    for units in solver.UNITS:
+        check_units(units)
+    with pytest.raises(Problem) as refused:
+        check_units("ft")
+    assert (refused.value.status, refused.value.code) == (422, "bad_units")
+
+
+def test_input_errors_name_the_field_not_the_file():
+    too_large = input_problem(solver.InputError("60 strands above 50", "/storage/blobs/x", "too_large"), "hair")
+    assert (too_large.status, too_large.code, too_large.detail) == (413, "too_large", "hair: 60 strands above 50")
+    bad = input_problem(solver.InputError("cut short", "/storage/blobs/y", "truncated"), "mesh")
+    assert (bad.status, bad.code) == (422, "truncated") and "/storage" not in bad.detail
+
+    def refuse():
+        raise solver.InputError("no", code=None)
+
+    with pytest.raises(Problem) as refused:
+        asyncio.run(validated(refuse, "skeleton"))
+    assert (refused.value.status, refused.value.code, refused.value.detail) == (422, "bad_input", "skeleton: no")
