@@ -14,8 +14,8 @@ each, where its layout is described:
 Each format module exports ``FORMAT``, a :class:`~.common.HairFormat` naming its reader,
 its writer and what the format keeps; :data:`FORMATS` below lists them, and everything else
 (the format names, the extensions, the writer's warnings) is derived from it. A new format
-is one new module, imported here and entered in :data:`FORMATS`. The machinery every format shares
-(limits, reports, the checks) is in :mod:`.common`.
+is one new module, imported here and entered in :data:`FORMATS`. The machinery every format
+shares (limits, reports, the checks) is in :mod:`.common`.
 
 Units: hairport works in meters. ``read_hair(..., units="cm")`` multiplies coordinates and
 thickness by :func:`~hairport.solver.model.units.unit_scale`; ``write_hair(..., units="cm")``

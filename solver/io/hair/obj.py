@@ -3,7 +3,8 @@
 Layout: ``v x y z [r g b]`` lines and ``l i j k ...`` lines (1-based indices, negative ones
 relative to the vertices so far, ``i/t`` forms accepted), one ``l`` line per strand, root
 first. Faces and other records are ignored with a warning (normals, texture and parameter
-coordinates, object and group names, smoothing groups and materials quietly). The format has no thickness; vertex colors are kept.
+coordinates, object and group names, smoothing groups and materials quietly). The format
+has no thickness; vertex colors are kept.
 """
 
 from __future__ import annotations

@@ -65,9 +65,11 @@ def test_parse_header_elements_types_and_body_offset():
 
 
 def test_parse_header_messages():
-    err = expect_error("bad_header", parse_header, ASCII_PLY + b"element vertex 1\nproperty quad x\nend_header\n", CONTEXT)
+    quad = ASCII_PLY + b"element vertex 1\nproperty quad x\nend_header\n"
+    err = expect_error("bad_header", parse_header, quad, CONTEXT)
     assert str(err) == "h.ply: PLY header line 4: unknown property type 'quad'"
-    err = expect_error("bad_header", parse_header, ASCII_PLY + b"element s 1\nproperty list float int i\nend_header\n", CONTEXT)
+    float_lengths = ASCII_PLY + b"element s 1\nproperty list float int i\nend_header\n"
+    err = expect_error("bad_header", parse_header, float_lengths, CONTEXT)
     assert "list length type 'float' is not an integer type" in str(err)
     err = expect_error("truncated", parse_header, b"pl", CONTEXT)
     assert "the file ends inside the PLY magic line" in str(err)
