@@ -1,0 +1,379 @@
+"""What every hair format module shares: read limits and reports, the records a reader and a
+writer work on, the format record the registry holds, and the checks and number handling
+that more than one format needs.
+
+A format module turns bytes into :class:`Strands` (in file units, short strands included)
+and a :class:`~hairport.solver.model.hair.Hair` into bytes; :func:`finish_read` does the
+rest of every read the same way (finite values, short strands dropped and counted, units
+converted to meters).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import BinaryIO
+
+import numpy as np
+
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import MIN_PARTICLES_PER_STRAND, Hair
+from hairport.solver.model.units import unit_scale
+
+ERROR_CODES: dict[str, str] = {
+    "unknown_format": "the extension or format name is not one of SUPPORTED_FORMATS",
+    "unreadable": "the file could not be opened or read (OS error)",
+    "truncated": "the file ends before the data its header or counts announce",
+    "trailing_data": "bytes left over after the announced data (binary formats)",
+    "too_large": "a count or the file size is above ReadLimits",
+    "bad_header": "a header or structural field is malformed or inconsistent",
+    "bad_value": "a value in a text format is not a number or not an integer where one is needed",
+    "bad_index": "a vertex index or strand layout field is out of range or inconsistent",
+    "bad_offsets": "npz offsets do not start at 0, end at N and increase",
+    "non_finite": "a coordinate, thickness, transparency or color is NaN or infinite",
+    "short_strand": "npz strand with fewer than two points (other formats skip them)",
+    "units_mismatch": "an npz archive recorded in other units than the ones asked for",
+}
+
+# Largest counts the binary formats' integer fields hold.
+UINT16_MAX = int(np.iinfo(np.uint16).max)
+INT32_MAX = int(np.iinfo(np.int32).max)
+UINT32_MAX = int(np.iinfo(np.uint32).max)
+
+ASCII_FLOAT = "%.9g"  # enough significant digits to give back every float32 exactly
+ASCII_CHUNK_ROWS = 1 << 16  # rows formatted per string operation when writing text
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    """Upper bounds a reader enforces before it allocates.
+
+    Attributes
+    ----------
+    max_strands : int
+        Strands the file may declare (short strands included).
+    max_particles : int
+        Points the file may declare (points of short strands included).
+    max_bytes : int or None
+        File size; ``None`` for no limit.
+    """
+
+    max_strands: int = 5_000_000
+    max_particles: int = 50_000_000
+    max_bytes: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ReadReport:
+    """A hairstyle read from a file and what the reader did to get it.
+
+    Attributes
+    ----------
+    hair : Hair
+        In meters.
+    format : str
+        One of ``SUPPORTED_FORMATS``.
+    source : str
+        The file name (or the name given for bytes).
+    strands_in_file : int
+        Strands the file holds, short ones included.
+    skipped_strands : int
+        Strands of fewer than two points that were dropped.
+    skipped_particles : int
+        Points of the dropped strands.
+    kept_strands : (S,) int64
+        File index of every strand of ``hair``, in order.
+    warnings : tuple of str
+        Everything the reader dropped or could not keep, in words.
+    """
+
+    hair: Hair
+    format: str
+    source: str
+    strands_in_file: int
+    skipped_strands: int
+    skipped_particles: int
+    kept_strands: np.ndarray
+    warnings: tuple[str, ...] = ()
+
+
+class HairIOWarning(UserWarning):
+    """Something a reader or writer dropped (short strands, transparency, attributes)."""
+
+
+@dataclass
+class Strands:
+    """What a format reader found, in file units, before short strands are dropped.
+
+    Attributes
+    ----------
+    points : (N, 3) float32 or float64
+    counts : (S,) int64
+        Points per strand, possibly fewer than two.
+    thickness : (N,) float or None
+    color : (N, 3) float or None
+    warnings : list of str
+    strict : bool
+        Short strands are an error instead of being skipped.
+    """
+
+    points: np.ndarray
+    counts: np.ndarray
+    thickness: np.ndarray | None = None
+    color: np.ndarray | None = None
+    warnings: list[str] = field(default_factory=list)
+    strict: bool = False
+
+
+@dataclass(frozen=True)
+class ReadContext:
+    """Where the bytes come from (for messages), the limits to enforce and the file's units."""
+
+    source: str
+    limits: ReadLimits
+    units: str
+
+    def error(self, problem: str, code: str) -> InputError:
+        """An :class:`InputError` naming the source, with one of ``ERROR_CODES``."""
+        return InputError(problem, self.source, code)
+
+    def check_limit(self, count: int, what: str) -> None:
+        """Refuse ``count`` ``"strands"`` or ``"particles"`` above the limits (``too_large``)."""
+        limit = self.limits.max_strands if what == "strands" else self.limits.max_particles
+        if count > limit:
+            raise self.error(
+                f"the file declares {count:,} {what}, above the limit of {limit:,} "
+                f"(ReadLimits.max_{what})",
+                "too_large",
+            )
+
+
+@dataclass(frozen=True)
+class WriteOptions:
+    """How a writer writes: the file's length unit, meters per that unit, text or binary."""
+
+    units: str
+    scale: float
+    ascii: bool = False
+
+
+Reader = Callable[[bytes | memoryview, ReadContext], Strands]
+Writer = Callable[[BinaryIO, Hair, WriteOptions], None]
+
+
+@dataclass(frozen=True)
+class HairFormat:
+    """One hair file format, as the registry holds it.
+
+    Attributes
+    ----------
+    name : str
+        The format's name, which is also its file extension (without the dot).
+    read : Reader
+        ``read(buffer, context) -> Strands``.
+    write : Writer
+        ``write(binary_file, hair, options)``; the hairstyle is in meters.
+    keeps_thickness, keeps_color : bool
+        Whether the file holds per-point thickness / color (else the writer warns and
+        drops them).
+    has_ascii : bool
+        Whether the writer has a text variant (``ascii=True``).
+    """
+
+    name: str
+    read: Reader
+    write: Writer
+    keeps_thickness: bool
+    keeps_color: bool
+    has_ascii: bool = False
+
+    @property
+    def extension(self) -> str:
+        """``"." + name``."""
+        return f".{self.name}"
+
+
+def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
+    """Check values, drop short strands, convert to meters, build the ``Hair``.
+
+    Parameters
+    ----------
+    raw : Strands
+        What the format reader found, in file units.
+    fmt : str
+        The format's name, for the report.
+    ctx : ReadContext
+
+    Returns
+    -------
+    report : ReadReport
+
+    Raises
+    ------
+    InputError
+        ``non_finite``; ``short_strand`` when ``raw.strict``.
+    """
+    counts = np.asarray(raw.counts, dtype=np.int64)
+    check_finite(raw.points, counts, "coordinate", ctx)
+    if raw.thickness is not None:
+        check_finite(raw.thickness, counts, "thickness", ctx)
+    if raw.color is not None:
+        check_finite(raw.color, counts, "color", ctx)
+    keep = counts >= MIN_PARTICLES_PER_STRAND
+    n_skipped = int(len(counts) - np.count_nonzero(keep))
+    notes = list(raw.warnings)
+    points, thickness, color = raw.points, raw.thickness, raw.color
+    skipped_particles = 0
+    if n_skipped:
+        if raw.strict:
+            bad = int(np.argmin(keep))
+            raise ctx.error(
+                f"strand {bad} has {int(counts[bad])} point(s); every strand needs at least "
+                f"{MIN_PARTICLES_PER_STRAND}",
+                "short_strand",
+            )
+        particle_keep = np.repeat(keep, counts)
+        skipped_particles = int(len(particle_keep) - np.count_nonzero(particle_keep))
+        points = points[particle_keep]
+        thickness = None if thickness is None else thickness[particle_keep]
+        color = None if color is None else color[particle_keep]
+        notes.append(
+            f"skipped {n_skipped:,} strand(s) with fewer than {MIN_PARTICLES_PER_STRAND} points "
+            f"({skipped_particles:,} point(s)); USC-HairSalon files mark scalp positions "
+            "without hair this way"
+        )
+    kept = counts[keep]
+    if len(kept) == 0:
+        notes.append("the file holds no strand of two or more points")
+    offsets = np.zeros(len(kept) + 1, dtype=np.int64)
+    np.cumsum(kept, out=offsets[1:])
+    scale = unit_scale(ctx.units)
+    points = np.asarray(points, dtype=np.float64)
+    if scale != 1.0:
+        points = points * scale
+    if thickness is not None:
+        thickness = np.asarray(thickness, dtype=np.float64) * scale
+    hair = Hair(points.reshape(-1, 3), offsets, thickness, color)
+    return ReadReport(
+        hair=hair,
+        format=fmt,
+        source=ctx.source,
+        strands_in_file=len(counts),
+        skipped_strands=n_skipped,
+        skipped_particles=skipped_particles,
+        kept_strands=np.flatnonzero(keep).astype(np.int64),
+        warnings=tuple(notes),
+    )
+
+
+def check_finite(values: np.ndarray, counts: np.ndarray, what: str, ctx: ReadContext) -> None:
+    """Refuse NaN or infinite values, naming the first bad point and its strand.
+
+    Parameters
+    ----------
+    values : (N,) or (N, k) float
+        One row per point.
+    counts : (S,) int64
+        Points per strand.
+    what : str
+        What the values are, for the message.
+    ctx : ReadContext
+
+    Raises
+    ------
+    InputError
+        ``non_finite``.
+    """
+    finite = np.isfinite(values)
+    if finite.all():
+        return
+    if finite.ndim > 1:
+        finite = finite.all(axis=1)
+    particle = int(np.argmin(finite))
+    strand = int(np.searchsorted(np.cumsum(counts), particle, side="right"))
+    raise ctx.error(
+        f"point {particle} (strand {strand}) has a non-finite {what} (NaN or inf)", "non_finite"
+    )
+
+
+def require_bytes(ctx: ReadContext, needed: int, size: int, what: str) -> None:
+    """Refuse a file of ``size`` bytes when ``what`` needs ``needed`` (``truncated``)."""
+    if needed > size:
+        raise ctx.error(f"{what} needs {needed:,} bytes but the file has {size:,}", "truncated")
+
+
+def no_trailing(ctx: ReadContext, end: int, size: int) -> None:
+    """Refuse bytes after ``end``, where the data end (``trailing_data``)."""
+    if end < size:
+        raise ctx.error(
+            f"{size - end:,} unexpected byte(s) after the data, which ends at byte {end:,}",
+            "trailing_data",
+        )
+
+
+def parse_numbers(text: bytes, dtype: type, what: str, ctx: ReadContext) -> np.ndarray:
+    """All whitespace-separated numbers of ``text``; anything else is an error.
+
+    Returns
+    -------
+    numbers : (K,) dtype
+
+    Raises
+    ------
+    InputError
+        ``bad_value``.
+    """
+    if not text.strip():
+        return np.zeros(0, dtype=dtype)
+    try:
+        with warnings.catch_warnings():
+            # numpy only warns (and stops) at the first word that is not a number
+            warnings.simplefilter("error", DeprecationWarning)
+            return np.fromstring(text, dtype=dtype, sep=" ")
+    except (ValueError, DeprecationWarning):
+        raise ctx.error(f"{what} hold(s) something that is not a number", "bad_value") from None
+
+
+def check_fits(hair: Hair, max_strands: int, max_particles: int, fmt: str) -> None:
+    """Refuse a hairstyle whose counts the format's integer fields cannot hold (``too_large``)."""
+    if hair.n_strands > max_strands or hair.n_particles > max_particles:
+        raise InputError(
+            f"{hair.n_strands:,} strands / {hair.n_particles:,} points do not fit "
+            f"the {fmt!r} format",
+            code="too_large",
+        )
+
+
+def to_float32(values: np.ndarray, what: str) -> np.ndarray:
+    """Little-endian float32 copy; refuses values float32 cannot hold (``non_finite``)."""
+    with np.errstate(over="ignore"):
+        out = np.ascontiguousarray(values, dtype="<f4")
+    if not np.isfinite(out).all():
+        raise InputError(f"a {what} is not finite or too large for float32", code="non_finite")
+    return out
+
+
+def write_rows(
+    f: BinaryIO, columns: list[np.ndarray], formats: list[str], prefix: str = ""
+) -> None:
+    """Write a text table, one row per line, formatting a chunk of rows at a time.
+
+    Parameters
+    ----------
+    f : binary file
+    columns : list of (R,) arrays
+        One per column, converted to float64 before formatting.
+    formats : list of str
+        A ``%`` format per column.
+    prefix : str
+        Written at the start of every row (e.g. ``"v "``).
+    """
+    n = len(columns[0]) if columns else 0
+    row = prefix + " ".join(formats) + "\n"
+    for start in range(0, n, ASCII_CHUNK_ROWS):
+        block = np.stack(
+            [np.asarray(c[start : start + ASCII_CHUNK_ROWS], dtype=np.float64) for c in columns],
+            axis=1,
+        )
+        f.write(((row * len(block)) % tuple(block.ravel().tolist())).encode("ascii"))

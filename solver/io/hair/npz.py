@@ -1,0 +1,220 @@
+"""hairport's own hair archive (``.npz``).
+
+Layout: a numpy ``.npz`` (zip) archive of ``format = "hairport-hair"``, ``version`` (int),
+``units`` (str), ``points (N, 3)``, ``offsets (S+1,)``, optional ``thickness (N,)`` and
+``color (N, 3)``, all kept exactly (float64). Read with ``allow_pickle=False``; every
+array's shape and dtype is checked from its ``.npy`` header before its data are read.
+
+The archive records its units and refuses to be read with other units (code
+``"units_mismatch"``). The reader is strict about short strands (its writer never makes
+them): code ``"short_strand"``.
+"""
+
+from __future__ import annotations
+
+import io
+import lzma
+import zipfile
+import zlib
+from typing import BinaryIO
+
+import numpy as np
+
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.model.hair import Hair
+from hairport.solver.model.units import METERS_PER_UNIT
+
+NPZ_FORMAT = "hairport-hair"
+NPZ_VERSION = 1
+NPZ_REQUIRED = ("format", "version", "points", "offsets")
+NPZ_OPTIONAL = ("units", "thickness", "color")
+NPZ_MAX_HEADER_BYTES = 10_000
+ZIP_MAGIC = b"PK\x03\x04"
+# what zipfile and numpy raise on a damaged member (bad deflate stream, unknown compression
+# method or zip version, encryption, short data)
+_ZIP_ERRORS = (
+    ValueError,
+    OSError,
+    EOFError,
+    zipfile.BadZipFile,
+    NotImplementedError,
+    RuntimeError,
+    zlib.error,
+    lzma.LZMAError,
+)
+NPY_HEADER_READERS = {(1, 0): "read_array_header_1_0", (2, 0): "read_array_header_2_0"}
+
+_Header = tuple[tuple, np.dtype]  # shape and dtype of one member, from its .npy header
+
+
+def read_npz(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
+    """Read a hairport archive, checking every member's header before its data.
+
+    Returns
+    -------
+    strands : Strands
+        ``points (N, 3)``, ``counts (S,) int64`` and the optional arrays as stored; strict
+        about short strands.
+    """
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(buf))
+    except _ZIP_ERRORS:
+        if ZIP_MAGIC.startswith(bytes(buf[:4])):  # a zip cut before its directory (at the end)
+            raise ctx.error(
+                "the npz archive is cut short (no zip directory)", "truncated"
+            ) from None
+        raise ctx.error("not an npz (zip) archive", "bad_header") from None
+    with archive:
+        members = {
+            name[: -len(".npy")]: name for name in archive.namelist() if name.endswith(".npy")
+        }
+        missing = [name for name in NPZ_REQUIRED if name not in members]
+        if missing:
+            raise ctx.error(
+                f"not a hairport hair archive: no array(s) {', '.join(missing)}", "bad_header"
+            )
+        headers = {
+            key: _member_header(archive, members[key], key, ctx)
+            for key in (*NPZ_REQUIRED, *NPZ_OPTIONAL)
+            if key in members
+        }
+        _check_marker(archive, members, headers, ctx)
+        n_points, n_strands = _check_shapes(headers, ctx)
+        ctx.check_limit(n_strands, "strands")
+        ctx.check_limit(n_points, "particles")
+        arrays = {key: _member_array(archive, members[key], key, ctx) for key in headers}
+    offsets = arrays["offsets"].astype(np.int64)
+    if offsets[0] != 0 or offsets[-1] != n_points or (np.diff(offsets) < 0).any():
+        raise ctx.error(
+            f"offsets must start at 0, end at the point count {n_points:,} and never decrease",
+            "bad_offsets",
+        )
+    extra = sorted(set(members) - set(NPZ_REQUIRED) - set(NPZ_OPTIONAL))
+    notes = [f"ignored unknown array(s) {', '.join(extra)}"] if extra else []
+    return Strands(
+        arrays["points"],
+        np.diff(offsets),
+        arrays.get("thickness"),
+        arrays.get("color"),
+        notes,
+        strict=True,
+    )
+
+
+def _member_header(archive: zipfile.ZipFile, member: str, key: str, ctx: ReadContext) -> _Header:
+    """Shape and dtype from the ``.npy`` header, and a check that the data are all there."""
+    try:
+        with archive.open(member) as f:
+            version = np.lib.format.read_magic(f)
+            if version not in NPY_HEADER_READERS:
+                raise ValueError(f".npy version {version} is not supported")
+            read = getattr(np.lib.format, NPY_HEADER_READERS[version])
+            shape, _, dtype = read(f, max_header_size=NPZ_MAX_HEADER_BYTES)
+            header_end = f.tell()
+    except _ZIP_ERRORS as exc:
+        raise ctx.error(
+            f"array {key!r} has a malformed .npy header ({exc})", "bad_header"
+        ) from None
+    if dtype.hasobject:
+        raise ctx.error(f"array {key!r} holds Python objects, which are not read", "bad_header")
+    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    stored = archive.getinfo(member).file_size
+    if header_end + nbytes > stored:
+        raise ctx.error(
+            f"array {key!r} needs {nbytes:,} bytes of data but has {stored - header_end:,}",
+            "truncated",
+        )
+    return shape, dtype
+
+
+def _check_marker(
+    archive: zipfile.ZipFile, members: dict[str, str], headers: dict[str, _Header], ctx: ReadContext
+) -> None:
+    """The ``format`` marker, a readable ``version`` and the recorded ``units``."""
+    for key, kinds in (("format", "US"), ("version", "iu"), ("units", "US")):
+        if key in headers and (headers[key][0] != () or headers[key][1].kind not in kinds):
+            raise ctx.error(f"array {key!r} must be a scalar of kind {kinds!r}", "bad_header")
+    marker = _member_text(_member_array(archive, members["format"], "format", ctx))
+    if marker != NPZ_FORMAT:
+        raise ctx.error(
+            f"not a hairport hair archive (format {marker!r}, expected {NPZ_FORMAT!r})",
+            "bad_header",
+        )
+    version = int(_member_array(archive, members["version"], "version", ctx)[()])
+    if not 1 <= version <= NPZ_VERSION:
+        raise ctx.error(
+            f"archive version {version} is not readable by this hairport (reads 1..{NPZ_VERSION})",
+            "bad_header",
+        )
+    if "units" in headers:
+        units = _member_text(_member_array(archive, members["units"], "units", ctx))
+        if units not in METERS_PER_UNIT:
+            raise ctx.error(f"the archive records unknown units {units!r}", "bad_header")
+        if units != ctx.units:
+            raise ctx.error(
+                f"the archive is in {units!r} but was read with units={ctx.units!r}; "
+                f"pass units={units!r}",
+                "units_mismatch",
+            )
+
+
+def _member_text(value: np.ndarray) -> str:
+    """A scalar ``str_`` or ``bytes_`` array as text."""
+    item = value[()]
+    return item.decode("utf-8", "replace") if isinstance(item, bytes) else str(item)
+
+
+def _check_shapes(headers: dict[str, _Header], ctx: ReadContext) -> tuple[int, int]:
+    """(N, S) from the shapes of ``points`` and ``offsets``; the optional arrays must match."""
+    (points_shape, points_dtype), (offsets_shape, offsets_dtype) = (
+        headers["points"],
+        headers["offsets"],
+    )
+    if len(points_shape) != 2 or points_shape[1] != 3 or points_dtype.kind != "f":
+        raise ctx.error(
+            f"points must be (N, 3) floats, got {points_shape} {points_dtype}", "bad_header"
+        )
+    if len(offsets_shape) != 1 or offsets_shape[0] < 1 or offsets_dtype.kind not in "iu":
+        raise ctx.error(
+            f"offsets must be (S+1,) integers, got {offsets_shape} {offsets_dtype}", "bad_header"
+        )
+    n = points_shape[0]
+    for key, shape in (("thickness", (n,)), ("color", (n, 3))):
+        if key in headers and (headers[key][0] != shape or headers[key][1].kind != "f"):
+            raise ctx.error(
+                f"{key} must be {shape} floats, got {headers[key][0]} {headers[key][1]}",
+                "bad_header",
+            )
+    return n, offsets_shape[0] - 1
+
+
+def _member_array(
+    archive: zipfile.ZipFile, member: str, key: str, ctx: ReadContext
+) -> np.ndarray:
+    try:
+        with archive.open(member) as f:
+            return np.lib.format.read_array(
+                f, allow_pickle=False, max_header_size=NPZ_MAX_HEADER_BYTES
+            )
+    except _ZIP_ERRORS as exc:
+        raise ctx.error(f"array {key!r} cannot be read ({exc})", "truncated") from None
+
+
+def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
+    """Write the archive: marker, version, units and the hairstyle's arrays in file units."""
+    scale = options.scale
+    arrays = {
+        "format": np.array(NPZ_FORMAT),
+        "version": np.array(NPZ_VERSION, dtype=np.int64),
+        "units": np.array(options.units),
+        "points": hair.points / scale,
+        "offsets": hair.offsets,
+    }
+    if hair.thickness is not None:
+        arrays["thickness"] = hair.thickness / scale
+    if hair.color is not None:
+        arrays["color"] = hair.color
+    np.savez(f, **arrays)
+
+
+FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True)
