@@ -22,10 +22,14 @@ MARKED_FOLDERS = ("integration", "quality")
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test by its folder: ``-m unit``, ``-m integration`` and ``-m quality`` select them."""
+    """Mark every test by its folder: ``-m unit``, ``-m integration`` and ``-m quality`` select them
+    (a module outside those folders may mark itself ``integration``, e.g. one running a subprocess)."""
     for item in items:
         parts = Path(item.fspath).resolve().relative_to(TESTS.resolve()).parts
-        item.add_marker(parts[0] if parts[0] in MARKED_FOLDERS else "unit")
+        if parts[0] in MARKED_FOLDERS:
+            item.add_marker(parts[0])
+        elif item.get_closest_marker("integration") is None and item.get_closest_marker("quality") is None:
+            item.add_marker("unit")
 
 
 #: seconds the private Redis server may take to answer

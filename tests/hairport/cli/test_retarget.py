@@ -1,72 +1,36 @@
-"""Tests of the ``hairport retarget`` command line (hairport/cli.py).
-
-Inputs are the small synthetic toy characters (solver/toy.py) written as OBJ + skeleton
-sidecar, and a 60 x 12 "short" groom. The CLI is called in-process through
-``hairport.cli.main`` (fast); one test runs the installed ``hairport`` console script to
-prove it works and that the exit code propagates. Success cases use a baseline method
-(``root-translate+pushout``): the global solver takes minutes even on the toy.
-
-Contract under test (README, "Command line"): bad input exits with code 2 and ONE line
-``hairport: error: <file>: <problem>`` on stderr (with ``--quiet``; otherwise progress lines
-precede it); every output (hair, report, preview) is written to a temporary name and
-renamed at the end, so a failed run leaves nothing, not even a temporary ``.part`` file.
-"""
+"""``hairport retarget``: bad inputs exit 2 with one line and leave nothing; outputs, report, preview, units."""
 
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import struct
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from hairport import cli, solver
+from hairport import solver
 from hairport.settings import get_settings
 from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
-from hairport.solver.io.hair import read_hair, write_hair
+from hairport.solver.io.hair import read_hair
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
-from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
+from tests.hairport.cli.helpers import (
+    BASELINE,
+    N_PARTICLES,
+    N_STRANDS,
+    assert_input_error,
+    assert_nothing_written,
+    call_log,
+    retarget_args,
+    run,
+)
 
-BASELINE = "root-translate+pushout"
-N_STRANDS = 60
-N_PARTICLES = 12
 # float32 coordinates (.data, .hair, .ply) near 1.7 m round to within ~6e-8 m
 FLOAT32_TOLERANCE_M = 1e-6
-
-
-# --------------------------------------------------------------------------------------
-# inputs, written once per module
-# --------------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def world(tmp_path_factory) -> dict:
-    """Source / target characters, variants of them, and a groom, as files."""
-    d = tmp_path_factory.mktemp("cli-inputs")
-    source = toy.toy_character(name="source")
-    target = toy.toy_character(head_scale=(1.1, 0.95, 1.05), neck_length=0.15, shoulder_width=0.42, name="target")
-    write_character(source, d / "source.obj", d / "source.skeleton.json")
-    write_character(target, d / "target.obj", d / "target.skeleton.json")
-    # the target mesh alone: its skeleton must be transferred from the source
-    shutil.copy(d / "target.obj", d / "bare.obj")
-
-    hair = generate_groom(source, "short", N_STRANDS, N_PARTICLES, seed=0)
-    assert (hair.n_strands, hair.n_particles) == (N_STRANDS, N_STRANDS * N_PARTICLES)
-    write_hair(d / "hair.data", hair)
-    write_hair(d / "hair.hair", hair)
-    # float64 archives: .data rounds to float32 differently in m and cm (~8e-8 m), and the
-    # push-out of the baseline amplifies that to ~2e-5 m on a few particles
-    write_hair(d / "hair.npz", hair)
-    write_hair(d / "hair_cm.npz", hair, units="cm")
-    return {"dir": d, "source": source, "target": target, "hair": hair}
 
 
 @pytest.fixture(scope="module")
@@ -79,74 +43,6 @@ def expected(world) -> dict:
     adaptable = pipeline.preprocess(source, hair)
     result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=BASELINE))
     return {"hair": hair, "result": result.hair, "root_targets": pipeline.root_targets(adaptable, target)}
-
-
-@pytest.fixture
-def out(tmp_path) -> Path:
-    """An empty output folder; failed runs must leave it empty."""
-    path = tmp_path / "out"
-    path.mkdir()
-    return path
-
-
-def retarget_args(world, out: Path, *, source=None, target=None, hair=None, method=BASELINE,
-                  extra=(), quiet=True, all_outputs=True) -> list[str]:
-    d = world["dir"]
-    args = [
-        "retarget",
-        "--source", str(source or d / "source.obj"),
-        "--target", str(target or d / "target.obj"),
-        "--hair", str(hair or d / "hair.data"),
-        "--out", str(out / "result.data"),
-        "--method", method,
-    ]
-    if all_outputs:
-        args += ["--report", str(out / "report.json"), "--preview", str(out / "preview.png")]
-    if quiet:
-        args.append("--quiet")
-    return args + list(extra)
-
-
-def run(capsys, args: list[str]) -> tuple[int, str, str]:
-    capsys.readouterr()  # drop anything printed by fixtures
-    code = cli.main(args)
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def assert_input_error(code: int, err: str, *keywords: str) -> str:
-    """Exit code 2, stderr exactly one 'hairport: error:' line holding every keyword."""
-    assert code == cli.EXIT_BAD_INPUT == 2, err
-    lines = err.splitlines()
-    assert len(lines) == 1, f"expected one stderr line, got {len(lines)}:\n{err}"
-    line = lines[0]
-    assert line.startswith("hairport: error:"), line
-    for word in keywords:
-        assert word.lower() in line.lower(), f"{word!r} not in {line!r}"
-    return line
-
-
-def assert_nothing_written(out: Path) -> None:
-    left = sorted(p.name for p in out.iterdir())  # hidden temporaries (.result.*.part.data) included
-    assert left == [], f"a failed run left files behind: {left}"
-
-
-def call_log(monkeypatch, module, name: str) -> list:
-    """Wrap ``module.name`` so calls are recorded (and still performed)."""
-    original = getattr(module, name)
-    calls = []
-
-    def wrapper(*args, **kwargs):
-        calls.append(args)
-        return original(*args, **kwargs)
-
-    monkeypatch.setattr(module, name, wrapper)
-    return calls
-
-
-# --------------------------------------------------------------------------------------
-# bad hair files
-# --------------------------------------------------------------------------------------
 
 
 def test_truncated_data_file(capsys, world, out, tmp_path):
@@ -214,11 +110,6 @@ def test_nan_coordinate_in_hair(capsys, world, out, tmp_path):
     assert_nothing_written(out)
 
 
-# --------------------------------------------------------------------------------------
-# bad characters
-# --------------------------------------------------------------------------------------
-
-
 def test_target_of_another_toy_resolution(capsys, world, out, tmp_path, monkeypatch):
     monkeypatch.setattr(toy, "TOY_RINGS", toy.TOY_RINGS // 2)
     coarse = toy.toy_character(name="coarse")
@@ -260,11 +151,6 @@ def test_skeleton_with_unknown_parent(capsys, world, out, tmp_path):
     code, _, err = run(capsys, retarget_args(world, out, extra=["--target-skeleton", str(sidecar)]))
     assert_input_error(code, err, str(sidecar), "unknown parent", "no_such_bone")
     assert_nothing_written(out)
-
-
-# --------------------------------------------------------------------------------------
-# bad arguments
-# --------------------------------------------------------------------------------------
 
 
 def test_unknown_output_format_refused_before_any_work(capsys, world, out, monkeypatch):
@@ -356,10 +242,6 @@ def test_unwritable_output_is_one_line_error(capsys, world, out):
     assert len(lines) == 1 and lines[0].startswith("hairport: error:") and "blocker" in lines[0], err
     assert sorted(p.name for p in out.iterdir()) == ["blocker"]
 
-
-# --------------------------------------------------------------------------------------
-# success
-# --------------------------------------------------------------------------------------
 
 MAGIC = {"data": struct.pack("<i", N_STRANDS), "hair": b"HAIR", "ply": b"ply\n", "npz": b"PK\x03\x04"}
 
@@ -462,172 +344,3 @@ def test_target_without_skeleton_gets_the_source_skeleton(capsys, world, out):
     report = json.loads((out / "report.json").read_text())
     assert report["metrics"]["root_to_target_max"] < 1e-9
     assert report["inputs"]["target"] == str(d / "bare.obj")
-    # the pipeline does not (yet) record where the target skeleton came from; nothing to check
-
-
-# --------------------------------------------------------------------------------------
-# the installed console script
-# --------------------------------------------------------------------------------------
-
-
-def hairport_executable() -> str:
-    beside = Path(sys.executable).with_name("hairport")
-    if beside.is_file():
-        return str(beside)
-    found = shutil.which("hairport")
-    if found is None:
-        pytest.skip("the hairport console script is not installed")
-    return found
-
-
-def test_console_script_propagates_exit_code(world, out, tmp_path):
-    bad = tmp_path / "cut.data"
-    data = (world["dir"] / "hair.data").read_bytes()
-    bad.write_bytes(data[: len(data) // 2])
-    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
-    done = subprocess.run(
-        [hairport_executable(), *retarget_args(world, out, hair=bad)],
-        capture_output=True, text=True, timeout=120, env=env,
-    )
-    assert done.returncode == 2, done.stderr
-    assert done.stdout == ""
-    assert_input_error(done.returncode, done.stderr, str(bad), "past the end of the file")
-    assert_nothing_written(out)
-
-
-# --------------------------------------------------------------------------------------
-# preprocess once, retarget from the artifact
-# --------------------------------------------------------------------------------------
-
-
-def test_preprocess_then_retarget_from_the_artifact_equals_the_one_shot_run(capsys, world, out):
-    d = world["dir"]
-    artifact = out / "groom.hpa"
-    code, stdout, err = run(capsys, ["preprocess", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"),
-                                     "--guides", "20", "--out", str(artifact), "--quiet"])
-    assert code == 0, err
-    assert f"{N_STRANDS} strands" in stdout and "20 guides" in stdout
-    common = ["--target", str(d / "target.obj"), "--max-iterations", "5", "--workers", "1", "--quiet"]
-    code, _, err = run(capsys, ["retarget", "--adaptable", str(artifact), "--out", str(out / "a.npz"),
-                                "--report", str(out / "a.json")] + common)
-    assert code == 0, err
-    code, _, err = run(capsys, ["retarget", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"),
-                                "--guides", "20", "--out", str(out / "b.npz")] + common)
-    assert code == 0, err
-    a, b = read_hair(out / "a.npz"), read_hair(out / "b.npz")
-    assert np.array_equal(a.points, b.points)
-    report = json.loads((out / "a.json").read_text())
-    assert report["metrics"]["method"] == "multiscale"  # the default
-    assert report["inputs"]["guides"] == 20 and report["inputs"]["adaptable"] == str(artifact)
-    assert report["metrics"]["penetrating_particles"] == 0
-    for stage in ("coarse_solve", "fine_solve", "initial_transfer"):
-        assert report["timings_s"][stage] >= 0
-    assert report["solver"]["guides"] == 20
-
-
-def test_adaptable_and_source_together_are_refused(capsys, world, out):
-    d = world["dir"]
-    code, _, err = run(capsys, ["retarget", "--adaptable", str(d / "x.hpa"), "--hair", str(d / "hair.data"),
-                                "--target", str(d / "target.obj"), "--out", str(out / "r.data"), "--quiet"])
-    assert_input_error(code, err, "--adaptable", "not both")
-    assert_nothing_written(out)
-
-
-def test_retarget_without_any_source_is_refused(capsys, world, out):
-    d = world["dir"]
-    code, _, err = run(capsys, ["retarget", "--target", str(d / "target.obj"), "--out", str(out / "r.data"), "--quiet"])
-    assert_input_error(code, err, "--adaptable", "--source")
-
-
-def test_corrupted_artifact_is_one_line_error(capsys, world, out, tmp_path):
-    bad = tmp_path / "bad.hpa"
-    bad.write_bytes(b"PK\x03\x04 not really a zip")
-    code, _, err = run(capsys, ["retarget", "--adaptable", str(bad), "--target", str(world["dir"] / "target.obj"),
-                                "--out", str(out / "r.data"), "--quiet"])
-    assert_input_error(code, err, str(bad), "adaptable hairstyle")
-    assert_nothing_written(out)
-
-
-def test_preprocess_refuses_a_wrong_extension_and_zero_guides(capsys, world, out):
-    d = world["dir"]
-    base = ["preprocess", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"), "--quiet"]
-    code, _, err = run(capsys, base + ["--out", str(out / "groom.npz")])
-    assert_input_error(code, err, ".hpa")
-    code, _, err = run(capsys, base + ["--out", str(out / "groom.hpa"), "--guides", "0"])
-    assert_input_error(code, err, "guides", ">= 1")
-    assert_nothing_written(out)
-
-
-# --------------------------------------------------------------------------------------
-# hairline edits (MakeHuman characters: the toy groom does not reach the ears)
-# --------------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def human_world(tmp_path_factory) -> dict:
-    from hairport.solver.synthetic.makehuman import PRESETS, build_character
-
-    d = tmp_path_factory.mktemp("cli-human")
-    for name in ("average-female", "heavy-male"):
-        character = build_character(PRESETS[name])
-        write_character(character, d / f"{name}.obj", d / f"{name}.skeleton.json")
-        if name == "average-female":
-            write_hair(d / "short.data", generate_groom(character, "short", 80, 6, seed=2))
-    code = cli.main(["preprocess", "--source", str(d / "average-female.obj"), "--hair", str(d / "short.data"),
-                     "--guides", "20", "--out", str(d / "short.hpa"), "--quiet"])
-    assert code == 0
-    return {"dir": d, "adaptable": d / "short.hpa", "target": d / "heavy-male.obj"}
-
-
-def hairline_args(world, out: Path, *extra: str) -> list[str]:
-    return ["retarget", "--adaptable", str(world["adaptable"]), "--target", str(world["target"]),
-            "--out", str(out / "result.npz"), "--report", str(out / "report.json"), "--max-iterations", "8",
-            "--workers", "1", "--quiet", *extra]
-
-
-def test_hairline_preset_on_the_command_line(capsys, human_world, out):
-    code, stdout, err = run(capsys, hairline_args(human_world, out, "--hairline", "widows-peak:0.6"))
-    assert code == 0, err
-    assert "hairline widows-peak:0.6 (membrane)" in stdout and "density change L1" in stdout
-    report = json.loads((out / "report.json").read_text())
-    hairline = report["metrics"]["hairline"]
-    assert hairline["edit"] == "widows-peak:0.6" and hairline["roots_moved"] > 0
-    assert report["metrics"]["penetrating_particles"] == 0 and report["timings_s"]["hairline"] > 0
-
-
-def test_current_hairline_round_trips_as_a_curve(capsys, human_world, out, tmp_path):
-    curve = tmp_path / "current.json"
-    code, stdout, err = run(capsys, ["hairline", "--adaptable", str(human_world["adaptable"]), "--target",
-                                     str(human_world["target"]), "--out", str(curve), "--quiet"])
-    assert code == 0, err
-    document = json.loads(curve.read_text())
-    assert document["units"] == "m" and len(document["points"]) > 20 and document["turning_points"][0] == 0
-    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline-curve", str(curve)))
-    assert code == 0, err
-    hairline = json.loads((out / "report.json").read_text())["metrics"]["hairline"]
-    assert hairline["max_travel_m"] < 1e-6  # the hairline as it is: nothing moves
-
-
-@pytest.mark.parametrize("document, words", [
-    ({"points": [[0, 1.6, 0], [0.1, 1.6, 0]]}, ["at least 3 points"]),
-    ({"units": "ft", "points": [[0, 1.6, 0], [0.1, 1.6, 0], [0.2, 1.6, 0]]}, ["unknown units"]),
-    ({"points": [[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]]}, ["off the head"]),
-    ("not json", ["not valid json"]),
-])
-def test_bad_hairline_curves_are_one_line_errors(capsys, human_world, out, tmp_path, document, words):
-    path = tmp_path / "curve.json"
-    path.write_text(document if isinstance(document, str) else json.dumps(document))
-    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline-curve", str(path)))
-    assert_input_error(code, err, "curve", *words)
-    assert_nothing_written(out)
-
-
-def test_bad_hairline_presets_are_refused_before_any_work(capsys, human_world, out, monkeypatch):
-    calls = call_log(monkeypatch, solver, "retarget")
-    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "mohawk"))
-    assert_input_error(code, err, "unknown hairline preset", "widows-peak")
-    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round:2"))
-    assert_input_error(code, err, "[0, 1]")
-    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round", "--method", "global-translate"))
-    assert_input_error(code, err, "baseline")
-    assert calls == [] and not any(out.iterdir())

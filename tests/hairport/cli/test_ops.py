@@ -1,0 +1,48 @@
+"""Operations commands: the OpenAPI contract, purging, and refusing to serve without keys."""
+
+import json
+import os
+from pathlib import Path
+
+from hairport.cli import main
+from hairport.cli.ops import openapi_yaml
+from hairport.records import JobRecord, PreprocessSettings
+from hairport.repository import Repository
+from hairport.storage import LocalStorage
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_openapi_yaml_is_generated_from_the_app():
+    committed = (ROOT / "openapi.yaml").read_text()
+    assert openapi_yaml() == committed, "openapi.yaml drifted from the app: run `hairport openapi --out openapi.yaml`"
+
+
+def test_openapi_command_writes_the_contract_and_nothing_else(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the default storage folder is relative: nothing may appear here
+    assert main(["openapi", "--out", "api.yaml"]) == 0
+    assert (tmp_path / "api.yaml").read_text() == (ROOT / "openapi.yaml").read_text()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["api.yaml"]
+
+
+def test_purge_command_removes_old_records_and_their_index_entries(tmp_path, monkeypatch, capsys):
+    from hairport.settings import get_settings
+
+    storage = LocalStorage(tmp_path)
+    repository = Repository(storage)
+    job = JobRecord(id="a" * 32, owner="kowner", hairstyle_id="h" * 32, target_character_id="c" * 32, options={},
+                    preprocess_options=PreprocessSettings(k=5, guides=9), artifact_key="e" * 64,
+                    output_format="data", created_at=1.0, updated_at=1.0)
+    repository.create_job(job)
+    record = tmp_path / "records" / "jobs" / f"{job.id}.json"
+    os.utime(record, (0, 0))
+    monkeypatch.setenv("HAIRPORT_STORAGE_DIR", str(tmp_path))
+    monkeypatch.setenv("HAIRPORT_RETENTION_DAYS", "1")
+    get_settings.cache_clear()
+    try:
+        assert main(["purge"]) == 0
+    finally:
+        get_settings.cache_clear()
+    assert "removed 1 files older than 1 days" in capsys.readouterr().out
+    assert not record.exists() and repository.list_jobs("kowner") == ([], 0)
+    assert json.dumps(storage.index_groups("jobs")) == '["kowner"]'

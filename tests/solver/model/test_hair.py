@@ -1,0 +1,58 @@
+"""The hairstyle container: CSR strands, derived indices, subsets, and the layout check."""
+
+import numpy as np
+import pytest
+
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair, particle_indices, validate_layout
+
+
+@pytest.fixture
+def hair() -> Hair:
+    return Hair.from_strands([np.arange(9.0).reshape(3, 3), 10 + np.arange(6.0).reshape(2, 3),
+                              20 + np.arange(12.0).reshape(4, 3)])
+
+
+def test_layout_indices(hair):
+    assert (hair.n_strands, hair.n_particles) == (3, 9)
+    assert hair.counts.tolist() == [3, 2, 4] and hair.roots.tolist() == [0, 3, 5]
+    assert hair.strand_of.tolist() == [0, 0, 0, 1, 1, 2, 2, 2, 2]
+    assert hair.is_root.tolist() == [True, False, False, True, False, True, False, False, False]
+    assert hair.index_in_strand.tolist() == [0, 1, 2, 0, 1, 0, 1, 2, 3]
+    assert hair.segments.tolist() == [[0, 1], [1, 2], [3, 4], [5, 6], [6, 7], [7, 8]]
+    np.testing.assert_array_equal(hair.strand(1), 10 + np.arange(6.0).reshape(2, 3))
+
+
+def test_subsets_keep_attributes(hair):
+    styled = Hair(hair.points, hair.offsets, thickness=np.arange(9.0), color=np.ones((9, 3)) * 0.5)
+    part = styled.subset(np.array([2, 0]))
+    assert part.counts.tolist() == [4, 3] and part.thickness.tolist() == [5, 6, 7, 8, 0, 1, 2]
+    assert particle_indices(hair.offsets, np.array([2, 0])).tolist() == [5, 6, 7, 8, 0, 1, 2]
+    moved = styled.with_points(styled.points + 1)
+    assert moved.thickness is styled.thickness and moved.points[0, 0] == 1.0
+
+
+def test_bad_attributes_are_refused(hair):
+    with pytest.raises(InputError, match=r"thickness has shape \(2,\), expected \(9,\)"):
+        Hair(hair.points, hair.offsets, thickness=np.ones(2))
+    with pytest.raises(InputError, match=r"color has shape \(9,\), expected \(9, 3\)"):
+        Hair(hair.points, hair.offsets, color=np.ones(9))
+
+
+@pytest.mark.parametrize("points, offsets, code", [
+    (np.zeros((4, 2)), np.array([0, 4]), "bad_shape"),
+    (np.zeros((4, 3)), np.zeros((1, 2), dtype=np.int64), "bad_shape"),
+    (np.zeros((4, 3)), np.array([1, 4]), "bad_offsets"),
+    (np.zeros((4, 3)), np.array([0, 3]), "bad_offsets"),
+    (np.zeros((4, 3)), np.array([0, 3, 4]), "short_strand"),
+    (np.array([[0, 0, 0], [0, np.inf, 0.0]]), np.array([0, 2]), "non_finite"),
+])
+def test_layout_check(points, offsets, code):
+    with pytest.raises(InputError) as refused:
+        validate_layout(points, offsets, "groom.data")
+    assert refused.value.code == code and str(refused.value).startswith("groom.data: ")
+
+
+def test_an_empty_hairstyle_passes_the_layout_check():
+    validate_layout(np.zeros((0, 3)), np.array([0]))
+    assert Hair.from_strands([]).n_strands == 0
