@@ -14,7 +14,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
-from hairport.solver.adaptation.active_set import StrandSolveReport
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.multiscale import (
@@ -23,8 +22,7 @@ from hairport.solver.adaptation.multiscale import (
     default_workers,
     solve_multiscale,
 )
-from hairport.solver.adaptation.options import SolveOptions
-from hairport.solver.adaptation.osqp_backend import SolveReport
+from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.artifact import FORMAT_VERSION, load_adaptable, save_adaptable
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
@@ -43,6 +41,7 @@ from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
+from hairport.solver.model.progress import rescaled
 from hairport.solver.options import PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
@@ -63,7 +62,7 @@ class RetargetResult:
     initial: Hair
     metrics: dict
     timings: dict
-    solve: SolveReport | StrandSolveReport | MultiscaleReport | None = None
+    solve: SolveReport | MultiscaleReport | None = None
     relocation: Relocation | None = None
 
     def report(self) -> dict:
@@ -192,8 +191,7 @@ def retarget(
         energy_tolerance=options.energy_tolerance,
     )
 
-    def solver_progress(fraction: float, message: str) -> None:
-        progress("solve", 0.1 + 0.85 * fraction, message)
+    solver_progress = rescaled(progress, 0.1, 0.95, "solve")
 
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")
