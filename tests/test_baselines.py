@@ -8,13 +8,14 @@ import scipy.sparse as sp
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from hairport.solver.baselines import BASELINE_METHODS, anchor_roots, parse_method, retarget_baseline, root_targets
+from hairport.solver.baselines import BASELINE_METHODS, parse_method, retarget_baseline
 from hairport.solver.mesh.clearance import push_out
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.triangles import face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError, TopologyMismatch
 from hairport.solver.model.hair import Hair
+from hairport.solver.transfer.anchors import root_targets, surface_anchors
 
 HEAD_RADIUS = 0.1  # m
 SEGMENTS_PER_STRAND = 12
@@ -80,6 +81,11 @@ def _deformed(head: Character) -> Character:
     v = head.vertices
     w = v * np.array([1.15, 0.95, 1.05]) + 0.02 * np.sin(v[:, [1, 2, 0]] / HEAD_RADIUS * 2.0)
     return head.with_vertices(w + np.array([0.01, -0.02, 0.3]), name="deformed")
+
+
+def anchor_roots(source_query: MeshQuery, hair: Hair) -> tuple[np.ndarray, np.ndarray]:
+    """The baselines' root anchors: each root's closest point on the source as face and barycentrics."""
+    return surface_anchors(source_query, source_query.signed_distance(hair.points[hair.roots]))
 
 
 # --------------------------------------------------------------------------------------------

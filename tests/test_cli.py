@@ -35,6 +35,7 @@ from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
+from hairport.solver.transfer.anchors import root_targets
 
 BASELINE = "root-translate+pushout"
 N_STRANDS = 60
@@ -79,7 +80,8 @@ def expected(world) -> dict:
     hair = read_hair(d / "hair.data")
     adaptable = pipeline.preprocess(source, hair)
     result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=BASELINE))
-    return {"hair": hair, "result": result.hair, "root_targets": pipeline.root_targets(adaptable, target)}
+    roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
+    return {"hair": hair, "result": result.hair, "root_targets": roots}
 
 
 @pytest.fixture
