@@ -26,7 +26,7 @@ Any method may be followed by :func:`push_out` (method suffix ``+pushout``), whi
 every non-root particle closer than ``clearance`` to the target body out along the distance
 normal.
 
-Conventions: points in meters, hairstyles in the CSR layout of :class:`~.hair.Hair`.
+Conventions: points in meters, hairstyles in the CSR layout of :class:`~.model.hair.Hair`.
 The methods place roots exactly on their root targets; roots that were not on the source
 surface are therefore projected onto it (the reflexive test source == target is exact for
 roots on the surface, and moves an off-surface root by its distance to the surface).

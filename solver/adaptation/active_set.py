@@ -36,6 +36,7 @@ from hairport.solver.adaptation import banded
 from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import (
+    BACKTRACK_FACTOR,
     INITIAL_RADIAL_DAMPING,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
@@ -323,7 +324,7 @@ def solve_strands(
             accepted |= merit_trial <= merit_now
             if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
-            fraction = np.where(accepted, fraction, 0.5 * fraction)
+            fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial

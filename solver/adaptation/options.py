@@ -9,7 +9,9 @@ import numpy as np
 
 #: the l1 penalty on constraint violation in the merit function is this times the largest multiplier
 MERIT_PENALTY_FACTOR = 2.0
-#: step halvings tried before the shortest step is taken anyway
+#: each backtracking step of the line search shortens the step by this factor ...
+BACKTRACK_FACTOR = 0.5
+#: ... and after this many tries the shortest step is taken anyway
 MAX_BACKTRACKS = 6
 
 #: radial damping of Eq. 7's curvature model (see energies.shape_blocks): start, bounds, factor

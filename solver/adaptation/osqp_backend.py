@@ -37,6 +37,7 @@ from hairport.solver.adaptation.constraints import (
 )
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, energy_terms, gradient, hessian
 from hairport.solver.adaptation.options import (
+    BACKTRACK_FACTOR,
     INITIAL_RADIAL_DAMPING,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
@@ -180,7 +181,7 @@ def solve_shape_adaptation(
                 radial_damping = float(adapt_damping(radial_damping, merit_trial - merit_now, predicted))
             if merit_trial <= merit_now:
                 break
-            fraction *= 0.5
+            fraction *= BACKTRACK_FACTOR
         points, sd = trial, trial_sd
         report.step_fractions.append(fraction)
         max_step = fraction * float(np.max(np.linalg.norm(step, axis=1)))
