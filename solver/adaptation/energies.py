@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-#: segments shorter than this (m) are treated as having this length
-MIN_SEGMENT_LENGTH = 1e-9
+from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
+
 #: Eq. 7's negative curvature is kept down to this share of beta (per segment); a particle
 #: belongs to at most two segments, each adding up to twice its block, so a share below 1/4
 #: leaves the Hessian positive definite through Eq. 11's term alone

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 from hairport.solver.transfer.smoothing import smooth_strands, strand_laplacian
 from tests.solver.hair_shapes import outward_strands, sphere_character
 
@@ -37,3 +38,12 @@ def test_smoothing_removes_a_staircase_step():
     after = np.linalg.norm(L @ smoothed - L @ source, axis=1).max()
     assert before > 0.3 and after <= 0.3
     assert smoothed[0].tolist() == stair[0].tolist()  # the root is Dirichlet
+
+
+def test_strand_laplacian_weights_are_inverse_source_lengths_floored():
+    # a repeated particle: its zero-length segment counts as MIN_SEGMENT_LENGTH long
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, -0.01, 0.0], [0.0, -0.03, 0.0]])
+    L = strand_laplacian(points, np.array([0, 4])).toarray()
+    np.testing.assert_array_equal(L[1], [1 / MIN_SEGMENT_LENGTH, -(1 / MIN_SEGMENT_LENGTH + 100.0), 100.0, 0.0])
+    np.testing.assert_allclose(L[2], [0.0, 100.0, -150.0, 50.0], rtol=1e-12)
+    assert not L[[0, 3]].any()
