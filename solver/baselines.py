@@ -3,7 +3,9 @@
 These are the transfers users would otherwise do by hand or in a game engine (design notes
 section 5, paper Fig. 2b-c). Every baseline first *anchors* each strand root on the source
 mesh (closest point -> face + barycentric coordinates) and re-evaluates that anchor on the
-target mesh (same topology), giving the root target. Then:
+target mesh (same topology), giving the root target: the root anchoring of the initial
+transfer (:func:`.transfer.anchors.surface_anchors`, :func:`.transfer.anchors.root_targets`).
+Then:
 
 ``global-translate``  (Fig. 2b, top)
     The whole hairstyle moves by the mean root displacement.
@@ -24,7 +26,7 @@ Any method may be followed by :func:`push_out` (method suffix ``+pushout``), whi
 every non-root particle closer than ``clearance`` to the target body out along the distance
 normal.
 
-Conventions: points in meters, hairstyles in the CSR layout of :class:`~.hair.Hair`.
+Conventions: points in meters, hairstyles in the CSR layout of :class:`~.model.hair.Hair`.
 The methods place roots exactly on their root targets; roots that were not on the source
 surface are therefore projected onto it (the reflexive test source == target is exact for
 roots on the surface, and moves an off-surface root by its distance to the surface).
@@ -39,10 +41,11 @@ from scipy.interpolate import RBFInterpolator
 
 from hairport.solver.mesh.clearance import push_out
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
+from hairport.solver.mesh.triangles import face_frames
 from hairport.solver.model.character import Character, check_same_topology
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
+from hairport.solver.transfer.anchors import root_targets, surface_anchors
 
 #: the method names accepted by :func:`retarget_baseline` (each may carry :data:`PUSHOUT_SUFFIX`)
 BASELINE_METHODS = ("global-translate", "root-translate", "root-rigid", "affine-translate", "rbf-warp")
@@ -111,47 +114,6 @@ def parse_method(name: str) -> tuple[str, bool]:
             code="unknown_method",
         )
     return base, pushout
-
-
-def anchor_roots(source_query: MeshQuery, hair: Hair) -> tuple[np.ndarray, np.ndarray]:
-    """Anchor each strand root at its closest point on the source mesh.
-
-    Parameters
-    ----------
-    source_query : MeshQuery
-        Over the source mesh.
-    hair : Hair
-        S strands.
-
-    Returns
-    -------
-    faces : (S,) int64
-        Face holding each root's closest point.
-    bary : (S, 3) float64
-        Barycentric coordinates of the closest point in that face.
-    """
-    roots = hair.points[hair.roots]
-    if len(roots) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    sd = source_query.signed_distance(roots)
-    triangles = source_query.vertices[source_query.faces[sd.faces]]
-    return sd.faces, barycentric_coordinates(sd.closest, triangles)
-
-
-def root_targets(target: Character, faces: np.ndarray, bary: np.ndarray) -> np.ndarray:
-    """Root anchors re-evaluated on the target mesh (same face, same barycentric coordinates).
-
-    Parameters
-    ----------
-    target : Character
-    faces : (S,) int64
-    bary : (S, 3) float64
-
-    Returns
-    -------
-    targets : (S, 3) float64
-    """
-    return interpolate_barycentric(target.vertices, target.faces, faces, bary)
 
 
 def hair_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -414,7 +376,8 @@ def retarget_baseline(
         )
     if hair.n_strands == 0:
         return hair.with_points(hair.points.copy())
-    faces, bary = anchor_roots(MeshQuery(source.vertices, source.faces), hair)
+    source_query = MeshQuery(source.vertices, source.faces)
+    faces, bary = surface_anchors(source_query, source_query.signed_distance(hair.points[hair.roots]))
     targets = root_targets(target, faces, bary)
     points = _METHODS[base](source, target, hair, faces, targets)
     if pushout:

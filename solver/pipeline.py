@@ -14,7 +14,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
-from hairport.solver.adaptation.active_set import StrandSolveReport
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.multiscale import (
@@ -23,8 +22,7 @@ from hairport.solver.adaptation.multiscale import (
     default_workers,
     solve_multiscale,
 )
-from hairport.solver.adaptation.options import SolveOptions
-from hairport.solver.adaptation.osqp_backend import SolveReport
+from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.artifact import FORMAT_VERSION, load_adaptable, save_adaptable
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
@@ -38,13 +36,13 @@ from hairport.solver.io.character import load_character
 from hairport.solver.io.hair import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.triangles import interpolate_barycentric
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
+from hairport.solver.model.progress import rescaled
 from hairport.solver.options import PreprocessOptions, RetargetOptions
-from hairport.solver.transfer.anchors import compute_anchors, place_anchors
+from hairport.solver.transfer.anchors import compute_anchors, place_anchors, root_targets
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
 
 ProgressFn = Callable[[str, float, str], None]
@@ -63,7 +61,7 @@ class RetargetResult:
     initial: Hair
     metrics: dict
     timings: dict
-    solve: SolveReport | StrandSolveReport | MultiscaleReport | None = None
+    solve: SolveReport | MultiscaleReport | None = None
     relocation: Relocation | None = None
 
     def report(self) -> dict:
@@ -131,14 +129,6 @@ def initial_transfer(
     return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=adaptable.strand_laplacian)
 
 
-def root_targets(adaptable: AdaptableHairstyle, target: Character) -> np.ndarray:
-    """Where each root belongs on the target: its anchor face and barycentrics, ``(S, 3)``."""
-    roots = adaptable.hair.roots
-    return interpolate_barycentric(
-        target.vertices, target.faces, adaptable.anchors.face[roots], adaptable.anchors.barycentric[roots]
-    )
-
-
 def retarget(
     adaptable: AdaptableHairstyle,
     target: Character,
@@ -175,7 +165,7 @@ def retarget(
     initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
     timings["initial_transfer"] = time.perf_counter() - began
 
-    roots = root_targets(adaptable, target)
+    roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
     start = gamma = relocation = None
     if options.hairline is not None:
         progress("hairline", 0.07, f"relocating the roots for the hairline edit {options.hairline.describe()}")
@@ -192,8 +182,7 @@ def retarget(
         energy_tolerance=options.energy_tolerance,
     )
 
-    def solver_progress(fraction: float, message: str) -> None:
-        progress("solve", 0.1 + 0.85 * fraction, message)
+    solver_progress = rescaled(progress, 0.1, 0.95, "solve")
 
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")

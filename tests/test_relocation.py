@@ -16,6 +16,7 @@ from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS as CHARACTERS
 from hairport.solver.synthetic.makehuman import build_character
+from hairport.solver.transfer.anchors import root_targets
 
 #: the paper's Fig. 17 claim, our target: roots from different parameterizations agree (m)
 PARAMETERIZATION_AGREEMENT_M = 1e-3
@@ -199,7 +200,7 @@ def test_adaptive_weights_and_start_of_the_re_solve(adaptable, target):
     hair = adaptable.hair
     prepared = pipeline.prepare_target(adaptable, target)
     initial, _ = pipeline.initial_transfer(adaptable, prepared)
-    roots = pipeline.root_targets(adaptable, prepared)
+    roots = root_targets(prepared, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
     edit = hairline_edit(preset="sideburns")
     relocation, start, gamma = pipeline.relocate_hairline(adaptable, prepared, initial, roots, edit)
     moved = relocation.travel > 0

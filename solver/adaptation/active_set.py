@@ -1,4 +1,4 @@
-"""Eq. 1 under Eq. 12-13 by sequential QPs, solved with strand-banded factorisations.
+"""Eq. 1 under Eq. 12-13 by sequential QPs, solved by a primal-dual active-set method with strand-banded factorisations.
 
 The Newton Hessian of Eq. 1 is ``S + 2 alpha K^T G K + 2 beta G`` (``G = diag(gamma)``):
 ``S``, Eq. 7's per-segment 3x3 blocks (:func:`.energies.shape_blocks`), is block-tridiagonal
@@ -17,7 +17,8 @@ neighbours are fixed guides), a few dozen steps when strands are coupled.
 
 When no entry of ``K`` links two strands every strand is its own problem: each gets its own
 backtracking line search, damping and convergence test, and leaves the loop when done.
-Coupled problems take one step length for all.
+Coupled problems take one step length for all. The constraints are those of
+:mod:`.constraints`, shared with the OSQP backend.
 
 Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``),
 vectors particle-major.
@@ -27,54 +28,35 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 
 from hairport.solver.adaptation import banded
-from hairport.solver.adaptation.constraints import BodyDistance
+from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import (
-    DAMPING_FACTOR,
+    BACKTRACK_FACTOR,
     INITIAL_RADIAL_DAMPING,
     MAX_BACKTRACKS,
-    MAX_RADIAL_DAMPING,
     MERIT_PENALTY_FACTOR,
-    MIN_RADIAL_DAMPING,
+    SOLVE_STAGE,
     Cancelled,
     SolveOptions,
+    SolveReport,
+    adapt_damping,
 )
 from hairport.solver.adaptation.strand_problem import NewtonSystem, StrandProblem, group_energies, newton_system
-from hairport.solver.mesh.clearance import push_out
+from hairport.solver.model.progress import ProgressFn
 
+#: this backend's name in :data:`.coupled.QP_BACKENDS` and in its reports
+BACKEND = "active-set"
 #: active-set rounds per QP before the last iterate is taken (they converge in a few)
 MAX_ACTIVE_SET_ROUNDS = 50
 #: conjugate gradients stop at this residual relative to the right-hand side ...
 CG_RELATIVE_TOLERANCE = 1e-6
 #: ... or after this many steps
 CG_MAX_STEPS = 1000
-
-ProgressFn = Callable[[float, str], None]
-
-
-@dataclass
-class StrandSolveReport:
-    """What the loop did."""
-
-    iterations: int = 0
-    converged: bool = False
-    groups: int = 0
-    converged_groups: int = 0
-    max_step: list[float] = field(default_factory=list)
-    min_clearance: list[float] = field(default_factory=list)
-    open_groups: list[int] = field(default_factory=list)
-    active_set_rounds: list[int] = field(default_factory=list)
-    cg_steps: list[int] = field(default_factory=list)
-    merit: list[float] = field(default_factory=list)
-    step_fractions: list[float] = field(default_factory=list)
-    pushed_out: int = 0
-    seconds: float = 0.0
 
 
 def normal_frames(normals: np.ndarray) -> np.ndarray:
@@ -217,8 +199,7 @@ def solve_qp(
     rotated_gradient = frames.to_local(system.gradient)
     curvature = rotated_diagonal[:, 0, 0]
     active = active & constrained & ~fixed
-    pinned = np.zeros((n, 3), dtype=bool)
-    pinned[fixed] = True
+    pinned = fixed_coordinates(fixed)
     values = np.zeros((n, 3))
     values[:, 0] = np.where(constrained, lower, 0.0)
     rounds = cg_steps = 0
@@ -237,15 +218,6 @@ def solve_qp(
     return frames.to_world(y), multipliers, active, rounds, cg_steps
 
 
-def _adapt_damping(damping: np.ndarray, ratio: np.ndarray) -> np.ndarray:
-    """Per-group Levenberg-Marquardt update from actual/predicted decrease (as :func:`.qp._adapt_damping`)."""
-    return np.where(
-        ratio < 0.25,
-        np.minimum(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR),
-        np.where(ratio > 0.75, np.maximum(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR), damping),
-    )
-
-
 def solve_strands(
     problem: StrandProblem,
     distance: BodyDistance,
@@ -254,7 +226,7 @@ def solve_strands(
     start: np.ndarray | None = None,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
-) -> tuple[np.ndarray, StrandSolveReport]:
+) -> tuple[np.ndarray, SolveReport]:
     """Minimise Eq. 1 under Eq. 12-13 by sequential QPs (Sec. 4.6).
 
     Each outer iteration: the projected-Newton QP (:func:`solve_qp`), then backtracking on
@@ -273,20 +245,22 @@ def solve_strands(
         ``eps_c``, ``max_iterations``, ``step_tolerance``, ``clearance_tolerance``.
     start : (N, 3) float64, optional
         First iterate (``problem.initial`` by default).
-    progress : callable(fraction, message), optional
+    progress : ProgressFn, optional
+        ``progress("solve", fraction, message)`` after every outer iteration.
     should_stop : callable() -> bool, optional
-        Polled once per outer iteration; True raises :class:`.qp.Cancelled`.
+        Polled once per outer iteration; True raises :class:`.options.Cancelled`.
 
     Returns
     -------
     points : (N, 3) float64
-    report : StrandSolveReport
+    report : SolveReport
+        With the active-set fields (``groups``, ``active_set_rounds``, ...).
     """
     began = time.perf_counter()
     points = np.array(problem.initial if start is None else start, dtype=np.float64)
     coupled = problem.coupled
     n_groups = 1 if coupled else problem.n_strands
-    report = StrandSolveReport(groups=n_groups)
+    report = SolveReport(backend=BACKEND, groups=n_groups)
     # the damping is per strand even when strands share one step length: one strand that
     # turns far must not stiffen every other strand's segments
     damping = np.full(problem.n_strands, INITIAL_RADIAL_DAMPING)
@@ -310,9 +284,9 @@ def solve_strands(
         dist, normal, near = dist_all[index], normal_all[index], near_all[index]
         strands = np.arange(problem.n_strands) if coupled else open_groups
         system = newton_system(sub, p, weights, damping[strands][sub.strand_of])
-        constrained = near & ~sub.fixed
+        constrained, lower = linearised_clearance(dist, options.eps_c, sub.fixed, near)
         step, multipliers, active, rounds, cg_steps = solve_qp(
-            system, sub.fixed, constrained, normal, options.eps_c - dist, active_set[index]
+            system, sub.fixed, constrained, normal, lower, active_set[index]
         )
         active_set[index] = active
         report.active_set_rounds.append(rounds)
@@ -345,14 +319,12 @@ def solve_strands(
             if attempt == 0:
                 strand_merit_trial = merit_trial if not coupled else group_energies(
                     sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c)
-                actual = strand_merit_trial - strand_merit_now
-                safe = np.where(strand_predicted < 0, strand_predicted, -1.0)
-                ratio = np.where(strand_predicted < 0, actual / safe, 0.0)
-                damping[strands] = _adapt_damping(damping[strands], ratio)
+                damping[strands] = adapt_damping(
+                    damping[strands], strand_merit_trial - strand_merit_now, strand_predicted)
             accepted |= merit_trial <= merit_now
             if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
-            fraction = np.where(accepted, fraction, 0.5 * fraction)
+            fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial
@@ -372,16 +344,14 @@ def solve_strands(
         report.iterations = iteration + 1
         if progress is not None:
             progress(
+                SOLVE_STAGE,
                 (iteration + 1) / options.max_iterations,
                 f"iteration {iteration + 1}: max step {report.max_step[-1]:.2e} m, {len(open_groups)} open",
             )
     report.converged = len(open_groups) == 0
     if not report.converged:
-        # stopped by the iteration cap, possibly with some particle short of its clearance:
-        # the result must never break Eq. 13
-        short = (dist_all < options.eps_c - options.clearance_tolerance) & ~problem.fixed
-        report.pushed_out = int(short.sum())
-        if report.pushed_out:
-            points = push_out(points, problem.fixed, distance.query, options.eps_c)
+        points, report.pushed_out = push_out_short(
+            points, problem.fixed, dist_all, distance.query, options.eps_c, options.clearance_tolerance
+        )
     report.seconds = time.perf_counter() - began
     return points, report

@@ -1,4 +1,19 @@
-"""Eq. 12-13: roots fixed, every other particle kept ``eps_c`` outside the target body."""
+"""Eq. 12-13: roots fixed, every other particle kept ``eps_c`` outside the target body.
+
+The one owner of what both QP backends (:mod:`.active_set`, :mod:`.osqp_backend`) do with
+the constraints of Sec. 4.6:
+
+* Eq. 12, roots held fixed: they are no unknowns of the QP (:func:`free_coordinates`,
+  :func:`pinned_coordinates`);
+* Eq. 13 linearised at the iterate ``p``: ``<n_i, d_i> >= eps_c - s_i`` for every free
+  particle near the body, with ``s_i`` its signed distance and ``n_i`` the distance normal
+  (:func:`linearised_clearance`; the broad phase :class:`BodyDistance` says which are near);
+* the l1 clearance violation of the line search's merit (:func:`clearance_violation`);
+* the push-out of particles short of the clearance when the iteration cap stops the loop
+  (:func:`push_out_short`): the result never breaks Eq. 13.
+
+Convention: particles ``(N, 3) float64`` in meters; ``fixed (N,) bool`` marks the roots.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +21,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from hairport.solver.mesh.clearance import push_out
 from hairport.solver.mesh.query import MeshQuery
 
 
@@ -13,8 +29,9 @@ class BodyDistance:
     """Signed distance to the target for the particles that can be near it.
 
     Without a broad phase every particle gets an exact query. With one (a function giving a
-    lower bound of ``|distance|`` per point), particles whose bound exceeds ``band`` get that
-    bound as their distance, a zero normal and no constraint.
+    lower bound of ``|distance|`` per point, such as :meth:`.distance_grid.DistanceGrid.lower_bound`),
+    particles whose bound is ``band`` or more get no query: distance ``inf``, a zero normal,
+    and no constraint (they are not near).
     """
 
     def __init__(self, query: MeshQuery, band: float = np.inf, broad_phase: Callable[[np.ndarray], np.ndarray] | None = None):
@@ -36,3 +53,121 @@ class BodyDistance:
             distance[near] = sd.distance
             normal[near] = sd.normal
         return distance, normal, near
+
+
+def fixed_coordinates(fixed: np.ndarray) -> np.ndarray:
+    """Eq. 12: every coordinate of a root is held where it is (a QP step is zero there).
+
+    Parameters
+    ----------
+    fixed : (N,) bool
+
+    Returns
+    -------
+    pinned : (N, 3) bool
+        A new array.
+    """
+    return np.repeat(np.asarray(fixed, dtype=bool)[:, None], 3, axis=1)
+
+
+def free_coordinates(fixed: np.ndarray) -> np.ndarray:
+    """Eq. 12 for a QP whose unknowns are the free coordinates only.
+
+    Parameters
+    ----------
+    fixed : (N,) bool
+
+    Returns
+    -------
+    columns : (3 F,) int64
+        Their indices ``3 i + c`` in a particle-major ``(3 N,)`` vector, ascending (``F`` free particles).
+    """
+    return np.flatnonzero(~fixed_coordinates(fixed).ravel())
+
+
+def linearised_clearance(
+    distance: np.ndarray, eps_c: float, fixed: np.ndarray | None = None, near: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 13 linearised at the iterate: a step ``d`` keeps ``<n_i, d_i> >= eps_c - s_i``.
+
+    With the closest point and normal frozen at the iterate, Eq. 13's ``<p_i + d_i - q_i, n_i> >= eps_c``
+    is this half-space on particle ``i``'s step (``s_i = <p_i - q_i, n_i>``); a particle already
+    inside has ``s_i < 0`` and must move out by more than ``eps_c``. Roots carry none (Eq. 12),
+    nor do particles the broad phase puts far from the body.
+
+    Parameters
+    ----------
+    distance : (N,) float64
+        ``s_i``, signed distance to the target (m).
+    eps_c : float
+        Clearance (m).
+    fixed : (N,) bool, optional
+        Roots; none by default.
+    near : (N,) bool, optional
+        Particles that can be near the body (:class:`BodyDistance`); all by default.
+
+    Returns
+    -------
+    constrained : (N,) bool
+        Particles with a half-space: free and near.
+    lower : (N,) float64
+        ``eps_c - s_i`` (m).
+    """
+    constrained = np.ones(len(distance), dtype=bool) if near is None else np.asarray(near, dtype=bool)
+    if fixed is not None:
+        constrained = constrained & ~fixed
+    return constrained, eps_c - distance
+
+
+def clearance_violation(distance: np.ndarray, eps_c: float, fixed: np.ndarray | None = None) -> np.ndarray:
+    """Per particle, how far (m) it is short of Eq. 13's clearance: the l1 term of the line search's merit.
+
+    Parameters
+    ----------
+    distance : (N,) float64
+        Signed distance to the target (m); ``inf`` for particles far from it.
+    eps_c : float
+    fixed : (N,) bool, optional
+        Roots, which are never short (Eq. 12).
+
+    Returns
+    -------
+    violation : (N,) float64
+        ``max(eps_c - distance, 0)``, 0 at roots.
+    """
+    short = np.maximum(eps_c - distance, 0.0)
+    return short if fixed is None else np.where(fixed, 0.0, short)
+
+
+def push_out_short(
+    points: np.ndarray, fixed: np.ndarray, distance: np.ndarray, query: MeshQuery, eps_c: float, tolerance: float
+) -> tuple[np.ndarray, int]:
+    """Eq. 13 made to hold when the iteration cap stopped the loop.
+
+    A loop stopped by its cap, possibly after a shortened step, may leave some free particle
+    short of its clearance: then every free particle closer than ``eps_c`` goes out along the
+    distance normal (:func:`.clearance.push_out`); the result never breaks Eq. 13.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    fixed : (N,) bool
+    distance : (N,) float64
+        Signed distance of ``points`` to the target (m); rows of fixed particles unused.
+    query : MeshQuery
+        The target body.
+    eps_c : float
+    tolerance : float
+        A particle counts as short below ``eps_c - tolerance`` (m).
+
+    Returns
+    -------
+    points : (N, 3) float64
+        ``points`` itself when no particle is short, else a new array.
+    pushed : int
+        Particles that were short.
+    """
+    pushed = int(np.sum((distance < eps_c - tolerance) & ~fixed))
+    if pushed:
+        points = push_out(points, fixed, query, eps_c)
+    return points, pushed

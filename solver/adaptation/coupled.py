@@ -1,4 +1,5 @@
-"""Eq. 1 over a whole coupled hairstyle (the ``global`` method, and the guides of the multi-scale solve), with a chosen QP backend."""
+"""Eq. 1 over a whole coupled hairstyle (the ``global`` method, and the guides of the multi-scale
+solve), by the chosen QP backend: :mod:`.active_set` or :mod:`.osqp_backend`."""
 
 from __future__ import annotations
 
@@ -6,15 +7,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from hairport.solver.adaptation.active_set import ProgressFn, solve_strands
+from hairport.solver.adaptation import active_set, osqp_backend
 from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
-from hairport.solver.adaptation.options import SolveOptions
+from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import problem_from_shape_model
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.progress import ProgressFn
 
-#: how the coupled QPs are solved: this module's active-set method, or OSQP (:mod:`.qp`)
-QP_BACKENDS = ("active-set", "osqp")
+#: how the coupled QPs are solved: the strand-banded active-set method (the default) or OSQP
+QP_BACKENDS = (active_set.BACKEND, osqp_backend.BACKEND)
 
 
 def solve_hairstyle(
@@ -26,13 +28,13 @@ def solve_hairstyle(
     weights: EnergyWeights = EnergyWeights(),
     options: SolveOptions = SolveOptions(),
     gamma: np.ndarray | None = None,
-    backend: str = "active-set",
+    backend: str = active_set.BACKEND,
     start: np.ndarray | None = None,
     broad_phase: Callable[[np.ndarray], np.ndarray] | None = None,
     band: float = np.inf,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
-):
+) -> tuple[np.ndarray, SolveReport]:
     """Eq. 1 over a whole (coupled) hairstyle with the chosen QP backend.
 
     Parameters
@@ -47,24 +49,30 @@ def solve_hairstyle(
     start : (N, 3) float64, optional
         First iterate (``initial`` by default); fixed particles stay where it puts them.
     broad_phase, band
-        See :class:`BodyDistance` (active-set backend only).
+        See :class:`.constraints.BodyDistance` (active-set backend only).
+    progress : ProgressFn, optional
+        ``progress("solve", fraction, message)`` after every outer iteration.
 
     Returns
     -------
     points : (N, 3) float64
-    report : StrandSolveReport or .qp.SolveReport
-    """
-    if backend == "osqp":
-        from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
+    report : SolveReport
+        ``report.backend`` is ``backend``.
 
-        return solve_shape_adaptation(
+    Raises
+    ------
+    ValueError
+        For a backend not in :data:`QP_BACKENDS`.
+    """
+    if backend == osqp_backend.BACKEND:
+        return osqp_backend.solve_shape_adaptation(
             model, initial, fixed, target, weights, options, gamma=gamma, start=start, progress=progress,
             should_stop=should_stop,
         )
-    if backend != "active-set":
+    if backend != active_set.BACKEND:
         raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
     problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
-    return solve_strands(
+    return active_set.solve_strands(
         problem, BodyDistance(target, band, broad_phase), weights, options, start=start, progress=progress,
         should_stop=should_stop,
     )

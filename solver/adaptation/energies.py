@@ -1,7 +1,10 @@
-"""The energies of Eq. 1 as sparse quadratic forms (Eq. 7, 8-10, 11, 14, 21).
+"""The energies of Eq. 1 (Eq. 7, 10, 11, weighted by Eq. 21's gamma): values, gradient and Hessian.
+
+The kNN sets and weights behind Eq. 10 (Eq. 8-9, and Eq. 14's guide-only sets) are
+:mod:`.neighbours`'.
 
 Convention: particles ``(N, 3) float64`` in meters, CSR strands as in
-:mod:`hairport.solver.hair`. Eq. 10 and Eq. 11 are separable in x, y, z (one ``(N, N)``
+:mod:`hairport.solver.model.hair`. Eq. 10 and Eq. 11 are separable in x, y, z (one ``(N, N)``
 operator acts on all three coordinate columns alike); Eq. 7's Gauss-Newton blocks couple
 the coordinates of a segment's two particles only.
 
@@ -25,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-#: segments shorter than this (m) are treated as having this length
-MIN_SEGMENT_LENGTH = 1e-9
+from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
+
 #: Eq. 7's negative curvature is kept down to this share of beta (per segment); a particle
 #: belongs to at most two segments, each adding up to twice its block, so a share below 1/4
 #: leaves the Hessian positive definite through Eq. 11's term alone

@@ -5,7 +5,7 @@ flattened to a vector of ``3 R`` coordinates (meters); the strands are clustered
 k-means (k-means++ seeding, Lloyd iterations) in that space, and in each cluster the member
 strand nearest to the cluster centre becomes the guide.
 
-Convention: CSR strands as in :mod:`hairport.solver.hair`; distances between strands are
+Convention: CSR strands as in :mod:`hairport.solver.model.hair`; distances between strands are
 Euclidean distances between their flattened resampled polylines (m), i.e. ``sqrt(R)`` times
 the root-mean-square distance of corresponding resampled points.
 

@@ -1,15 +1,15 @@
-"""The multi-scale solve of Sec. 5: guides coupled, then every other strand on its own.
+"""The multi-scale solve of Sec. 5 (Eq. 14): guides coupled, then every other strand on its own.
 
 1. Guides (:mod:`.guides`): a few hundred representative strands.
 2. Coarse level: Eq. 1 on the guides only, kNN among particles of other guides, solved by
-   the coupled solver of :mod:`.qp`.
+   the coupled solver of :mod:`.coupled`.
 3. Fine level (Eq. 14): every other ("normal") particle takes its kNN from guide particles
    only; with the guides adapted, these neighbours are constants and all normal strands
-   are independent (:mod:`.strand_solver`). They are solved in chunks of whole strands, so
+   are independent (:mod:`.active_set`). They are solved in chunks of whole strands, so
    memory stays bounded, optionally in parallel processes.
 
-Convention: particles ``(N, 3) float64`` in meters, CSR strands (:mod:`.hair`); guide
-ids are strand indices into the full hairstyle.
+Convention: particles ``(N, 3) float64`` in meters, CSR strands
+(:mod:`hairport.solver.model.hair`); guide ids are strand indices into the full hairstyle.
 """
 
 from __future__ import annotations
@@ -24,18 +24,18 @@ from multiprocessing import get_context
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.adaptation.active_set import StrandSolveReport, solve_strands
+from hairport.solver.adaptation.active_set import solve_strands
 from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
 from hairport.solver.adaptation.guides import select_guides
 from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
-from hairport.solver.adaptation.options import Cancelled, SolveOptions
-from hairport.solver.adaptation.osqp_backend import SolveReport
+from hairport.solver.adaptation.options import SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair, particle_indices
+from hairport.solver.model.progress import ProgressFn, rescaled
 
 #: particles per fine-level chunk: bounds the fine solve's working memory (~1 kB per particle)
 DEFAULT_CHUNK_PARTICLES = 200_000
@@ -43,6 +43,8 @@ DEFAULT_CHUNK_PARTICLES = 200_000
 #: closest-point query and no Eq. 13 constraint in an iteration (m); it exceeds every step
 #: the line search accepts near the body, and the merit test re-queries moved particles
 CONTACT_BAND = 0.02
+#: the coarse level reports its progress in [0, this] of the solve's range, the fine level in the rest
+COARSE_PROGRESS_SHARE = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,11 +129,11 @@ def fine_source(hair: Hair, model: MultiscaleModel) -> FineSource:
 
 @dataclass
 class MultiscaleReport:
-    """What the two levels did."""
+    """What the two levels did: the guides' coupled solve and one active-set report per fine-level chunk."""
 
     guides: int = 0
-    coarse: StrandSolveReport | SolveReport | None = None
-    fine: list[StrandSolveReport] = field(default_factory=list)
+    coarse: SolveReport | None = None
+    fine: list[SolveReport] = field(default_factory=list)
     coarse_seconds: float = 0.0
     fine_seconds: float = 0.0
     chunks: int = 0
@@ -170,7 +172,16 @@ def chunk_strands(counts: np.ndarray, chunk_particles: int) -> list[np.ndarray]:
     return [np.arange(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
-def _solve_chunk(args) -> tuple[np.ndarray, StrandSolveReport]:
+def _labelled(progress: ProgressFn, label: str) -> ProgressFn:
+    """``progress`` with every message prefixed by ``label: ``."""
+
+    def report(stage: str, fraction: float, message: str) -> None:
+        progress(stage, fraction, f"{label}: {message}")
+
+    return report
+
+
+def _solve_chunk(args) -> tuple[np.ndarray, SolveReport]:
     problem, start, vertices, faces, grid, weights, options = args
     query = MeshQuery(vertices, faces)
     distance = BodyDistance(query, CONTACT_BAND, None if grid is None else grid.lower_bound)
@@ -192,7 +203,7 @@ def solve_multiscale(
     chunk_particles: int = DEFAULT_CHUNK_PARTICLES,
     grid: DistanceGrid | None = None,
     backend: str = "active-set",
-    progress: Callable[[float, str], None] | None = None,
+    progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> tuple[np.ndarray, MultiscaleReport]:
     """Eq. 1 by the two levels of Sec. 5.
@@ -223,7 +234,12 @@ def solve_multiscale(
     grid : DistanceGrid, optional
         Broad phase of the target's distance.
     backend : str
-        QP backend of the coarse level (:data:`.strand_solver.QP_BACKENDS`).
+        QP backend of the coarse level (:data:`.coupled.QP_BACKENDS`).
+    progress : ProgressFn, optional
+        The coarse level's iterations as ``guides: ...`` in ``[0, COARSE_PROGRESS_SHARE]``,
+        then ``strands: chunk i/n`` up to 1.
+    should_stop : callable() -> bool, optional
+        Polled by the coarse level once per iteration, by the fine level per chunk.
 
     Returns
     -------
@@ -231,7 +247,8 @@ def solve_multiscale(
     report : MultiscaleReport
     """
     report = MultiscaleReport(guides=len(model.guides))
-    progress = progress or (lambda fraction, message: None)
+    coarse_progress = _labelled(rescaled(progress, 0.0, COARSE_PROGRESS_SHARE), "guides")
+    fine_progress = rescaled(progress, COARSE_PROGRESS_SHARE, 1.0)
     gamma_all = np.ones(hair.n_particles) if gamma is None else np.asarray(gamma, dtype=np.float64)
     first = np.asarray(initial if start is None else start, dtype=np.float64)
     points = first.copy()
@@ -240,9 +257,6 @@ def solve_multiscale(
     guide_particles = particle_indices(hair.offsets, model.guides)
     guide_roots = np.zeros(len(guide_particles), dtype=bool)
     guide_roots[np.concatenate([[0], np.cumsum(hair.counts[model.guides])[:-1]])] = True
-
-    def coarse_progress(fraction: float, message: str) -> None:
-        progress(0.5 * fraction, f"guides: {message}")
 
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(
@@ -279,10 +293,10 @@ def solve_multiscale(
                 indices.append(index)
                 yield piece, fine_start[index]
 
-        def store(number: int, solved: np.ndarray, fine_report: StrandSolveReport) -> None:
+        def store(number: int, solved: np.ndarray, fine_report: SolveReport) -> None:
             points[fine.particles[indices[number]]] = solved
             report.fine.append(fine_report)
-            progress(0.5 + 0.5 * (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
+            fine_progress(SOLVE_STAGE, (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
 
         if report.workers == 1:
             distance = BodyDistance(target, CONTACT_BAND, None if grid is None else grid.lower_bound)

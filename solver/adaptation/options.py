@@ -1,20 +1,32 @@
-"""What both QP backends share: solve options, cancellation, the merit penalty and the damping rule."""
+"""What both QP backends share: solve options, cancellation, the single-level solve report,
+the merit penalty and the Levenberg-Marquardt damping rule of the outer loop (Sec. 4.6)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
 
 #: the l1 penalty on constraint violation in the merit function is this times the largest multiplier
 MERIT_PENALTY_FACTOR = 2.0
-#: step halvings tried before the shortest step is taken anyway
+#: each backtracking step of the line search shortens the step by this factor ...
+BACKTRACK_FACTOR = 0.5
+#: ... and after this many tries the shortest step is taken anyway
 MAX_BACKTRACKS = 6
-
 
 #: radial damping of Eq. 7's curvature model (see energies.shape_blocks): start, bounds, factor
 INITIAL_RADIAL_DAMPING = 1.0
 MIN_RADIAL_DAMPING = 1e-4
 MAX_RADIAL_DAMPING = 1.0
 DAMPING_FACTOR = 4.0
+#: a step whose actual merit decrease is below this share of the model's prediction raises the
+#: damping (the model was too optimistic) ...
+DAMPING_RAISE_BELOW = 0.25
+#: ... and one above this share lowers it
+DAMPING_LOWER_ABOVE = 0.75
+
+#: the stage under which the solvers report progress (``progress(stage, fraction, message)``)
+SOLVE_STAGE = "solve"
 
 
 class Cancelled(RuntimeError):
@@ -36,7 +48,7 @@ class SolveOptions:
     clearance_tolerance : float
         ... and no free particle is closer than ``eps_c - clearance_tolerance`` (m).
     energy_tolerance : float
-        The active-set solver (:mod:`.strand_solver`) also stops a strand (or the coupled
+        The active-set solver (:mod:`.active_set`) also stops a strand (or the coupled
         hairstyle) whose Eq. 1 merit fell by less than this fraction in an iteration, with
         the clearance kept: the tail of the nonconvex loop creeps by micrometres per
         iteration without visible change. 0 disables the test.
@@ -53,3 +65,86 @@ class SolveOptions:
     osqp_eps_abs: float = 1e-7
     osqp_eps_rel: float = 1e-7
     osqp_max_iter: int = 50_000
+
+
+@dataclass
+class SolveReport:
+    """What one outer loop did, by either QP backend (one level; see :class:`.multiscale.MultiscaleReport`
+    for two). The job report's ``solver`` entry is its :func:`dataclasses.asdict`.
+
+    Attributes
+    ----------
+    backend : str
+        ``"active-set"`` or ``"osqp"`` (:data:`.coupled.QP_BACKENDS`).
+    iterations : int
+        Outer iterations run.
+    converged : bool
+    max_step : list of float
+        Per iteration, the longest particle move (m).
+    min_clearance : list of float
+        Per iteration, the smallest signed distance of a free particle (m).
+    step_fractions : list of float
+        Per iteration, the (shortest) step length the line search took.
+    pushed_out : int
+        Particles pushed out after the iteration cap (:func:`.constraints.push_out_short`).
+    seconds : float
+    groups, converged_groups : int
+        Active-set only: independent problems (1 when strands are coupled, else one per
+        strand) and how many of them converged.
+    open_groups, active_set_rounds, cg_steps : list of int
+        Active-set only, per iteration: groups still open, active-set rounds of the QP,
+        conjugate-gradient steps.
+    merit : list of float
+        Active-set only, per iteration: Eq. 1 plus the clearance penalty after the step.
+    osqp_status : list of str
+    osqp_iterations : list of int
+        OSQP only, per iteration: OSQP's status and iterations.
+    """
+
+    backend: str = ""
+    iterations: int = 0
+    converged: bool = False
+    max_step: list[float] = field(default_factory=list)
+    min_clearance: list[float] = field(default_factory=list)
+    step_fractions: list[float] = field(default_factory=list)
+    pushed_out: int = 0
+    seconds: float = 0.0
+    groups: int = 0
+    converged_groups: int = 0
+    open_groups: list[int] = field(default_factory=list)
+    active_set_rounds: list[int] = field(default_factory=list)
+    cg_steps: list[int] = field(default_factory=list)
+    merit: list[float] = field(default_factory=list)
+    osqp_status: list[str] = field(default_factory=list)
+    osqp_iterations: list[int] = field(default_factory=list)
+
+
+def adapt_damping(damping: np.ndarray | float, actual: np.ndarray | float, predicted: np.ndarray | float) -> np.ndarray:
+    """Levenberg-Marquardt update of the radial damping from a step's actual and predicted merit change.
+
+    The ratio ``actual / predicted`` (0 where the model predicted no decrease) says how well
+    the damped model foresaw the step: below :data:`DAMPING_RAISE_BELOW` the damping grows by
+    :data:`DAMPING_FACTOR` (up to :data:`MAX_RADIAL_DAMPING`), above :data:`DAMPING_LOWER_ABOVE`
+    it shrinks by it (down to :data:`MIN_RADIAL_DAMPING`), otherwise it stays.
+
+    Parameters
+    ----------
+    damping : (G,) float64 or float
+        Current damping per group (strand, or the coupled hairstyle).
+    actual : (G,) float64 or float
+        Merit after the full step minus merit before (negative: decrease).
+    predicted : (G,) float64 or float
+        The same change predicted by the QP's quadratic model.
+
+    Returns
+    -------
+    damping : (G,) float64 (0-d for scalar inputs)
+    """
+    predicted = np.asarray(predicted, dtype=np.float64)
+    descent = predicted < 0
+    ratio = np.where(descent, actual / np.where(descent, predicted, -1.0), 0.0)
+    return np.where(
+        ratio < DAMPING_RAISE_BELOW,
+        np.minimum(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR),
+        np.where(ratio > DAMPING_LOWER_ABOVE, np.maximum(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR), damping),
+    )

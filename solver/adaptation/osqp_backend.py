@@ -1,4 +1,4 @@
-"""The iterate-linearize-QP loop of Sec. 4.6, solved with OSQP.
+"""The iterate-linearize-QP loop of Sec. 4.6, solved with OSQP (Eq. 1 under Eq. 12-13).
 
 Each outer iteration linearises Eq. 7 (Gauss-Newton, see :mod:`.energies`) and freezes the
 closest points and normals of Eq. 13 at the current iterate ``p``, and solves a convex QP
@@ -7,13 +7,14 @@ for the step ``delta`` (so that an already optimal hairstyle gives ``delta = 0``
     min  1/2 delta^T P delta + g^T delta
     s.t. <n_i, delta_i> >= eps_c - s_i      for every free (non-root) particle i
 
+with ``P`` the Gauss-Newton Hessian over the free particles, ``g`` the gradient at ``p``
+and ``s_i`` the signed distance of particle i to the target. Roots (Eq. 12) are not
+variables: they stay where the initial transfer put them. The constraints are those of
+:mod:`.constraints`, shared with the active-set backend.
+
 The step is then shortened by backtracking until Eq. 1's energy plus an l1 penalty on
 violated clearance does not increase (Gauss-Newton's model is poor for segments that turn
 far, and the linearised constraints are only local).
-
-with ``P`` the Gauss-Newton Hessian over the free particles, ``g`` the gradient at ``p``
-and ``s_i`` the signed distance of particle i to the target. Roots (Eq. 12) are not
-variables: they stay where the initial transfer put them.
 
 Convention: particles ``(N, 3) float64`` in meters; the QP vector is particle-major
 (x, y, z of the first free particle, then of the second, ...).
@@ -23,48 +24,38 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 import osqp
 import scipy.sparse as sp
 
+from hairport.solver.adaptation.constraints import (
+    clearance_violation,
+    free_coordinates,
+    linearised_clearance,
+    push_out_short,
+)
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, energy_terms, gradient, hessian
 from hairport.solver.adaptation.options import (
-    DAMPING_FACTOR,
+    BACKTRACK_FACTOR,
     INITIAL_RADIAL_DAMPING,
     MAX_BACKTRACKS,
-    MAX_RADIAL_DAMPING,
     MERIT_PENALTY_FACTOR,
-    MIN_RADIAL_DAMPING,
+    SOLVE_STAGE,
     Cancelled,
     SolveOptions,
+    SolveReport,
+    adapt_damping,
 )
-from hairport.solver.mesh.clearance import push_out
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.progress import ProgressFn
 
+#: this backend's name in :data:`.coupled.QP_BACKENDS` and in its reports
+BACKEND = "osqp"
 #: OSQP's tolerance is at most this factor above the floor (options.osqp_eps_*) ...
 QP_LOOSEST_EPS = 1e3
 #: ... and at most this fraction (per meter of tolerance) of the previous step
 QP_ACCURACY_PER_STEP = 1e-3
-
-
-@dataclass
-class SolveReport:
-    """What the loop did."""
-
-    iterations: int = 0
-    converged: bool = False
-    max_step: list[float] = field(default_factory=list)
-    min_clearance: list[float] = field(default_factory=list)
-    osqp_status: list[str] = field(default_factory=list)
-    osqp_iterations: list[int] = field(default_factory=list)
-    step_fractions: list[float] = field(default_factory=list)
-    pushed_out: int = 0
-    seconds: float = 0.0
-
-
-ProgressFn = Callable[[float, str], None]
 
 
 def _constraint_matrix(normals: np.ndarray) -> sp.csc_matrix:
@@ -76,19 +67,9 @@ def _constraint_matrix(normals: np.ndarray) -> sp.csc_matrix:
     return sp.csc_matrix((normals.ravel(), indices, indptr), shape=(f, 3 * f))
 
 
-def _adapt_damping(damping: float, actual: float, predicted: float) -> float:
-    """Levenberg-Marquardt update of the radial damping from the step's actual/predicted decrease."""
-    ratio = actual / predicted if predicted < 0 else 0.0
-    if ratio < 0.25:
-        return min(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR)
-    if ratio > 0.75:
-        return max(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR)
-    return damping
-
-
 def _merit(model, points, initial, weights, gamma, distance, eps_c, penalty) -> float:
     """Eq. 1's energy plus an l1 penalty on violated clearance (the line search's merit)."""
-    violation = float(np.sum(np.maximum(eps_c - distance, 0.0)))
+    violation = float(np.sum(clearance_violation(distance, eps_c)))
     return energy_terms(model, points, initial, gamma).total(weights) + penalty * violation
 
 
@@ -119,10 +100,11 @@ def solve_shape_adaptation(
     weights : EnergyWeights
     options : SolveOptions
     gamma : (N,) float64, optional
-        Eq. 21's adaptive weights.
+        Eq. 21's weights.
     start : (N, 3) float64, optional
         First iterate (defaults to ``initial``).
-    progress : callable(fraction, message), optional
+    progress : ProgressFn, optional
+        ``progress("solve", fraction, message)`` after every outer iteration.
     should_stop : callable() -> bool, optional
         Polled once per outer iteration; True raises :class:`Cancelled`.
 
@@ -130,11 +112,12 @@ def solve_shape_adaptation(
     -------
     points : (N, 3) float64
     report : SolveReport
+        With the OSQP fields (``osqp_status``, ``osqp_iterations``).
     """
     began = time.perf_counter()
     points = np.array(initial if start is None else start, dtype=np.float64)
     free = np.flatnonzero(~fixed)
-    report = SolveReport()
+    report = SolveReport(backend=BACKEND)
     if len(free) == 0:
         report.converged = True
         return points, report
@@ -153,7 +136,7 @@ def solve_shape_adaptation(
     radial_damping = INITIAL_RADIAL_DAMPING
     last_step = np.inf
     f = len(free)
-    free3 = (3 * free[:, None] + np.arange(3)).ravel()
+    free3 = free_coordinates(fixed)
     sd = target.signed_distance(points[free])
     for iteration in range(options.max_iterations):
         if should_stop is not None and should_stop():
@@ -162,8 +145,9 @@ def solve_shape_adaptation(
         P = sp.triu(H, format="csc")
         P.sort_indices()
         q = gradient(model, points, initial, weights, gamma)[free].ravel()
+        # one half-space per free particle: without a broad phase every one is constrained
+        _, lower = linearised_clearance(sd.distance, options.eps_c)
         A = _constraint_matrix(sd.normal)
-        lower = options.eps_c - sd.distance
         upper = np.full(f, np.inf)
         if solver is None or pattern is None or not (
             np.array_equal(pattern[0], P.indptr) and np.array_equal(pattern[1], P.indices)
@@ -194,10 +178,10 @@ def solve_shape_adaptation(
             trial_sd = target.signed_distance(trial[free])
             merit_trial = _merit(model, trial, initial, weights, gamma, trial_sd.distance, options.eps_c, penalty)
             if attempt == 0:
-                radial_damping = _adapt_damping(radial_damping, merit_trial - merit_now, predicted)
+                radial_damping = float(adapt_damping(radial_damping, merit_trial - merit_now, predicted))
             if merit_trial <= merit_now:
                 break
-            fraction *= 0.5
+            fraction *= BACKTRACK_FACTOR
         points, sd = trial, trial_sd
         report.step_fractions.append(fraction)
         max_step = fraction * float(np.max(np.linalg.norm(step, axis=1)))
@@ -209,16 +193,16 @@ def solve_shape_adaptation(
         clearance = float(np.min(sd.distance))
         report.min_clearance.append(clearance)
         if progress is not None:
-            progress((iteration + 1) / options.max_iterations, f"iteration {iteration + 1}: max step {max_step:.2e} m")
+            progress(SOLVE_STAGE, (iteration + 1) / options.max_iterations,
+                     f"iteration {iteration + 1}: max step {max_step:.2e} m")
         if max_step < options.step_tolerance and clearance >= options.eps_c - options.clearance_tolerance:
             report.converged = True
             break
     if not report.converged:
-        # stopped by the iteration cap, possibly after a shortened step that left some
-        # particle short of its clearance: the result must never break Eq. 13
-        short = sd.distance < options.eps_c - options.clearance_tolerance
-        report.pushed_out = int(short.sum())
-        if report.pushed_out:
-            points = push_out(points, fixed, target, options.eps_c)
+        distance = np.full(len(points), np.inf)
+        distance[free] = sd.distance
+        points, report.pushed_out = push_out_short(
+            points, fixed, distance, target, options.eps_c, options.clearance_tolerance
+        )
     report.seconds = time.perf_counter() - began
     return points, report

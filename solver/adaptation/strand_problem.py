@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from hairport.solver.adaptation import banded
+from hairport.solver.adaptation.constraints import clearance_violation
 from hairport.solver.adaptation.energies import (
     NEGATIVE_CURVATURE_SHARE,
     EnergyWeights,
@@ -121,7 +122,8 @@ def group_energies(
     penalty: float = 0.0, distance: np.ndarray | None = None, eps_c: float = 0.0,
 ) -> np.ndarray:
     """Eq. 1 summed per group ``(n_groups,)`` of particles (``group (N,)``), plus ``penalty``
-    times the clearance short of ``eps_c`` when ``distance (N,)`` is given."""
+    times the clearance short of ``eps_c`` (:func:`.constraints.clearance_violation`) when
+    ``distance (N,)`` is given: the active-set line search's merit."""
     seg = problem.segment_starts
     _, unit = unit_rows(points[seg + 1] - points[seg])
     per_particle = np.zeros(problem.n_particles)
@@ -130,7 +132,7 @@ def group_energies(
     per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
     per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
     if distance is not None and penalty > 0:
-        per_particle += penalty * np.where(problem.fixed, 0.0, np.maximum(eps_c - distance, 0.0))
+        per_particle += penalty * clearance_violation(distance, eps_c, problem.fixed)
     return np.bincount(group, per_particle, minlength=n_groups)
 
 

@@ -2,7 +2,7 @@
 
 Convention: points are ``(N, 3) float64`` in meters; the grid is axis-aligned with cubic
 cells of edge ``spacing`` (m), node ``(i, j, k)`` at ``origin + spacing * (i, j, k)``; node
-values are signed distances (m, negative inside) computed by :meth:`.geometry.MeshQuery.signed_distance`,
+values are signed distances (m, negative inside) computed by :meth:`.query.MeshQuery.signed_distance`,
 exact (float64, libigl's AABB) at every node closer to the surface than the grid's
 ``exact_band``. Beyond ``exact_band`` a node holds a value of the right sign whose
 magnitude is at least ``exact_band`` and at most the exact ``|distance|`` (a certified lower

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: segments shorter than this (m) are treated as having this length (no direction to divide by)
+MIN_SEGMENT_LENGTH = 1e-9
+
 
 def polyline_arc_length(points: np.ndarray) -> np.ndarray:
     """Cumulative arc length of a polyline.

@@ -88,6 +88,10 @@ class SignedDistance:
     normal: np.ndarray
     faces: np.ndarray
 
+    def take(self, rows: np.ndarray) -> "SignedDistance":
+        """The results of some points: ``rows`` is an ``(K,) int64`` index or an ``(N,) bool`` mask."""
+        return SignedDistance(self.distance[rows], self.closest[rows], self.normal[rows], self.faces[rows])
+
 
 @dataclass(frozen=True)
 class RayHits:

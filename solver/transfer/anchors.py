@@ -1,11 +1,13 @@
-"""Initial transfer (paper Sec. 4.1): bone anchoring (Eq. 2-3) and adaptive smoothing (Eq. 4-6).
+"""Initial transfer, anchoring (paper Sec. 4.2, Eq. 2-3): each particle's local coordinates
+relative to a bone and the body, and the same coordinates placed on a target.
 
 Convention: hair particles ``(N, 3) float64`` in meters in the CSR layout of
-:mod:`hairport.solver.hair`; characters as in :mod:`hairport.solver.character`.
+:mod:`hairport.solver.model.hair`; characters as in :mod:`hairport.solver.model.character`.
 
 Anchoring depends on the source only (:func:`compute_anchors`, part of preprocessing);
-placing the anchors on a target (:func:`place_anchors`) and smoothing
-(:func:`smooth_strands`) run per target.
+placing the anchors on a target (:func:`place_anchors`, :func:`root_targets`) runs per
+target, before the smoothing of :mod:`.smoothing`. Roots are anchored by
+:func:`surface_anchors`, which the baselines (:mod:`hairport.solver.baselines`) share.
 
 Deviations from the paper's text, on purpose:
 
@@ -19,7 +21,6 @@ Deviations from the paper's text, on purpose:
 * Besides the valid region, Eq. 2's indicator also asks that the hit lie within reach of
   the particle (:data:`ANCHOR_REACH_FACTOR`); a particle no bone reaches falls back to its
   closest surface point.
-* Eq. 4 restores the *source* Laplacian on the unsmooth set (DESIGN.md section 3).
 * On the target, the ray origin ``o_b`` is the point of the (inner part of the) bone
   closest to the mapped hit ``q_b``, not the point at the source's bone parameter: on the
   source ``p``, ``q_b`` and ``o_b`` are collinear with ``o_b`` the foot of ``p`` (and of
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport.solver.mesh.polyline import closest_points_on_segments
-from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.query import MeshQuery, SignedDistance
 from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
@@ -150,6 +151,48 @@ def inner_bone_segments(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) 
     return heads + lo[:, None] * axis, heads + hi[:, None] * axis
 
 
+def surface_anchors(query: MeshQuery, surface: SignedDistance) -> tuple[np.ndarray, np.ndarray]:
+    """Anchor points at their closest point on the mesh: its face and barycentric coordinates.
+
+    The anchor of every root (so that roots land exactly on the target surface, Eq. 12) and
+    of every fallback particle.
+
+    Parameters
+    ----------
+    query : MeshQuery
+        Over the source mesh.
+    surface : SignedDistance
+        ``query.signed_distance`` of the K points to anchor.
+
+    Returns
+    -------
+    faces : (K,) int64
+        Face holding each closest point.
+    barycentric : (K, 3) float64
+        Of the closest point in that face.
+    """
+    triangles = query.vertices[query.faces[surface.faces]]
+    return surface.faces, barycentric_coordinates(surface.closest, triangles)
+
+
+def root_targets(target: Character, faces: np.ndarray, barycentric: np.ndarray) -> np.ndarray:
+    """Where each root belongs on the target: its anchor (same face, same barycentric coordinates) there.
+
+    Parameters
+    ----------
+    target : Character
+        Same topology as the source the anchors were taken on.
+    faces : (S,) int64
+    barycentric : (S, 3) float64
+        Root anchors, from :func:`surface_anchors` (or an :class:`Anchors`' rows of the roots).
+
+    Returns
+    -------
+    targets : (S, 3) float64
+    """
+    return interpolate_barycentric(target.vertices, target.faces, faces, barycentric)
+
+
 def compute_anchors(
     source: Character,
     points: np.ndarray,
@@ -226,9 +269,9 @@ def compute_anchors(
     frame_offset = np.zeros((n, 3))
     if closest_needed.any():
         idx = np.flatnonzero(closest_needed)
-        faces = surface.faces[idx]
+        faces, barycentric = surface_anchors(query, surface.take(idx))
         best["face"][idx] = faces
-        best["barycentric"][idx] = barycentric_coordinates(surface.closest[idx], source.vertices[source.faces[faces]])
+        best["barycentric"][idx] = barycentric
         best["bone"][idx] = -1
         frames, _ = face_frames(source.vertices, source.faces, faces)
         offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])

@@ -6,7 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from hairport.solver.transfer.anchors import MIN_RAY_LENGTH
+from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 
 #: Eq. 6's epsilon_s: Laplacian discrepancy (unitless, Eq. 5 divides by lengths)
 SMOOTHING_EPS = 0.3
@@ -34,7 +34,7 @@ def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
     """
     n = len(points)
     lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (N-1,), includes fake cross-strand gaps
-    inv = 1.0 / np.maximum(lengths, MIN_RAY_LENGTH)
+    inv = 1.0 / np.maximum(lengths, MIN_SEGMENT_LENGTH)
     is_end = np.zeros(n, dtype=bool)
     is_end[offsets[:-1]] = True
     is_end[offsets[1:] - 1] = True

@@ -18,6 +18,7 @@ from hairport.solver.io.hair import read_hair
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.makehuman import write_character
+from hairport.solver.transfer.anchors import root_targets
 from tests.hairport.cli.helpers import (
     BASELINE,
     N_PARTICLES,
@@ -42,7 +43,8 @@ def expected(world) -> dict:
     hair = read_hair(d / "hair.data")
     adaptable = pipeline.preprocess(source, hair)
     result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=BASELINE))
-    return {"hair": hair, "result": result.hair, "root_targets": pipeline.root_targets(adaptable, target)}
+    roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
+    return {"hair": hair, "result": result.hair, "root_targets": roots}
 
 
 def test_truncated_data_file(capsys, world, out, tmp_path):

@@ -1,44 +1,14 @@
-"""The linearize-then-QP loop (Sec. 4.6)."""
+"""The linearize-then-QP loop of Sec. 4.6 with OSQP (solver/adaptation/osqp_backend.py)."""
 
 import numpy as np
 import pytest
 
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
-from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
+from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import Cancelled, SolveOptions
-from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
+from hairport.solver.adaptation.osqp_backend import BACKEND, solve_shape_adaptation
 from hairport.solver.mesh.query import MeshQuery
-from tests.test_transfer import outward_strands, sphere_character
-
-
-def model_of(hair, k=5):
-    nb = knn_other_strands(hair.points, hair.strand_of, k)
-    K = laplacian_operator(nb, np.arange(hair.n_particles), hair.n_particles)
-    return ShapeModel.build(hair.points, hair.segments, K)
-
-
-def tilt_into_surface(hair, query, angle_from_normal):
-    """Each strand rigidly rotated about its root so it leaves at ``angle_from_normal`` (rad)
-    from the surface normal: beyond pi/2 it dips into the body."""
-    points = hair.points.copy()
-    roots = hair.roots
-    sd = query.signed_distance(points[roots + 1])
-    normal = sd.normal
-    for s, r in enumerate(roots):
-        rel = points[r:hair.offsets[s + 1]] - points[r]
-        d = rel[1] / np.linalg.norm(rel[1])
-        axis = np.cross(normal[s], d)
-        if np.linalg.norm(axis) < 1e-6:
-            axis = np.cross(normal[s], [1.0, 0.0, 0.0])
-        axis /= np.linalg.norm(axis)
-        tangent = np.cross(axis, normal[s])
-        goal = np.cos(angle_from_normal) * normal[s] + np.sin(angle_from_normal) * tangent
-        # rotation taking d to goal about axis
-        theta = np.arctan2(np.dot(np.cross(d, goal), axis), np.dot(d, goal))
-        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-        R = np.eye(3) + np.sin(theta) * K + (1 - np.cos(theta)) * K @ K
-        points[r:hair.offsets[s + 1]] = points[r] + rel @ R.T
-    return points
+from hairport.solver.metrics import mean_segment_angle
+from tests.solver.hair_shapes import model_of, outward_strands, sphere_character, tilt_into_surface
 
 
 @pytest.fixture(scope="module")
@@ -66,8 +36,6 @@ def test_penetrating_start_is_pushed_out_with_clearance_and_roots_stay(head_case
     assert distance.min() >= eps_c - 1e-5
     np.testing.assert_array_equal(points[roots], start[roots])
     # Eq. 7 turns the segments back toward the source directions while pushing out
-    from hairport.solver.metrics import mean_segment_angle
-
     assert mean_segment_angle(points, hair.points, hair.segments) < 0.8 * mean_segment_angle(start, hair.points, hair.segments)
 
 
@@ -95,3 +63,34 @@ def test_weights_trade_off_terms(head_case):
         points, _ = solve_shape_adaptation(model, start, hair.is_root, target, EnergyWeights(3e3, beta))
         far[beta] = np.linalg.norm(points - start, axis=1).mean()
     assert far[1e4] < far[1e2]
+
+
+def test_report_and_progress_of_every_iteration(head_case):
+    hair, model, query = head_case
+    start = tilt_into_surface(hair, query, np.radians(95.0))
+    seen = []
+    options = SolveOptions(max_iterations=4)
+    points, report = solve_shape_adaptation(
+        model, start, hair.is_root, query, options=options, progress=lambda *call: seen.append(call)
+    )
+    assert report.backend == BACKEND == "osqp"
+    assert report.iterations == len(seen) == 4 and not report.converged
+    assert [(stage, fraction) for stage, fraction, _ in seen] == [("solve", k / 4) for k in range(1, 5)]
+    assert [message for _, _, message in seen] == [
+        f"iteration {k + 1}: max step {step:.2e} m" for k, step in enumerate(report.max_step)
+    ]
+    for per_iteration in (report.max_step, report.min_clearance, report.step_fractions, report.osqp_status,
+                          report.osqp_iterations):
+        assert len(per_iteration) == 4
+    assert set(report.osqp_status) <= {"solved", "solved inaccurate"} and min(report.osqp_iterations) > 0
+    # the active-set fields stay empty
+    assert report.groups == 0 and report.open_groups == report.active_set_rounds == report.merit == []
+    # stopped by the cap: whatever was short of the clearance has been pushed out
+    assert query.signed_distance(points[~hair.is_root]).distance.min() >= options.eps_c - 1e-9
+
+
+def test_no_free_particle_is_converged_at_once(head_case):
+    hair, model, query = head_case
+    points, report = solve_shape_adaptation(model, hair.points, np.ones(hair.n_particles, dtype=bool), query)
+    assert report.converged and report.iterations == 0
+    np.testing.assert_array_equal(points, hair.points)

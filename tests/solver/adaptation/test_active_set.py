@@ -1,24 +1,18 @@
-"""The active-set strand solver (solver/strand_solver.py): QPs, derivatives, and agreement with OSQP."""
+"""The active-set strand solver (solver/adaptation/active_set.py): QPs, the outer loop, and agreement with OSQP."""
 
 import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.adaptation.active_set import solve_qp, solve_strands
+from hairport.solver.adaptation.active_set import BACKEND, Frames, normal_frames, solve_qp, solve_strands
 from hairport.solver.adaptation.constraints import BodyDistance
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator, unit_rows
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
 from hairport.solver.adaptation.options import Cancelled, SolveOptions
 from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
-from hairport.solver.adaptation.strand_problem import (
-    StrandProblem,
-    group_energies,
-    newton_system,
-    problem_from_shape_model,
-)
+from hairport.solver.adaptation.strand_problem import StrandProblem, newton_system, problem_from_shape_model
 from hairport.solver.mesh.query import MeshQuery
-from tests.test_qp import model_of, tilt_into_surface
-from tests.test_transfer import outward_strands, sphere_character
+from tests.solver.hair_shapes import fine_problem, model_of, outward_strands, sphere_character, tilt_into_surface
 
 #: both loops converge linearly once particles slide along the faceted surface (the half-spaces
 #: carry no curvature); 1e-7 m steps are reached in < 100 iterations by both
@@ -29,17 +23,6 @@ TIGHT = SolveOptions(max_iterations=200, step_tolerance=1e-7, osqp_eps_abs=1e-10
 def sphere():
     source = sphere_character()
     return source, MeshQuery(source.vertices, source.faces)
-
-
-def fine_problem(hair, start, pull_weight, pull_target, fixed=None):
-    """A decoupled problem (Eq. 14 form: K diagonal) over ``hair``'s strands."""
-    directions = np.zeros_like(hair.points)
-    _, unit = unit_rows(hair.points[1:] - hair.points[:-1])
-    directions[:-1] = unit
-    return StrandProblem(
-        hair.offsets, directions, start, sp.diags(pull_weight, format="csr"), pull_target,
-        np.ones(hair.n_particles), hair.is_root if fixed is None else fixed,
-    )
 
 
 def shape_model_of(problem, source_points):
@@ -88,48 +71,6 @@ def test_qp_solution_satisfies_kkt_and_matches_osqp():
                  np.full(len(idx), np.inf), verbose=False, eps_abs=1e-12, eps_rel=1e-12, max_iter=200000, polishing=True)
     reference = solver.solve(raise_error=False).x.reshape(-1, 3)
     np.testing.assert_allclose(step[idx], reference, atol=1e-9)
-
-
-def test_gradient_matches_finite_differences():
-    rng = np.random.default_rng(1)
-    source_hair = outward_strands(sphere_character(), n_strands=4, n_points=6)
-    points = source_hair.points + rng.normal(scale=1e-3, size=source_hair.points.shape)
-    n = source_hair.n_particles
-    K = sp.random(n, n, density=0.2, random_state=2, format="csr") + sp.identity(n, format="csr")
-    problem = StrandProblem(source_hair.offsets, fine_problem(source_hair, points, np.ones(n), points).source_directions,
-                            source_hair.points, K.tocsr(), rng.normal(scale=1e-3, size=(n, 3)), rng.random(n) + 0.5,
-                            source_hair.is_root)
-    weights = EnergyWeights()
-    gradient = newton_system(problem, points, weights, np.zeros(n)).gradient
-    group = np.zeros(n, dtype=np.int64)
-    h = 1e-7
-    numeric = np.zeros_like(points)
-    for i in range(n):
-        for c in range(3):
-            plus, minus = points.copy(), points.copy()
-            plus[i, c] += h
-            minus[i, c] -= h
-            numeric[i, c] = (group_energies(problem, plus, weights, group, 1)[0]
-                             - group_energies(problem, minus, weights, group, 1)[0]) / (2 * h)
-    np.testing.assert_allclose(gradient, numeric, rtol=1e-5, atol=1e-4)
-
-
-def test_hessian_matches_finite_differences_of_the_gradient_where_convex():
-    """Near the source no negative curvature is clamped: with no damping the model is the exact Hessian."""
-    rng = np.random.default_rng(3)
-    hair = outward_strands(sphere_character(), n_strands=3, n_points=5)
-    points = hair.points + rng.normal(scale=1e-5, size=hair.points.shape)
-    n = hair.n_particles
-    problem = fine_problem(hair, hair.points, np.ones(n), hair.points)
-    weights = EnergyWeights()
-    system = newton_system(problem, points, weights, np.zeros(n))
-    h = 1e-8
-    for j in rng.choice(3 * n, size=10, replace=False):
-        e = np.zeros((n, 3))
-        e.ravel()[j] = 1.0
-        numeric = (newton_system(problem, points + h * e, weights, np.zeros(n)).gradient
-                   - newton_system(problem, points - h * e, weights, np.zeros(n)).gradient) / (2 * h)
-        np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
 
 
 def test_source_is_a_fixed_point(sphere):
@@ -192,3 +133,65 @@ def test_cancel_stops_the_loop(sphere):
     problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root)
     with pytest.raises(Cancelled):
         solve_strands(problem, BodyDistance(query), should_stop=lambda: True)
+
+
+def test_report_and_progress_of_every_iteration(sphere):
+    source, query = sphere
+    hair = outward_strands(source, n_strands=6, n_points=10, seed=7)
+    start = tilt_into_surface(hair, query, np.radians(93.0))
+    problem = fine_problem(hair, start, np.full(hair.n_particles, 1.0), hair.points)
+    seen = []
+    options = SolveOptions(max_iterations=5)
+    points, report = solve_strands(problem, BodyDistance(query), options=options,
+                                   progress=lambda *call: seen.append(call))
+    assert report.backend == BACKEND == "active-set"
+    assert report.groups == 6 and report.open_groups[0] == 6  # uncoupled: a group per strand
+    assert report.iterations == len(seen) == 5 and not report.converged
+    assert [(stage, fraction) for stage, fraction, _ in seen] == [("solve", k / 5) for k in range(1, 6)]
+    still_open = report.open_groups[1:] + [report.groups - report.converged_groups]
+    assert [message for _, _, message in seen] == [
+        f"iteration {k + 1}: max step {step:.2e} m, {n} open" for k, (step, n) in enumerate(zip(report.max_step, still_open))
+    ]
+    for per_iteration in (report.max_step, report.min_clearance, report.step_fractions, report.active_set_rounds,
+                          report.cg_steps, report.merit):
+        assert len(per_iteration) == report.iterations
+    assert report.cg_steps == report.active_set_rounds  # K diagonal: one banded solve per round, no CG
+    assert report.osqp_status == report.osqp_iterations == []
+    # stopped by the cap: whatever was short of the clearance has been pushed out
+    assert query.signed_distance(points[~hair.is_root]).distance.min() >= options.eps_c - 1e-9
+
+
+def test_normal_frames_are_rotations_with_the_normal_first():
+    rng = np.random.default_rng(4)
+    normals = rng.normal(size=(200, 3))
+    normals[:3] = np.eye(3)  # axis-aligned normals
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    R = normal_frames(normals)
+    np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.broadcast_to(np.eye(3), R.shape), atol=1e-15)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-15)
+    np.testing.assert_array_equal(R[:, :, 0], normals)
+
+
+@pytest.mark.parametrize("rows", [np.array([1, 4]), np.array([0, 1, 2, 3, 5])], ids=["sparse", "dense"])
+def test_frames_rotate_only_their_rows_and_invert(rows):
+    rng = np.random.default_rng(5)
+    n = 6
+    normals = rng.normal(size=(len(rows), 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    frames = Frames(n, rows, normals)
+    assert frames.dense == (len(rows) > n // 2)
+    x = rng.normal(size=(n, 3))
+    local = frames.to_local(x)
+    np.testing.assert_allclose(local[rows, 0], np.einsum("ij,ij->i", normals, x[rows]), rtol=0, atol=1e-15)
+    others = np.setdiff1d(np.arange(n), rows)
+    np.testing.assert_array_equal(local[others], x[others])
+    np.testing.assert_allclose(frames.to_world(local), x, rtol=0, atol=1e-15)
+    # R^T H R of a block-tridiagonal H, against the dense product
+    diagonal, upper = rng.normal(size=(n, 3, 3)), rng.normal(size=(n, 3, 3))
+    rotated_diagonal, rotated_upper = frames.rotate_blocks(diagonal, upper)
+    R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    R[rows] = normal_frames(normals)
+    for i in range(n):
+        np.testing.assert_allclose(rotated_diagonal[i], R[i].T @ diagonal[i] @ R[i], rtol=0, atol=1e-14)
+    for i in range(n - 1):
+        np.testing.assert_allclose(rotated_upper[i], R[i].T @ upper[i] @ R[i + 1], rtol=0, atol=1e-14)

@@ -1,11 +1,13 @@
-"""The multi-scale solve (solver/multiscale.py): agreement with the coupled solve, chunking, workers."""
+"""The multi-scale solve (solver/adaptation/multiscale.py, Eq. 14): agreement with the coupled solve, chunking, workers, progress."""
 
 import numpy as np
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.adaptation.multiscale import chunk_strands
+from hairport.solver.adaptation.multiscale import COARSE_PROGRESS_SHARE, chunk_strands, solve_multiscale
+from hairport.solver.adaptation.options import SolveOptions
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.hair import particle_indices
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
@@ -55,8 +57,6 @@ def test_multiscale_result_is_penetration_free_with_exact_roots(case):
 def test_guides_move_only_in_the_coarse_solve(case):
     """The fine level leaves guide particles where the coarse level put them."""
     _, target, hair, adaptable, multiscale = case
-    from hairport.solver.model.hair import particle_indices
-
     guides = particle_indices(hair.offsets, adaptable.multiscale.guides)
     options = pipeline.RetargetOptions(method="multiscale", workers=1, chunk_particles=1)
     chunked = pipeline.retarget(adaptable, target, options)
@@ -72,3 +72,26 @@ def test_parallel_workers_give_the_same_result(case):
     parallel = pipeline.retarget(adaptable, target, options)
     assert parallel.solve.workers == 2 and parallel.solve.chunks >= 2
     np.testing.assert_allclose(parallel.hair.points, multiscale.hair.points, rtol=0, atol=1e-12)
+
+
+def test_progress_of_the_coarse_then_the_fine_level(case):
+    """Guides' iterations in [0, 0.5] as ``guides: ...``, then one report per fine chunk up to 1."""
+    _, target, hair, adaptable, _ = case
+    prepared = pipeline.prepare_target(adaptable, target)
+    initial, _ = pipeline.initial_transfer(adaptable, prepared)
+    seen = []
+    options = SolveOptions(max_iterations=3)
+    _, report = solve_multiscale(
+        hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial,
+        MeshQuery(prepared.vertices, prepared.faces), options=options, chunk_particles=1000,
+        progress=lambda *call: seen.append(call),
+    )
+    coarse = report.coarse
+    assert COARSE_PROGRESS_SHARE == 0.5 and report.chunks >= 2
+    assert seen == [
+        ("solve", 0.5 * k / 3, f"guides: iteration {k}: max step {step:.2e} m, {n} open")
+        for k, step, n in zip(range(1, coarse.iterations + 1), coarse.max_step,
+                              coarse.open_groups[1:] + [coarse.groups - coarse.converged_groups])
+    ] + [("solve", 0.5 + 0.5 * i / report.chunks, f"strands: chunk {i}/{report.chunks}")
+         for i in range(1, report.chunks + 1)]
+

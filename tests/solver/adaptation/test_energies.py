@@ -1,76 +1,21 @@
-"""Energies of Eq. 7-11: hand-solvable cases and identities."""
+"""Energies of Eq. 7, 10 and 11 (solver/adaptation/energies.py): hand-solvable cases and identities."""
 
 import numpy as np
 import pytest
 
 from hairport.solver.adaptation.energies import (
     EnergyWeights,
-    ShapeModel,
+    clamped_direction_hessians,
     energy_terms,
     gradient,
     hessian,
     segment_operator,
 )
-from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
 from hairport.solver.model.hair import Hair
+from tests.solver.hair_shapes import model_of, parallel_strands
 
-
-def parallel_strands(n_strands=3, n_points=6, spacing=0.01, step=0.005):
-    strands = [np.stack([np.full(n_points, s * spacing), -step * np.arange(n_points), np.zeros(n_points)], axis=1)
-               for s in range(n_strands)]
-    return Hair.from_strands(strands)
-
-
-def model_of(hair, k=2):
-    nb = knn_other_strands(hair.points, hair.strand_of, k)
-    K = laplacian_operator(nb, np.arange(hair.n_particles), hair.n_particles)
-    return ShapeModel.build(hair.points, hair.segments, K), nb
-
-
-def test_knn_excludes_own_strand_and_weights_sum_to_one():
-    hair = parallel_strands()
-    nb = knn_other_strands(hair.points, hair.strand_of, 3)
-    assert (hair.strand_of[nb.index] != hair.strand_of[:, None]).all()
-    np.testing.assert_allclose(nb.weight.sum(axis=1), 1.0, atol=1e-15)
-
-
-def test_knn_nearest_is_the_adjacent_strand_at_equal_height():
-    hair = parallel_strands(spacing=0.01, step=0.005)
-    nb = knn_other_strands(hair.points, hair.strand_of, 1)
-    middle = np.flatnonzero(hair.strand_of == 0)
-    # strand 0's nearest other particle is strand 1's particle at the same height, 1 cm away
-    np.testing.assert_allclose(np.linalg.norm(hair.points[nb.index[middle, 0]] - hair.points[middle], axis=1), 0.01)
-
-
-def test_knn_inverse_distance_weights_match_eq9():
-    hair = parallel_strands(n_strands=3, spacing=0.01)
-    nb = knn_other_strands(hair.points, hair.strand_of, 2)
-    i = 0  # strand 0 root: neighbours at 1 cm (strand 1 root) and at sqrt(1^2+0.5^2) cm (strand 1 next)
-    d = np.linalg.norm(hair.points[nb.index[i]] - hair.points[i], axis=1)
-    expected = (1 / d) / np.sum(1 / d)
-    np.testing.assert_allclose(nb.weight[i], expected, rtol=1e-14)
-
-
-def test_knn_candidates_restrict_neighbours_to_guides():
-    hair = parallel_strands(n_strands=4)
-    guides = np.isin(hair.strand_of, [0, 3])
-    nb = knn_other_strands(hair.points, hair.strand_of, 2, candidates=guides)
-    assert guides[nb.index].all()
-
-
-def test_knn_single_strand_has_no_neighbours():
-    hair = parallel_strands(n_strands=1)
-    nb = knn_other_strands(hair.points, hair.strand_of, 5)
-    assert np.all(nb.weight == 0.0)
-    K = laplacian_operator(nb, np.arange(hair.n_particles), hair.n_particles)
-    assert abs(K).sum() == 0.0
-
-
-def test_laplacian_is_translation_invariant():
-    hair = parallel_strands()
-    model, _ = model_of(hair)
-    shifted = hair.points + np.array([0.3, -1.0, 2.0])
-    np.testing.assert_allclose(model.K @ shifted, model.source_features, atol=1e-14)
+#: the kNN count of these tests' shape models
+K_NEIGHBOURS = 2
 
 
 def test_segment_operator_differences():
@@ -80,7 +25,7 @@ def test_segment_operator_differences():
 
 def test_energies_vanish_at_source_and_scale_invariance_of_shape_term():
     hair = parallel_strands()
-    model, _ = model_of(hair)
+    model = model_of(hair, K_NEIGHBOURS)
     terms = energy_terms(model, hair.points, hair.points)
     assert terms.strand_shape < 1e-28 and terms.inter_strand < 1e-28 and terms.hair_body == 0.0
     # Eq. 7 only sees directions: a uniformly stretched hairstyle has zero shape energy
@@ -90,7 +35,7 @@ def test_energies_vanish_at_source_and_scale_invariance_of_shape_term():
 def test_shape_energy_of_one_rotated_segment():
     strand = np.array([[0.0, 0, 0], [0.0, -0.01, 0]])
     hair = Hair.from_strands([strand])
-    model, _ = model_of(hair, k=1)
+    model = model_of(hair, k=1)
     angle = 0.3
     bent = np.array([[0.0, 0, 0], [0.01 * np.sin(angle), -0.01 * np.cos(angle), 0]])
     # |u - d|^2 = 2 - 2 cos(angle)
@@ -100,7 +45,7 @@ def test_shape_energy_of_one_rotated_segment():
 def test_gradient_matches_finite_differences_of_eq1():
     rng = np.random.default_rng(3)
     hair = parallel_strands(n_strands=3, n_points=5)
-    model, _ = model_of(hair)
+    model = model_of(hair, K_NEIGHBOURS)
     weights = EnergyWeights(alpha=3e3, beta=1e3)
     points = hair.points + 1e-3 * rng.normal(size=hair.points.shape)
     initial = hair.points + 1e-3 * rng.normal(size=hair.points.shape)
@@ -124,7 +69,7 @@ def test_hessian_is_exact_where_directions_match_the_source():
     """At zero direction residual (a stretched source) Gauss-Newton is the exact Hessian."""
     rng = np.random.default_rng(4)
     hair = parallel_strands(n_strands=3, n_points=5)
-    model, _ = model_of(hair)
+    model = model_of(hair, K_NEIGHBOURS)
     weights = EnergyWeights()
     points = 1.3 * hair.points  # same directions, longer segments
     initial = hair.points
@@ -139,8 +84,6 @@ def test_hessian_is_exact_where_directions_match_the_source():
 
 
 def test_closed_form_clamped_hessians_match_an_eigensolver():
-    from hairport.solver.adaptation.energies import clamped_direction_hessians
-
     rng = np.random.default_rng(0)
     u = rng.normal(size=(500, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)

@@ -1,4 +1,4 @@
-"""Conservative distance grid (solver/distance_grid.py): lower bounds, near masks, signs.
+"""Conservative distance grid (solver/mesh/distance_grid.py): lower bounds, near masks, signs.
 
 Ground truth is :meth:`MeshQuery.signed_distance` (exact float64) on an icosphere of radius
 0.1 m (|p| - r up to the tessellation) and on an axis-aligned cube, where the hand cases are

@@ -1,4 +1,4 @@
-"""Geometric queries (solver/mesh/): signed distance with a cached tree, ray hits, helpers.
+"""Geometric queries (solver/mesh/query.py): signed distance with a cached tree, ray hits, closest points on triangles.
 
 The reference for the signed distance is libigl's ``signed_distance`` with the
 pseudonormal sign (the implementation before the tree was cached), the analytic distance
@@ -12,97 +12,19 @@ import numpy as np
 import pytest
 import trimesh
 
-from hairport.solver.mesh import backends
 from hairport.solver.mesh import query as mesh_query
-from hairport.solver.mesh.polyline import closest_points_on_segments
 from hairport.solver.mesh.query import ON_SURFACE_DISTANCE, MeshQuery
 from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
-
-
-def _available(name):
-    try:
-        backends._FACE_INDEXES[name](np.eye(3), np.array([[0, 1, 2]]))
-        return True
-    except ImportError:
-        return False
-
-
-BACKENDS = [name for name in backends._FACE_INDEXES if _available(name)]  # the default and the opt-in ones
-
-
-def query_with(vertices, faces, backend):
-    """A MeshQuery whose face search is forced to ``backend``."""
-    query = MeshQuery(vertices, faces)
-    query._prepare()
-    query._closest = backends._closest_face_index(query.vertices, query.faces, [backend])
-    return query
-
-
-def old_signed_distance(points, vertices, faces):
-    """The previous implementation: libigl, tree and normals rebuilt per call."""
-    distance, face, closest, pseudonormal = igl.signed_distance(
-        points, vertices, faces, igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL
-    )
-    return distance, face, closest, pseudonormal / np.linalg.norm(pseudonormal, axis=1, keepdims=True)
-
-
-def icosphere(radius=0.1, subdivisions=3):
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
-    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
-
-
-def dented_box():
-    """A subdivided cube whose top-face centre vertex is pushed in: a concave vertex ringed by
-    convex and concave edges, where a single face normal gets the sign wrong."""
-    mesh = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-    for _ in range(2):
-        mesh = mesh.subdivide()
-    mesh.merge_vertices()
-    vertices = np.array(mesh.vertices)
-    top = np.flatnonzero((np.abs(vertices[:, 2] - 0.5) < 1e-9) & (np.abs(vertices[:, 0]) < 1e-9) & (np.abs(vertices[:, 1]) < 1e-9))
-    assert len(top) == 1
-    vertices[top[0], 2] = 0.2
-    return vertices, np.asarray(mesh.faces, dtype=np.int64), top[0]
-
-
-def assert_matches_old(sd, distance, closest, backend, vertices):
-    """Equal to the previous implementation: to rounding with the float64 search; with the
-    float32 one exactly within the near-surface band and to ~1e-7 of the size beyond it
-    (a near-tie face may be picked there, so the closest point is not compared)."""
-    if backends._FACE_INDEXES[backend].exact:
-        np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(sd.closest, closest, rtol=0, atol=1e-12)
-        return
-    extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
-    np.testing.assert_allclose(sd.distance, distance, rtol=0, atol=1e-6 * extent)
-    near = np.abs(distance) < 0.5 * mesh_query.EXACT_BAND * extent
-    np.testing.assert_allclose(sd.distance[near], distance[near], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(sd.closest[near], closest[near], rtol=0, atol=1e-12)
-    return near
-
-
-def check_normal_identity(points, sd):
-    """<p - closest, normal> == distance, unit normal, |p - closest| == |distance|."""
-    offset = points - sd.closest
-    np.testing.assert_allclose(np.einsum("ij,ij->i", offset, sd.normal), sd.distance, atol=1e-14)
-    np.testing.assert_allclose(np.linalg.norm(sd.normal, axis=1), 1.0, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(offset, axis=1), np.abs(sd.distance), atol=1e-14)
-
-
-def sample_near_features(vertices, faces, rng, n=600):
-    """Points inside/outside near the vertices, edge midpoints and face centroids, plus deep
-    inside and far outside."""
-    corners = vertices[faces]
-    centroid = corners.mean(axis=1)
-    midpoint = 0.5 * (corners[:, 0] + corners[:, 1])
-    extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
-    anchors = np.concatenate([vertices, midpoint, centroid])
-    anchors = anchors[rng.integers(0, len(anchors), n)]
-    offsets = rng.normal(size=(n, 3)) * extent * np.geomspace(1e-7, 1e-1, n)[:, None]
-    center = vertices.mean(axis=0)
-    deep = center + rng.normal(size=(n // 6, 3)) * 0.1 * extent
-    far = center + rng.normal(size=(n // 6, 3)) * 2.0 * extent
-    return np.concatenate([anchors + offsets, deep, far])
+from tests.solver.mesh.meshes import (
+    BACKENDS,
+    assert_matches_old,
+    check_normal_identity,
+    dented_box,
+    icosphere,
+    old_signed_distance,
+    query_with,
+    sample_near_features,
+)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -228,23 +150,6 @@ def test_sign_near_features_of_non_convex_meshes(backend, shape):
     check_normal_identity(points, sd)
 
 
-def test_float32_face_search_is_close_everywhere_and_exact_near_the_surface():
-    if "fcpw" not in BACKENDS:
-        pytest.skip("fcpw not installed")
-    vertices, faces = icosphere(0.1, subdivisions=4)
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    surface, _ = trimesh.sample.sample_surface(mesh, 20000, seed=3)
-    rng = np.random.default_rng(3)
-    points = surface + rng.normal(size=surface.shape) * np.geomspace(1e-9, 1e-2, len(surface))[:, None]
-    fast, exact = query_with(vertices, faces, "fcpw"), query_with(vertices, faces, "igl")
-    a, b = fast.signed_distance(points), exact.signed_distance(points)
-    np.testing.assert_array_equal(a.distance < 0, b.distance < 0)
-    extent = np.linalg.norm(vertices.max(0) - vertices.min(0))
-    np.testing.assert_allclose(a.distance, b.distance, atol=1e-6 * extent)
-    near = np.abs(b.distance) < 0.5 * mesh_query.EXACT_BAND * extent
-    np.testing.assert_allclose(a.distance[near], b.distance[near], atol=1e-14)
-
-
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_sign_next_to_a_knife_edge(backend):
     """A thin wedge (5 degree edge), points from 1e-8 to 1e-3 away from its sharp edge: the
@@ -316,30 +221,6 @@ def test_z_order_sorting_does_not_change_results(backend, monkeypatch):
         np.testing.assert_array_equal(getattr(sorted_, field), getattr(plain, field))
 
 
-def test_default_backend_and_structures_are_built_once():
-    vertices, faces = icosphere()
-    query = MeshQuery(vertices, faces)
-    assert query._closest is None  # lazily
-    points = np.random.default_rng(4).normal(size=(50, 3)) * 0.1
-    first = query.signed_distance(points)
-    index = query._closest
-    assert type(index) is backends._FACE_INDEXES[backends.CLOSEST_FACE_BACKENDS[0]]
-    second = query.signed_distance(points)
-    assert query._closest is index
-    np.testing.assert_array_equal(first.distance, second.distance)
-
-def test_an_unavailable_backend_falls_through(monkeypatch):
-    vertices, faces = icosphere()
-
-    def missing(*_):
-        raise ImportError("not installed")
-
-    monkeypatch.setitem(backends._FACE_INDEXES, "missing", missing)
-    assert isinstance(backends._closest_face_index(vertices, faces, ["missing", "igl"]), backends._IglFaces)
-    with pytest.raises(ImportError):
-        backends._closest_face_index(vertices, faces, ["missing"])
-
-
 def test_pickle_and_empty_input():
     vertices, faces = icosphere()
     query = MeshQuery(vertices, faces)
@@ -354,6 +235,18 @@ def test_pickle_and_empty_input():
     assert empty.distance.shape == (0,) and empty.closest.shape == (0, 3) and empty.faces.dtype == np.int64
     hits = query.first_hits(np.zeros((0, 3)), np.zeros((0, 3)))
     assert hits.hit.shape == (0,) and hits.points.shape == (0, 3)
+
+
+def test_take_selects_rows_of_a_result():
+    vertices, faces = icosphere()
+    points = np.random.default_rng(13).normal(size=(30, 3)) * 0.1
+    sd = MeshQuery(vertices, faces).signed_distance(points)
+    rows = np.array([4, 0, 17])
+    part = sd.take(rows)
+    for field in ("distance", "closest", "normal", "faces"):
+        np.testing.assert_array_equal(getattr(part, field), getattr(sd, field)[rows])
+    mask = sd.distance < 0
+    np.testing.assert_array_equal(sd.take(mask).distance, sd.distance[mask])
 
 
 def test_first_hits_match_trimesh_reference():
@@ -384,40 +277,6 @@ def test_first_hits_match_trimesh_reference():
     np.testing.assert_allclose(interpolate_barycentric(vertices, faces, hits.faces[h], hits.barycentric[h]), hits.points[h], atol=1e-9)
     assert hits.barycentric[h].min() > -1e-6
     np.testing.assert_allclose(hits.barycentric[h].sum(axis=1), 1.0, atol=1e-12)
-
-
-def test_barycentric_helpers_round_trip():
-    rng = np.random.default_rng(7)
-    triangles = rng.normal(size=(500, 3, 3))
-    weights = rng.dirichlet(np.ones(3), 500)
-    weights[:50] = np.eye(3)[rng.integers(0, 3, 50)]  # corners
-    points = np.einsum("ij,ijk->ik", weights, triangles)
-    np.testing.assert_allclose(barycentric_coordinates(points, triangles), weights, atol=1e-9)
-    # off the plane: coordinates of the projection
-    normal = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    lifted = points + normal * rng.normal(size=(500, 1))
-    np.testing.assert_allclose(barycentric_coordinates(lifted, triangles), weights, atol=1e-9)
-    # interpolate through a face table
-    vertices = triangles.reshape(-1, 3)
-    faces = np.arange(len(vertices)).reshape(-1, 3)
-    ids = rng.permutation(500)
-    np.testing.assert_allclose(interpolate_barycentric(vertices, faces, ids, weights[ids]), points[ids], atol=1e-12)
-
-
-def test_closest_points_on_segments_against_dense_sampling():
-    rng = np.random.default_rng(8)
-    points = rng.normal(size=(30, 3))
-    heads, tails = rng.normal(size=(7, 3)), rng.normal(size=(7, 3))
-    tails[0] = heads[0]  # a degenerate segment
-    t, closest = closest_points_on_segments(points, heads, tails)
-    assert t.shape == (30, 7) and closest.shape == (30, 7, 3)
-    assert t.min() >= 0 and t.max() <= 1
-    grid = np.linspace(0.0, 1.0, 20001)
-    samples = heads[None, :, None] + grid[None, None, :, None] * (tails - heads)[None, :, None]  # (1, B, G, 3)
-    best = np.linalg.norm(points[:, None, None] - samples, axis=-1).min(axis=-1)
-    got = np.linalg.norm(points[:, None] - closest, axis=-1)
-    assert (got <= best + 1e-12).all() and (best - got).max() < 1e-6
-    np.testing.assert_allclose(closest[:, 0], np.broadcast_to(heads[0], (30, 3)))
 
 
 def test_closest_point_regions_against_brute_force():

@@ -1,76 +1,31 @@
-"""Tests of the naive retargeting baselines (solver/baselines.py) on a synthetic icosphere head."""
+"""Tests of the naive retargeting baselines (solver/baselines.py) on a synthetic ellipsoid head."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-import trimesh
 from scipy.spatial.transform import Rotation
 
-from hairport.solver.baselines import BASELINE_METHODS, anchor_roots, parse_method, retarget_baseline, root_targets
-from hairport.solver.mesh.clearance import push_out
+from hairport.solver.baselines import BASELINE_METHODS, parse_method, retarget_baseline
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.triangles import face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError, TopologyMismatch
 from hairport.solver.model.hair import Hair
+from hairport.solver.transfer.anchors import root_targets, surface_anchors
+from tests.solver.hair_shapes import HEAD_RADIUS, ellipsoid_head, hanging_groom
 
-HEAD_RADIUS = 0.1  # m
-SEGMENTS_PER_STRAND = 12
-HEAD_AXES = np.array([1.0, 0.9, 1.1])  # relative semi-axes of the ellipsoidal head
-STRAND_END_POLAR = 1.9  # rad: strands hang down to this polar angle (a little below the equator)
-MIN_SOURCE_CLEARANCE = 1e-3  # m: the synthetic groom keeps this from its source head
 SNAPPING_METHODS = ("root-translate", "root-rigid", "affine-translate", "rbf-warp")
-
-
-def _head() -> Character:
-    mesh = trimesh.creation.icosphere(subdivisions=3, radius=HEAD_RADIUS)
-    vertices = np.asarray(mesh.vertices) * HEAD_AXES  # an ellipsoid, not a sphere
-    return Character(vertices, np.asarray(mesh.faces), name="head")
-
-
-def _groom(head: Character, n_strands: int = 150, seed: int = 0) -> Hair:
-    """Strands rooted exactly on the upper head, hanging down along it a few mm outside.
-
-    Non-root particles lie on scaled copies (2-4 % larger) of the smooth ellipsoid whose
-    vertices the head mesh interpolates, so they clear the (inscribed) mesh by > 1 mm.
-    """
-    rng = np.random.default_rng(seed)
-    centroids = head.vertices[head.faces].mean(axis=1)
-    candidates = np.flatnonzero(centroids[:, 2] > 0.5 * HEAD_RADIUS * HEAD_AXES[2])
-    faces = rng.choice(candidates, n_strands)
-    bary = rng.dirichlet(np.ones(3), n_strands)
-    roots = interpolate_barycentric(head.vertices, head.faces, faces, bary)
-    unit = roots / (HEAD_RADIUS * HEAD_AXES)
-    polar0 = np.arccos(np.clip(unit[:, 2] / np.linalg.norm(unit, axis=1), -1, 1))
-    azimuth = np.arctan2(unit[:, 1], unit[:, 0])
-    k = np.arange(1, SEGMENTS_PER_STRAND + 1) / SEGMENTS_PER_STRAND  # (K,)
-    polar = polar0[:, None] + k[None] * (STRAND_END_POLAR - polar0[:, None])  # (S, K)
-    lift = 1.02 + 0.02 * k[None]
-    on_sphere = np.stack(
-        [np.sin(polar) * np.cos(azimuth[:, None]), np.sin(polar) * np.sin(azimuth[:, None]), np.cos(polar)], axis=2
-    )
-    rest = on_sphere * (lift[..., None] * HEAD_RADIUS * HEAD_AXES)
-    points = np.concatenate([roots[:, None, :], rest], axis=1)
-    hair = Hair(points.reshape(-1, 3), np.arange(n_strands + 1) * (SEGMENTS_PER_STRAND + 1))
-    # keep the strands whose non-root particles clear the source head by MIN_SOURCE_CLEARANCE
-    d = MeshQuery(head.vertices, head.faces).signed_distance(hair.points).distance
-    ok_particle = (d >= MIN_SOURCE_CLEARANCE) | hair.is_root
-    ok = np.logical_and.reduceat(ok_particle, hair.offsets[:-1])
-    hair = hair.subset(np.flatnonzero(ok))
-    thickness = np.linspace(1e-4, 5e-5, hair.n_particles)
-    return Hair(hair.points, hair.offsets, thickness=thickness)
 
 
 @pytest.fixture(scope="module")
 def head() -> Character:
-    return _head()
+    return ellipsoid_head()
 
 
 @pytest.fixture(scope="module")
 def hair(head: Character) -> Hair:
-    hair = _groom(head)
+    hair = hanging_groom(head)
     assert hair.n_strands > 80
     return hair
 
@@ -80,6 +35,11 @@ def _deformed(head: Character) -> Character:
     v = head.vertices
     w = v * np.array([1.15, 0.95, 1.05]) + 0.02 * np.sin(v[:, [1, 2, 0]] / HEAD_RADIUS * 2.0)
     return head.with_vertices(w + np.array([0.01, -0.02, 0.3]), name="deformed")
+
+
+def anchor_roots(source_query: MeshQuery, hair: Hair) -> tuple[np.ndarray, np.ndarray]:
+    """The baselines' root anchors: each root's closest point on the source as face and barycentrics."""
+    return surface_anchors(source_query, source_query.signed_distance(hair.points[hair.roots]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -108,14 +68,6 @@ def test_bad_clearance_and_topology(head, hair):
     other = Character(head.vertices[:-1], head.faces[:10], name="other")
     with pytest.raises(TopologyMismatch):
         retarget_baseline("root-translate", head, other, hair)
-
-
-def test_anchor_roots_reproduce_roots(head, hair):
-    faces, bary = anchor_roots(MeshQuery(head.vertices, head.faces), hair)
-    assert faces.shape == (hair.n_strands,) and bary.shape == (hair.n_strands, 3)
-    np.testing.assert_allclose(bary.sum(axis=1), 1.0, atol=1e-12)
-    assert (bary > -1e-9).all()
-    np.testing.assert_allclose(root_targets(head, faces, bary), hair.points[hair.roots], rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("method", BASELINE_METHODS)
@@ -150,13 +102,6 @@ def test_rigid_motion(head, hair, method):
     out = retarget_baseline(method, head, target, hair)
     expected = hair.points @ rotation.T + shift
     np.testing.assert_allclose(out.points, expected, rtol=0, atol=RIGID_TOLERANCE[method])
-
-
-def test_face_frames_are_rotations(head):
-    frames, valid = face_frames(head.vertices, head.faces, np.arange(head.n_faces))
-    assert valid.all()
-    np.testing.assert_allclose(frames @ frames.transpose(0, 2, 1), np.broadcast_to(np.eye(3), frames.shape), atol=1e-12)
-    np.testing.assert_allclose(np.linalg.det(frames), 1.0, atol=1e-12)
 
 
 @pytest.mark.parametrize("method", SNAPPING_METHODS)
@@ -222,23 +167,6 @@ def test_push_out_removes_penetrations(head, hair, method):
     # the suffix is the same switch
     suffixed = retarget_baseline(method + "+pushout", head, target, hair, clearance=clearance, target_query=query)
     np.testing.assert_array_equal(suffixed.points, pushed.points)
-
-
-def test_push_out_direct(head):
-    query = MeshQuery(head.vertices, head.faces)
-    rng = np.random.default_rng(3)
-    points = rng.normal(size=(500, 3)) * HEAD_RADIUS  # inside and outside
-    is_root = np.zeros(len(points), dtype=bool)
-    is_root[:5] = True
-    out = push_out(points, is_root, query, 2e-3)
-    d = query.signed_distance(out).distance
-    assert d[~is_root].min() >= 2e-3 - 1e-9
-    np.testing.assert_array_equal(out[:5], points[:5])
-    before = query.signed_distance(points).distance
-    np.testing.assert_array_equal(out[before >= 2e-3], points[before >= 2e-3])
-    # pushed particles sit at exactly the clearance
-    moved = (~is_root) & (before < 2e-3)
-    np.testing.assert_allclose(d[moved], 2e-3, atol=1e-9)
 
 
 def test_empty_hair(head):

@@ -1,0 +1,88 @@
+"""Metrics of DESIGN.md section 4 (solver/metrics.py) on hand-solvable cases."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from hairport.solver.adaptation.energies import EnergyWeights, energy_terms
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.metrics import (
+    hairstyle_metrics,
+    interstrand_error,
+    mean_particle_distance,
+    mean_segment_angle,
+    penetration,
+    root_errors,
+    segment_angles,
+)
+from tests.solver.hair_shapes import model_of, parallel_strands
+
+
+def test_mean_particle_distance():
+    a = np.zeros((4, 3))
+    b = np.array([[1.0, 0, 0], [0, 2.0, 0], [0, 0, 3.0], [0, 0, 0]])
+    assert mean_particle_distance(a, b) == 1.5
+
+
+def test_segment_angles_of_a_known_turn_and_of_tiny_turns():
+    segments = np.array([[0, 1]])
+    a = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    b = np.array([[0.0, 0, 0], [np.cos(0.3), np.sin(0.3), 0]])
+    assert abs(segment_angles(a, b, segments)[0] - 0.3) < 1e-15
+    tiny = np.array([[0.0, 0, 0], [1.0, 1e-9, 0]])
+    assert abs(mean_segment_angle(a, tiny, segments) - 1e-9) < 1e-20  # atan2 keeps tiny angles
+
+
+def test_penetration_counts_inside_and_short_of_clearance():
+    sphere = trimesh.creation.icosphere(5, radius=1.0)
+    query = MeshQuery(sphere.vertices, sphere.faces)
+    # radial points over a face centre, at known signed distances from the polyhedron
+    centre = sphere.triangles_center[0]
+    normal = sphere.face_normals[0]
+    offsets = np.array([-1e-3, 4e-4, 5e-4 - 1e-8, 1e-3])  # inside, short, short within tolerance, clear
+    points = centre + offsets[:, None] * normal
+    stats = penetration(points, np.zeros(4, dtype=bool), query, eps_c=5e-4)
+    np.testing.assert_allclose(stats["distance"], offsets, atol=1e-12)
+    assert stats["inside"] == 1
+    assert stats["below_clearance"] == 2
+    assert abs(stats["min_distance"] + 1e-3) < 1e-12
+
+
+def test_root_errors_to_targets_and_to_the_surface():
+    sphere = trimesh.creation.icosphere(3, radius=1.0)
+    query = MeshQuery(sphere.vertices, sphere.faces)
+    centres, normals = sphere.triangles_center[:2], sphere.face_normals[:2]
+    roots = centres + np.array([[1e-3], [0.0]]) * normals  # 1 mm off the surface, and on it
+    targets = roots + [[0.0, 0.0, 3e-3], [4e-3, 0.0, 0.0]]
+    errors = root_errors(roots, targets, query)
+    assert list(errors) == ["root_to_target_max", "root_to_target_mean", "root_to_surface_max", "root_to_surface_mean"]
+    np.testing.assert_allclose([errors["root_to_target_max"], errors["root_to_target_mean"]], [4e-3, 3.5e-3], rtol=1e-12)
+    np.testing.assert_allclose([errors["root_to_surface_max"], errors["root_to_surface_mean"]], [1e-3, 5e-4], atol=1e-15)
+    assert root_errors(np.zeros((0, 3)), np.zeros((0, 3)), query) == dict.fromkeys(errors, 0.0)
+
+
+def test_interstrand_error_and_all_metrics_of_a_moved_hairstyle():
+    hair = parallel_strands(n_strands=3, n_points=5)
+    model = model_of(hair, k=2)
+    shifted = hair.points.copy()
+    shifted[hair.strand_of == 1] += [0.0, 0.0, 0.002]  # the middle strand 2 mm off its neighbours
+    assert interstrand_error(model, hair.points + 0.5) < 1e-15  # Eq. 10 ignores translations
+    expected = np.mean(np.linalg.norm(model.K @ shifted - model.source_features, axis=1))
+    assert interstrand_error(model, shifted) == expected > 1e-3
+
+    body = trimesh.creation.icosphere(2, radius=0.005)  # a small ball far below the strands
+    query = MeshQuery(np.asarray(body.vertices) + [0.0, -0.5, 0.0], body.faces)
+    roots = hair.points[hair.roots]
+    metrics = hairstyle_metrics(shifted, hair.points, hair.points, hair.is_root, roots, model, query, eps_c=5e-4)
+    n = hair.n_particles
+    assert metrics["particles"] == n and metrics["penetrating_particles"] == metrics["particles_below_clearance"] == 0
+    assert metrics["mean_segment_angle_rad"] == metrics["max_segment_angle_rad"] == 0.0  # a translated strand
+    assert metrics["mean_distance_to_initial_m"] == pytest.approx(0.002 * 5 / n, rel=1e-12)
+    assert metrics["interstrand_error_m"] == expected
+    terms = energy_terms(model, shifted, hair.points)
+    assert metrics["energy_inter_strand_per_particle"] == terms.inter_strand / n
+    assert metrics["energy_hair_body_per_particle"] == pytest.approx(5 * 0.002**2 / n, rel=1e-12)
+    assert metrics["energy_total_per_particle"] == terms.total(EnergyWeights()) / n
+    assert metrics["root_to_target_max"] == pytest.approx(0.002, rel=1e-12)  # the middle strand's root moved too
+    assert metrics["root_to_target_mean"] == pytest.approx(0.002 / 3, rel=1e-12)
+    assert metrics["min_signed_distance_m"] == pytest.approx(0.5 - 0.02 - 0.005, abs=1e-9)  # tip over the ball's pole
