@@ -8,7 +8,8 @@ transfer (Eq. 2-6), then shape adaptation (Eq. 1) or a baseline, then metrics.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -23,7 +24,6 @@ from hairport.solver.adaptation.multiscale import (
     solve_multiscale,
 )
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
-from hairport.solver.artifact import FORMAT_VERSION, load_adaptable, save_adaptable
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
 from hairport.solver.hairline.curve import HairlineCurve
@@ -31,21 +31,16 @@ from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.hairline.presets import parse_preset
 from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
 from hairport.solver.hairline.weights import adaptive_weights
-from hairport.solver.io.character import MESH_EXTENSIONS as CHARACTER_MESH_EXTENSIONS
-from hairport.solver.io.character import load_character
-from hairport.solver.io.hair import SUPPORTED_FORMATS, ReadLimits, read_hair, write_hair
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
-from hairport.solver.model.progress import rescaled
-from hairport.solver.options import PreprocessOptions, RetargetOptions
+from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
+from hairport.solver.options import SOLVER_METHODS, PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, root_targets
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
-
-ProgressFn = Callable[[str, float, str], None]
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
@@ -72,8 +67,12 @@ class RetargetResult:
         return out
 
 
-def _noop(stage: str, fraction: float, message: str) -> None:
-    return None
+@contextmanager
+def timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Record in ``timings[stage]`` the seconds the block took (when it ends without an error)."""
+    began = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - began
 
 
 def preprocess(
@@ -91,20 +90,18 @@ def preprocess(
     hair : Hair
         The hairstyle made for ``source``.
     """
-    progress = progress or _noop
+    progress = progress or no_progress
     options.validate()
     if source.skeleton is None or source.weights is None:
         raise InputError("the source character needs a skeleton with skin weights", source.name, "no_skeleton")
-    timings = {}
-    began = time.perf_counter()
-    progress("anchors", 0.0, "anchoring particles to bones")
-    query = MeshQuery(source.vertices, source.faces)
-    anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma)
-    timings["anchors"] = time.perf_counter() - began
-    began = time.perf_counter()
-    progress("guides", 0.5, "selecting guides and inter-strand neighbours")
-    multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
-    timings["guides"] = time.perf_counter() - began
+    timings: dict[str, float] = {}
+    with timed(timings, "anchors"):
+        progress("anchors", 0.0, "anchoring particles to bones")
+        query = MeshQuery(source.vertices, source.faces)
+        anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma)
+    with timed(timings, "guides"):
+        progress("guides", 0.5, "selecting guides and inter-strand neighbours")
+        multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
     progress("preprocess", 1.0, "done")
     return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings)
 
@@ -150,20 +147,16 @@ def retarget(
         Polled between solver iterations (cancellation).
     """
     options.validate()
-    progress = progress or _noop
+    progress = progress or no_progress
     hair = adaptable.hair
     timings: dict[str, float] = {}
-
-    began = time.perf_counter()
-    progress("prepare", 0.0, "checking the target")
-    target = prepare_target(adaptable, target)
-    target_query = MeshQuery(target.vertices, target.faces)
-    timings["prepare"] = time.perf_counter() - began
-
-    began = time.perf_counter()
-    progress("initial_transfer", 0.05, "initial transfer")
-    initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
-    timings["initial_transfer"] = time.perf_counter() - began
+    with timed(timings, "prepare"):
+        progress("prepare", 0.0, "checking the target")
+        target = prepare_target(adaptable, target)
+        target_query = MeshQuery(target.vertices, target.faces)
+    with timed(timings, "initial_transfer"):
+        progress("initial_transfer", 0.05, "initial transfer")
+        initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
 
     roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
     start = gamma = relocation = None
@@ -173,61 +166,89 @@ def retarget(
         roots = relocation.roots
         timings["hairline"] = relocation.report["seconds"]
 
-    model = adaptable.shape_model
     weights = EnergyWeights(options.alpha, options.beta)
-    solve_report = None
-    began = time.perf_counter()
-    solve_options = SolveOptions(
-        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance,
-        energy_tolerance=options.energy_tolerance,
-    )
-
-    solver_progress = rescaled(progress, 0.1, 0.95, "solve")
-
-    if options.method == "global":
-        progress("solve", 0.1, "shape adaptation (global)")
-        points, solve_report = solve_hairstyle(
-            model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options, gamma=gamma,
-            backend=options.qp_backend, start=start, progress=solver_progress, should_stop=should_stop,
-        )
-        timings["solve"] = time.perf_counter() - began
-    elif options.method == "multiscale":
-        progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
-        reach = (initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN)
-        grid = DistanceGrid.build(target_query, region=reach)
-        timings["distance_grid"] = time.perf_counter() - began
-        points, solve_report = solve_multiscale(
-            hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
-            weights, solve_options, gamma=gamma, start=start, workers=options.workers or default_workers(),
-            chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
-            progress=solver_progress, should_stop=should_stop,
-        )
-        timings["coarse_solve"] = solve_report.coarse_seconds
-        timings["fine_solve"] = solve_report.fine_seconds
-        timings["solve"] = time.perf_counter() - began
+    if options.method in SOLVER_METHODS:
+        with timed(timings, "solve"):
+            points, solve_report = adapt_shape(adaptable, target_query, initial, options, weights, timings, gamma,
+                                               start, progress, should_stop)
     else:
-        progress("baseline", 0.1, f"baseline {options.method}")
-        base, pushout = parse_method(options.method)
-        points = retarget_baseline(
-            base, adaptable.source, target, hair, pushout=pushout, clearance=options.eps_c, target_query=target_query
-        ).points
-        timings["baseline"] = time.perf_counter() - began
+        solve_report = None
+        with timed(timings, "baseline"):
+            progress("baseline", 0.1, f"baseline {options.method}")
+            base, pushout = parse_method(options.method)
+            points = retarget_baseline(base, adaptable.source, target, hair, pushout=pushout, clearance=options.eps_c,
+                                       target_query=target_query).points
 
-    began = time.perf_counter()
-    progress("metrics", 0.95, "measuring")
-    metrics = hairstyle_metrics(
-        points, hair.points, initial, hair.is_root, roots, model, target_query, options.eps_c, weights,
-    )
-    metrics["method"] = options.method
-    if relocation is not None:
-        metrics["hairline"] = relocation.report
-    metrics["smoothed_particles"] = int(unsmooth.sum())
-    metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
-    timings["metrics"] = time.perf_counter() - began
+    with timed(timings, "metrics"):
+        progress("metrics", 0.95, "measuring")
+        metrics = hairstyle_metrics(points, hair.points, initial, hair.is_root, roots, adaptable.shape_model,
+                                    target_query, options.eps_c, weights)
+        metrics["method"] = options.method
+        if relocation is not None:
+            metrics["hairline"] = relocation.report
+        metrics["smoothed_particles"] = int(unsmooth.sum())
+        metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation
     )
+
+
+def adapt_shape(
+    adaptable: AdaptableHairstyle,
+    target_query: MeshQuery,
+    initial: np.ndarray,
+    options: RetargetOptions,
+    weights: EnergyWeights,
+    timings: dict[str, float],
+    gamma: np.ndarray | None = None,
+    start: np.ndarray | None = None,
+    progress: ProgressFn = no_progress,
+    should_stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray, SolveReport | MultiscaleReport]:
+    """Eq. 1 under Eq. 12-13, by the multi-scale solve (Sec. 5) or over all strands coupled.
+
+    Parameters
+    ----------
+    initial : (N, 3) float64
+        The initial transfer ``p-hat``.
+    timings : dict
+        Receives the distance grid's and the two levels' seconds (multi-scale).
+    gamma : (N,) float64, optional
+        Eq. 20's weights after a hairline edit.
+    start : (N, 3) float64, optional
+        The first iterate (``initial`` by default).
+
+    Returns
+    -------
+    points : (N, 3) float64
+    report : SolveReport or MultiscaleReport
+    """
+    hair = adaptable.hair
+    solve_options = SolveOptions(
+        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance,
+        energy_tolerance=options.energy_tolerance,
+    )
+    solver_progress = rescaled(progress, 0.1, 0.95, "solve")
+    if options.method == "global":
+        progress("solve", 0.1, "shape adaptation (global)")
+        return solve_hairstyle(
+            adaptable.shape_model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options,
+            gamma=gamma, backend=options.qp_backend, start=start, progress=solver_progress, should_stop=should_stop,
+        )
+    progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
+    with timed(timings, "distance_grid"):
+        reach = (initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN)
+        grid = DistanceGrid.build(target_query, region=reach)
+    points, report = solve_multiscale(
+        hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
+        weights, solve_options, gamma=gamma, start=start, workers=options.workers or default_workers(),
+        chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
+        progress=solver_progress, should_stop=should_stop,
+    )
+    timings["coarse_solve"] = report.coarse_seconds
+    timings["fine_solve"] = report.fine_seconds
+    return points, report
 
 
 def relocate_hairline(
@@ -287,50 +308,3 @@ def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = No
     free = ~hair.is_root
     mask[free] = query.signed_distance(hair.points[free]).distance < 0.0
     return mask
-
-
-#: hair file formats read and written (file extensions without the dot)
-HAIR_FORMATS = SUPPORTED_FORMATS
-#: character mesh extensions read
-MESH_EXTENSIONS = CHARACTER_MESH_EXTENSIONS
-ARTIFACT_FORMAT_VERSION = FORMAT_VERSION
-
-
-def load_character_file(
-    mesh_path, skeleton_path=None, units: str | None = None, *, max_vertices: int, max_faces: int, max_bytes: int
-) -> Character:
-    """A character from a mesh file and an optional skeleton JSON (see :mod:`.characterio`)."""
-    return load_character(
-        mesh_path, skeleton_path=skeleton_path, units=units, max_vertices=max_vertices, max_faces=max_faces,
-        max_bytes=max_bytes,
-    )
-
-
-def read_hair_file(path, units: str = "m", *, max_strands: int, max_particles: int, max_bytes: int) -> Hair:
-    """A hairstyle from a file, validated against the limits (see :mod:`.hairio`)."""
-    return read_hair(path, units=units, limits=ReadLimits(max_strands, max_particles, max_bytes))
-
-
-def write_hair_file(path, hair: Hair, format: str, units: str = "m") -> None:
-    """Write ``hair`` in ``format`` (one of :data:`HAIR_FORMATS`)."""
-    write_hair(path, hair, units=units, format=format)
-
-
-def save_adaptable_file(adaptable: AdaptableHairstyle, path) -> None:
-    """Write the adaptable hairstyle artifact (see :mod:`.artifact`)."""
-    save_adaptable(adaptable, path)
-
-
-def load_adaptable_file(path) -> AdaptableHairstyle:
-    """Read an adaptable hairstyle artifact; refuses other versions and damaged files."""
-    return load_adaptable(path)
-
-
-def write_preview(path, adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> None:
-    """PNG: the source hairstyle next to the result, penetrating particles highlighted."""
-    from hairport.solver.render.preview import render_preview
-
-    render_preview(path, [
-        (adaptable.hair, adaptable.source, None, "source"),
-        (result.hair, target, penetrating_mask(result.hair, target), f"result ({result.metrics['method']})"),
-    ])
