@@ -67,8 +67,7 @@ def _reset_peak() -> bool:
 
 def measure_size(args) -> dict:
     """One size, in this process: preprocess, multi-scale retargets, baselines."""
-    from hairport.solver import pipeline
-    from hairport.solver.baselines import BASELINE_METHODS
+    from hairport import solver
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
@@ -76,26 +75,26 @@ def measure_size(args) -> dict:
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
     hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
     began = time.perf_counter()
-    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=args.guides))
+    adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(guides=args.guides))
     adaptable.coarse_model, adaptable.fine_source  # noqa: B018 - source-only, part of preprocessing
     preprocess = time.perf_counter() - began
 
-    options = pipeline.RetargetOptions(method="multiscale", workers=args.workers)
+    options = solver.RetargetOptions(method="multiscale", workers=args.workers)
     runs, result = [], None
     base_rss = _status_bytes("VmRSS")
     can_reset = _reset_peak()
     for _ in range(args.runs):
         began = time.perf_counter()
-        result = pipeline.retarget(adaptable, target, options)
+        result = solver.retarget(adaptable, target, options)
         runs.append({"total": time.perf_counter() - began, **result.timings})
     peak = _status_bytes("VmHWM")
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
     np.save(args.save, result.hair.points)
 
     baselines = {}
-    for method in BASELINE_METHODS:
+    for method in solver.BASELINE_METHODS:
         began = time.perf_counter()
-        pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method=f"{method}+pushout"))
+        solver.retarget(adaptable, target, solver.RetargetOptions(method=f"{method}+pushout"))
         baselines[method] = time.perf_counter() - began
 
     def median(key: str) -> float:
@@ -125,16 +124,16 @@ def measure_size(args) -> dict:
 
 def measure_full(args) -> dict:
     """The coupled solve of one size, in this process."""
-    from hairport.solver import pipeline
+    from hairport import solver
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     strands, per_strand = groom_shape(int(float(args.full)))
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
     hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
-    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=args.guides))
+    adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(guides=args.guides))
     began = time.perf_counter()
-    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method="global"))
+    result = solver.retarget(adaptable, target, solver.RetargetOptions(method="global"))
     seconds = time.perf_counter() - began - result.timings.get("metrics", 0.0)
     multiscale = np.load(args.compare)
     return {

@@ -34,6 +34,17 @@ _RETARGET = solver.RetargetOptions()
 _PREPROCESS = solver.PreprocessOptions()
 _HAIRLINE = solver.HairlineEdit(preset=solver.HAIRLINE_PRESETS[0])
 
+
+
+def listed(extensions) -> str:
+    """``".a, .b or .c"``: file extensions for a description."""
+    *others, last = [name if name.startswith(".") else f".{name}" for name in extensions]
+    return f"{', '.join(others)} or {last}" if others else last
+
+
+HAIR_FILE_DESCRIPTION = f"hair file: {listed(solver.HAIR_FORMATS)}"
+MESH_FILE_DESCRIPTION = f"body mesh: {listed(solver.MESH_EXTENSIONS)}"
+
 __all__ = ["CharacterOut", "ErrorInfo", "HairFormat", "HairlineIn", "HairstyleOut", "JobOut", "JobPage", "JobState",
            "JobsCreated", "PreprocessingOut", "RetargetIn", "RetargetOptionsIn", "Units"]
 

@@ -29,8 +29,9 @@ class StageProgress:
 
 
 def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
-    p.add_argument("--source", required=required, help="source character mesh (OBJ/PLY/GLB)")
-    p.add_argument("--hair", required=required, help="hair file of the source (.data/.hair/.ply/.npz/.obj)")
+    p.add_argument("--source", required=required, help=f"source character mesh ({'/'.join(solver.MESH_EXTENSIONS)})")
+    p.add_argument("--hair", required=required,
+                   help=f"hair file of the source ({'/'.join('.' + name for name in solver.HAIR_FORMATS)})")
     p.add_argument("--source-skeleton", help="skeleton JSON of the source (default: <mesh>.skeleton.json, else glTF skin)")
     p.add_argument("--guides", type=int, default=None,
                    help="guide strands of the multi-scale solve (default 300, or every strand if fewer)")

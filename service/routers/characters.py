@@ -8,7 +8,7 @@ from fastapi import APIRouter, File, Form, UploadFile
 
 from ..auth import Owner
 from ..deps import OwnedCharacter, RepositoryDep, SettingsDep
-from ..schemas import CharacterOut
+from ..schemas import MESH_FILE_DESCRIPTION, CharacterOut
 from ..services import characters
 
 router = APIRouter(prefix="/v1/characters", tags=["characters"])
@@ -19,7 +19,7 @@ async def create_character(
     owner: Owner,
     settings: SettingsDep,
     repository: RepositoryDep,
-    mesh: Annotated[UploadFile, File(description="OBJ, PLY, GLB or glTF body mesh")],
+    mesh: Annotated[UploadFile, File(description=MESH_FILE_DESCRIPTION)],
     skeleton: Annotated[UploadFile | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
     units: Annotated[str | None, Form(description="units of a mesh without a skeleton JSON (default m)")] = None,
 ) -> CharacterOut:

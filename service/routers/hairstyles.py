@@ -10,7 +10,7 @@ from hairport import solver
 
 from ..auth import Owner
 from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
-from ..schemas import HairstyleOut
+from ..schemas import HAIR_FILE_DESCRIPTION, HairstyleOut
 from ..services import hairstyles
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
@@ -23,7 +23,7 @@ async def create_hairstyle(
     settings: SettingsDep,
     repository: RepositoryDep,
     queue: QueueDep,
-    hair: Annotated[UploadFile, File(description="hair file: .data, .hair, .ply, .npz or .obj")],
+    hair: Annotated[UploadFile, File(description=HAIR_FILE_DESCRIPTION)],
     source_character_id: Annotated[str, Form(description="the character the hairstyle was made for")],
     units: Annotated[str, Form(description="units of the hair file")] = "m",
     guides: Annotated[int | None, Form(description="guide strands of the multi-scale solve (default 300)")] = None,
