@@ -6,7 +6,7 @@ import pytest
 
 from hairport.solver import pipeline
 from hairport.solver.hairline.curve import HairlineCurve, first_self_crossing, smoothed_arc_length
-from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.hairline.edit import HairlineEdit, hairline_edit
 from hairport.solver.hairline.membrane import signed_uv_areas
 from hairport.solver.hairline.presets import BAND, PRESETS, lateral_position, parse_preset, spherical
 from hairport.solver.hairline.relocation import edit_curve, hairline_targets, relocate_roots, scalp_chart
@@ -184,7 +184,7 @@ def target():
 
 @pytest.mark.parametrize("name", PRESETS)
 def test_every_preset_retargets_without_penetration(adaptable, target, name):
-    options = pipeline.RetargetOptions(workers=1, hairline=pipeline.hairline_edit(preset=name))
+    options = pipeline.RetargetOptions(workers=1, hairline=hairline_edit(preset=name))
     result = pipeline.retarget(adaptable, target, options)
     metrics = result.metrics
     assert metrics["penetrating_particles"] == 0
@@ -200,7 +200,7 @@ def test_adaptive_weights_and_start_of_the_re_solve(adaptable, target):
     prepared = pipeline.prepare_target(adaptable, target)
     initial, _ = pipeline.initial_transfer(adaptable, prepared)
     roots = pipeline.root_targets(adaptable, prepared)
-    edit = pipeline.hairline_edit(preset="sideburns")
+    edit = hairline_edit(preset="sideburns")
     relocation, start, gamma = pipeline.relocate_hairline(adaptable, prepared, initial, roots, edit)
     moved = relocation.travel > 0
     assert moved.all()  # the membrane moves every root, far from the edit by micrometres
