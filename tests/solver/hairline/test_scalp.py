@@ -12,6 +12,7 @@ from hairport.solver.hairline.scalp import (
     split_boundary_ears,
     turning_points,
 )
+from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize, signed_areas
 from hairport.solver.mesh.topology import (
     boundary_edges,
     boundary_loops,
@@ -145,6 +146,14 @@ def test_refine_scalp_keeps_the_surface_and_the_hairline(character, scalp, query
     )
     assert len(few[1]) == 4 * len(scalp.faces)
     assert np.array_equal(few[2][::2], scalp.boundary)
+
+
+@pytest.mark.parametrize("method", PARAMETERIZATIONS)
+def test_parameterizations_of_the_refined_scalp(character, scalp, method):
+    vertices, triangles, boundary = refine_scalp(character.vertices[scalp.vertices], scalp.triangles, scalp.boundary)
+    uv = parameterize(vertices, triangles, method)
+    assert (signed_areas(uv, triangles) > 0).all()
+    assert np.linalg.norm(uv, axis=1).max() <= 1.0 + 1e-9
 
 
 def test_refine_scalp_with_enough_triangles_is_a_copy(character, scalp):
