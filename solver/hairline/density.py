@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport.solver.hairline.baselines import _check_points, _check_triangles, _index_array, _refuse
+from hairport.solver.mesh.areas import triangle_areas
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,11 +31,6 @@ class DensityChange:
     linf: float
     changes: np.ndarray
     triangles: np.ndarray
-
-
-def _areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    corners = points[triangles]
-    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
 
 
 def density_change(
@@ -81,10 +77,10 @@ def density_change(
     held = np.flatnonzero(np.bincount(root_triangles[root_triangles >= 0], minlength=len(triangles)))
     if held.size == 0:
         return DensityChange(0.0, 0.0, np.zeros(0), np.zeros(0, dtype=np.int64))
-    before = _areas(rest, triangles[held])
+    before = triangle_areas(rest, triangles[held])
     if (before <= 0).any():
         raise _refuse(f"{int((before <= 0).sum())} scalp triangles holding roots have zero rest area", source)
-    after = _areas(deformed, triangles[held])
+    after = triangle_areas(deformed, triangles[held])
     with np.errstate(divide="ignore"):
         changes = before / after - 1.0
     magnitude = np.abs(changes)

@@ -46,6 +46,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from hairport.solver.hairline.head_chart import HeadChart
+from hairport.solver.mesh.areas import signed_areas, triangle_areas
 from hairport.solver.model.errors import InputError
 
 #: Young's modulus (Pa); the minimiser of Eq. 15 does not depend on it (the energy is
@@ -132,12 +133,12 @@ class Membrane:
         e1 = X[:, 1] - X[:, 0]
         e2 = X[:, 2] - X[:, 0]
         length = np.linalg.norm(e1, axis=1)
-        twice_area = np.linalg.norm(np.cross(e2, e1), axis=1)
-        if (length <= 0).any() or (twice_area <= 0).any():
+        areas = triangle_areas(rest, triangles)
+        if (length <= 0).any() or (areas <= 0).any():
             raise InputError("the scalp has degenerate rest triangles", "membrane")
         a = length
         b = np.einsum("ij,ij->i", e2, e1) / length
-        c = twice_area / length
+        c = 2.0 * areas / length
         # D = [[a, b], [0, c]] (Eq. 16), D^-1 = [[1/a, -b/(a c)], [0, 1/c]]
         rest_inverse = np.zeros((len(triangles), 2, 2))
         rest_inverse[:, 0, 0] = 1.0 / a
@@ -145,7 +146,7 @@ class Membrane:
         rest_inverse[:, 1, 1] = 1.0 / c
         mu = young / (2.0 * (1.0 + poisson))
         lam = young * poisson / (1.0 - poisson * poisson)
-        return cls(rest, triangles, rest_inverse, 0.5 * twice_area, float(mu), float(lam))
+        return cls(rest, triangles, rest_inverse, areas, float(mu), float(lam))
 
 
 #: Lame parameters (Pa) of DEFAULT_YOUNG and DEFAULT_POISSON, as Membrane.build sets them
@@ -404,7 +405,7 @@ def fold_barrier(
         Per-triangle Hessians over the corners' parameters (zero where inactive).
     """
     n, m = len(u), len(triangles)
-    ratio = signed_uv_areas(triangles, u) / rest_uv_areas
+    ratio = signed_areas(u, triangles) / rest_uv_areas
     gradient = np.zeros((n, 2))
     blocks = np.zeros((m, 6, 6))
     active = np.flatnonzero(ratio < threshold)
@@ -431,10 +432,3 @@ def fold_barrier(
         (w * db) / rest_uv_areas[active])[:, None, None] * _AREA_HESSIAN[None]
     return energy, gradient, blocks
 
-
-def signed_uv_areas(triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Signed areas ``(m,)`` of the scalp triangles in the parameter plane (uv units^2)."""
-    U = np.asarray(u, dtype=np.float64)[triangles]
-    e1 = U[:, 1] - U[:, 0]
-    e2 = U[:, 2] - U[:, 0]
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])

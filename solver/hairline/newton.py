@@ -20,8 +20,8 @@ from hairport.solver.hairline.membrane import (
     _shifted_solve,
     fold_barrier,
     membrane_energy,
-    signed_uv_areas,
 )
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.model.errors import InputError
 
 #: default Newton stopping tolerance on the largest parameter step (uv units); harmonic
@@ -320,14 +320,14 @@ def relocate(
         raise InputError("need u_start (n, 2), fixed (n,) and u_fixed (fixed.sum(), 2)", "relocate")
     if (chart.locate(u_start)[0] < 0).any() or (chart.locate(u_fixed)[0] < 0).any():
         raise InputError("starting or hairline parameters lie outside the head chart", "relocate")
-    orientation = np.sign(signed_uv_areas(membrane.triangles, u_start))
+    orientation = np.sign(signed_areas(u_start, membrane.triangles))
     if (orientation == 0).any():
         raise InputError("the scalp has degenerate triangles in uv at the start", "relocate")
 
     report = RelocationReport()
     free = ~fixed
     oriented = np.where((orientation < 0)[:, None], membrane.triangles[:, [0, 2, 1]], membrane.triangles)
-    rest_uv = signed_uv_areas(oriented, u_start)
+    rest_uv = signed_areas(u_start, oriented)
     barrier_weights = FOLD_STIFFNESS * membrane.mu * membrane.areas
     energy_scale = membrane.mu * float(membrane.areas.sum())
     laplacian = None
@@ -336,7 +336,7 @@ def relocate(
         """Energy at ``u`` if inside the chart and unflipped, else None."""
         if (chart.locate(u)[0] < 0).any():
             return None
-        if (signed_uv_areas(membrane.triangles, u) * orientation <= 0).any():
+        if (signed_areas(u, membrane.triangles) * orientation <= 0).any():
             return None
         energy = membrane_energy(membrane, chart, u) + barrier(u)[0]
         return energy if np.isfinite(energy) else None

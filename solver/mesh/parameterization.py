@@ -5,6 +5,7 @@ from __future__ import annotations
 import igl
 import numpy as np
 
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.topology import check_disk
 from hairport.solver.model.errors import InputError
 
@@ -16,13 +17,6 @@ ARAP_ITERATIONS = 50
 #: a parameterized triangle is flipped or degenerate when its signed area is below this
 #: fraction of the mean triangle area in uv
 MIN_UV_AREA_FRACTION = 1e-12
-
-
-def signed_areas(uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(q,) signed areas of ``triangles (q, 3)`` in ``uv (p, 2)``, positive counter-clockwise."""
-    a, b, c = uv[triangles[:, 0]], uv[triangles[:, 1]], uv[triangles[:, 2]]
-    e1, e2 = b - a, c - a
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
 def _segments_cross(polygon: np.ndarray) -> bool:

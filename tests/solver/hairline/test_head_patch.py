@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from hairport.solver.hairline.head_patch import DEFAULT_MARGIN_RINGS, head_patch
-from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize, signed_areas
+from hairport.solver.mesh.areas import signed_areas
+from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize
 from hairport.solver.mesh.topology import boundary_loops, euler_characteristic
 from hairport.solver.model.errors import InputError
 

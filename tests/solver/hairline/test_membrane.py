@@ -14,8 +14,8 @@ from hairport.solver.hairline.membrane import (
     membrane_energy,
     membrane_gradient,
     membrane_hessian,
-    signed_uv_areas,
 )
+from hairport.solver.mesh.areas import signed_areas
 from tests.solver.hairline.charts import paraboloid_chart, rotated_scalp
 
 # ----------------------------------------------------------------------------------------
@@ -114,7 +114,7 @@ def test_projected_hessian_is_positive_semidefinite(perturbed):
 def test_fold_barrier_against_hand_values_and_differences():
     triangles = np.array([[0, 1, 2], [1, 3, 2]])
     rest = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
-    rest_areas = signed_uv_areas(triangles, rest)
+    rest_areas = signed_areas(rest, triangles)
     weights = np.array([2.0, 3.0])
     energy, gradient, blocks = fold_barrier(triangles, rest, rest_areas, weights)
     assert energy == 0.0 and not gradient.any() and not blocks.any()  # inactive above the threshold

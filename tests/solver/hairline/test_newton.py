@@ -4,16 +4,17 @@ known minimisers, stationarity, load stages and refusals."""
 import numpy as np
 import pytest
 
-from hairport.solver.hairline.membrane import Membrane, membrane_gradient, signed_uv_areas
+from hairport.solver.hairline.membrane import Membrane, membrane_gradient
 from hairport.solver.hairline.newton import KINK_BARYCENTRIC, relocate
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.model.errors import InputError
 from tests.solver.hairline.charts import PARABOLOID, boundary_of, flat_chart, paraboloid_chart, rotated_scalp
 from tests.solver.triangle_grids import grid
 
 
 def assert_unflipped(membrane, u, u_rest):
-    signs = np.sign(signed_uv_areas(membrane.triangles, u_rest))
-    assert (signed_uv_areas(membrane.triangles, u) * signs > 0).all()
+    signs = np.sign(signed_areas(u_rest, membrane.triangles))
+    assert (signed_areas(u, membrane.triangles) * signs > 0).all()
 
 
 def assert_monotone(report):

@@ -7,9 +7,9 @@ import pytest
 from hairport.solver import pipeline
 from hairport.solver.hairline.curve import HairlineCurve
 from hairport.solver.hairline.edit import HairlineEdit, hairline_edit
-from hairport.solver.hairline.membrane import signed_uv_areas
 from hairport.solver.hairline.presets import PRESETS
 from hairport.solver.hairline.relocation import hairline_targets, relocate_roots
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.groom import generate_groom
@@ -45,7 +45,7 @@ def test_every_preset_relocates_without_folding(character, relocations, name):
     report = moved.report
     assert report["converged"], report
     assert report["roots_moved"] > 0 and 0.005 < report["max_travel_m"] < 0.04
-    areas = signed_uv_areas(moved.setup.triangles, moved.u)
+    areas = signed_areas(moved.u, moved.setup.triangles)
     assert (areas > 0).all()
     # root_anchors stay on the head and in the chart
     distance = MeshQuery(character.vertices, character.faces).signed_distance(moved.roots).distance

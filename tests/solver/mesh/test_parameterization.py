@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from hairport.solver.mesh.parameterization import _segments_cross, check_injective, parameterize, signed_areas
+from hairport.solver.mesh.areas import signed_areas
+from hairport.solver.mesh.parameterization import _segments_cross, check_injective, parameterize
 from hairport.solver.mesh.topology import boundary_loops
 from hairport.solver.model.errors import InputError
 
