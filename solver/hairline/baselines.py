@@ -42,11 +42,11 @@ from __future__ import annotations
 
 import igl
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import RBFInterpolator
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from hairport.solver.mesh.topology import vertex_adjacency
 from hairport.solver.model.errors import InputError
 
 #: interior vertices pinned at zero displacement by the RBF alternatives. The paper only
@@ -115,15 +115,6 @@ def _check_pins(fixed, targets, n: int, dim: int, source: str) -> tuple[np.ndarr
     return fixed, targets
 
 
-def _edge_graph(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Symmetric unit-weight adjacency ``(n, n)`` of the mesh edges."""
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    graph = (graph + graph.T).tocsr()
-    graph.data[:] = 1.0
-    return graph
-
-
 def harmonic_displacement(
     u_rest: np.ndarray, triangles: np.ndarray, fixed: np.ndarray, u_fixed: np.ndarray
 ) -> np.ndarray:
@@ -165,7 +156,7 @@ def harmonic_displacement(
         raise _refuse("the scalp has no triangles", source)
     fixed, u_fixed = _check_pins(fixed, u_fixed, n, 2, source)
 
-    _, piece = connected_components(_edge_graph(triangles, n), directed=False)
+    _, piece = connected_components(vertex_adjacency(triangles, n), directed=False)
     anchored = np.bincount(piece, weights=fixed.astype(np.float64)) > 0
     free = anchored[piece] & ~fixed
     displacement = np.zeros((n, 2))
@@ -332,7 +323,7 @@ def interior_seeds(
         raise _refuse(f"count must be a non-negative integer, got {count!r}", source)
     count = int(count)
 
-    hops = dijkstra(_edge_graph(triangles, n), directed=False, indices=np.unique(boundary),
+    hops = dijkstra(vertex_adjacency(triangles, n), directed=False, indices=np.unique(boundary),
                     unweighted=True, min_only=True)
     reached = np.isfinite(hops)
     deepest = hops[reached].max()

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hairport.solver.mesh.topology import corner_neighbours, vertex_faces
 from hairport.solver.model.errors import InputError
 
 #: a point belongs to a triangle when its barycentric coordinates are all >= -this
@@ -127,22 +128,7 @@ class HeadChart:
         cell_start = np.zeros(int(grid_shape.prod()) + 1, dtype=np.int64)
         np.cumsum(np.bincount(cell, minlength=int(grid_shape.prod())), out=cell_start[1:])
 
-        # edge adjacency: the edge opposite corner k joins corners k+1 and k+2
-        g = len(faces)
-        ends = np.stack([faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]], axis=2).reshape(-1, 2)  # (3g, 2)
-        key = np.sort(ends, axis=1)
-        key = key[:, 0] * len(vertices) + key[:, 1]
-        order_e = np.argsort(key, kind="stable")
-        same = key[order_e[1:]] == key[order_e[:-1]]
-        a, b = order_e[:-1][same], order_e[1:][same]
-        neighbours = np.full(3 * g, -1, dtype=np.int64)
-        neighbours[a] = b // 3
-        neighbours[b] = a // 3
-        # triangles around each vertex
-        corner_vertex = faces.ravel()
-        order_v = np.argsort(corner_vertex, kind="stable")
-        vertex_start = np.zeros(len(vertices) + 1, dtype=np.int64)
-        np.cumsum(np.bincount(corner_vertex, minlength=len(vertices)), out=vertex_start[1:])
+        vertex_start, vertex_triangles, vertex_corners = vertex_faces(faces, len(vertices))
         return cls(
             vertices=vertices,
             faces=faces,
@@ -154,10 +140,10 @@ class HeadChart:
             grid_shape=grid_shape,
             cell_start=cell_start,
             cell_triangles=owner[order],
-            neighbours=neighbours.reshape(g, 3),
+            neighbours=corner_neighbours(faces),
             vertex_start=vertex_start,
-            vertex_triangles=order_v // 3,
-            vertex_corners=order_v % 3,
+            vertex_triangles=vertex_triangles,
+            vertex_corners=vertex_corners,
         )
 
     def locate(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -22,6 +22,7 @@ from hairport.solver.hairline.membrane import (
     membrane_energy,
 )
 from hairport.solver.mesh.areas import signed_areas
+from hairport.solver.mesh.topology import graph_laplacian
 from hairport.solver.model.errors import InputError
 
 #: default Newton stopping tolerance on the largest parameter step (uv units); harmonic
@@ -118,15 +119,6 @@ class RelocationReport:
     held: list[int] = field(default_factory=list)
     exact_steps: int = 0
     stop: str = ""
-
-
-def _uniform_laplacian(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Graph Laplacian ``(n, n)`` of the scalp's edges, unit weights."""
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    edges = np.unique(np.sort(edges, axis=1), axis=0)
-    A = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    A = (A + A.T).tocsr()
-    return (sp.diags(np.asarray(A.sum(axis=1)).ravel()) - A).tocsr()
 
 
 def _activity(
@@ -387,7 +379,7 @@ def relocate(
         if energy is not None:
             return extended, energy, "elastic"
         if laplacian is None:
-            laplacian = _uniform_laplacian(membrane.triangles, n)
+            laplacian = graph_laplacian(membrane.triangles, n)
         # a shift keeps components without a pinned vertex (zero motion) solvable
         L_ff = (laplacian[free][:, free] + HARMONIC_SHIFT * sp.identity(int(free.sum()))).tocsc()
         motion = np.zeros((n, 2))

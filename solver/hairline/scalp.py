@@ -57,10 +57,10 @@ import scipy.sparse as sp
 from hairport.solver.body.head_frame import REFERENCE_CROWN_M, HeadFrame, head_frame
 from hairport.solver.mesh.polyline import polyline_arc_length
 from hairport.solver.mesh.topology import (
-    _largest_piece,
     boundary_edges,
     check_disk,
     face_adjacency,
+    largest_piece,
     make_disk,
     subdivide,
     submesh,
@@ -307,7 +307,7 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     best = (-1.0, 0, None)  # roots held, rings, piece
     for rings in range(MAX_CLOSING_RINGS + 1):
         region = seed_faces if rings == 0 else _closed_faces(faces, seed_vertices, rings, vadj)
-        piece = _largest_piece(region, adjacency, roots_per_face)
+        piece = largest_piece(region, adjacency, roots_per_face)
         held = float(roots_per_face[piece].sum())
         if held > best[0]:
             best = (held, rings, piece)
