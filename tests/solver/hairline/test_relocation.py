@@ -22,7 +22,8 @@ PARAMETERIZATION_AGREEMENT_M = 1e-3
 
 @pytest.fixture(scope="module")
 def relocations(character, root_anchors):
-    return {name: relocate_roots(character, root_anchors[0], root_anchors[1], HairlineEdit(preset=name)) for name in PRESETS}
+    faces, barycentric, _ = root_anchors
+    return {name: relocate_roots(character, faces, barycentric, HairlineEdit(preset=name)) for name in PRESETS}
 
 
 def test_identity_edit_leaves_every_root(character, root_anchors, scalp_setup):
@@ -55,7 +56,8 @@ def test_every_preset_relocates_without_folding(character, relocations, name):
 
 def test_relocation_is_insensitive_to_the_parameterization(character, root_anchors):
     results = {
-        param: relocate_roots(character, root_anchors[0], root_anchors[1], HairlineEdit(preset="widows-peak", parameterization=param))
+        param: relocate_roots(character, root_anchors[0], root_anchors[1],
+                              HairlineEdit(preset="widows-peak", parameterization=param))
         for param in ("harmonic", "lscm", "arap")
     }
     harmonic = results["harmonic"].roots
