@@ -181,7 +181,7 @@ class HeadChart:
         pair_triangle = self.cell_triangles[
             np.repeat(start, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
         ]
-        weights = self._barycentric(pair_triangle, u[pair_point])
+        weights = self.barycentric(pair_triangle, u[pair_point])
         score = weights.min(axis=1)
         keep = score >= -BARYCENTRIC_TOLERANCE
         pair_point, pair_triangle, weights, score = pair_point[keep], pair_triangle[keep], weights[keep], score[keep]
@@ -227,7 +227,19 @@ class HeadChart:
         """
         return self.jacobian[np.asarray(host, dtype=np.int64)]
 
-    def _barycentric(self, triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``(k, 3)`` barycentric coordinates of ``u (k, 2)`` in head ``triangles (k,)``."""
+    def barycentric(self, triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Barycentric coordinates of parameters in given head triangles (Eq. 18).
+
+        Parameters
+        ----------
+        triangles : (k,) int64
+            Head triangle of each point.
+        u : (k, 2) float64
+
+        Returns
+        -------
+        weights : (k, 3) float64
+            Of the triangle's corners; negative outside it.
+        """
         local = np.einsum("kab,kb->ka", self.uv_inverse[triangles], u - self.uv[self.faces[triangles, 0]])
         return np.column_stack([1.0 - local[:, 0] - local[:, 1], local[:, 0], local[:, 1]])

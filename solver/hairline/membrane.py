@@ -243,15 +243,39 @@ def _position_hessians(F: np.ndarray, B: np.ndarray, areas: np.ndarray, mu: floa
     return areas[:, None, None, None, None] * H
 
 
-def _project_psd(H: np.ndarray) -> np.ndarray:
-    """Symmetric ``(m, d, d)`` blocks with negative eigenvalues set to 0."""
+def project_psd(H: np.ndarray) -> np.ndarray:
+    """Per-block projection onto the positive semi-definite matrices (projected Newton).
+
+    Parameters
+    ----------
+    H : (m, d, d) float64
+        Blocks, symmetrised before the projection.
+
+    Returns
+    -------
+    projected : (m, d, d) float64
+        Each block with its negative eigenvalues set to 0.
+    """
     H = 0.5 * (H + np.transpose(H, (0, 2, 1)))
     w, V = np.linalg.eigh(H)
     return (V * np.maximum(w, 0.0)[:, None, :]) @ np.transpose(V, (0, 2, 1))
 
 
-def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``F (m, 3, 2)`` and ``dE/dx (n, 3)`` at deformed positions ``x (n, 3)``."""
+def position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Deformation gradients and the gradient of Eq. 15 in the 3D positions.
+
+    Parameters
+    ----------
+    membrane : Membrane
+    x : (n, 3) float64
+        Deformed positions (m).
+
+    Returns
+    -------
+    F : (m, 3, 2) float64
+    gradient : (n, 3) float64
+        ``dE/dx`` (J/m).
+    """
     F = deformation_gradients(membrane, x)
     P, _ = _first_piola(F, membrane.mu, membrane.lam)
     gx = membrane.areas[:, None, None] * np.einsum("tia,tka->tki", P, _corner_weights(membrane))  # (m, 3, 3)
@@ -260,9 +284,25 @@ def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, 
     return F, np.column_stack([np.bincount(flat, gx[:, :, c].ravel(), minlength=n) for c in range(3)])
 
 
-def _parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """Exact per-triangle Hessians ``(m, 6, 6)`` in the corners' parameters: ``J^T H_x J``
-    with the block-diagonal ``J (m, 9, 6)`` of the corners' Jacobians ``M (n, 3, 2)``."""
+def parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Exact per-triangle Hessians of Eq. 15 in the corners' parameters, hosts fixed.
+
+    ``J^T H_x J`` with ``H_x`` a triangle's 9x9 Hessian in its corners' positions and the
+    block-diagonal ``J (m, 9, 6)`` of the corners' Jacobians.
+
+    Parameters
+    ----------
+    membrane : Membrane
+    F : (m, 3, 2) float64
+        Deformation gradients.
+    M : (n, 3, 2) float64
+        ``dx/du`` of each scalp vertex's host (:meth:`.HeadChart.jacobians`).
+
+    Returns
+    -------
+    blocks : (m, 6, 6) float64
+        Over the corners' parameters, vertex-major.
+    """
     m = len(membrane.triangles)
     H = _position_hessians(F, _corner_weights(membrane), membrane.areas, membrane.mu, membrane.lam).reshape(m, 9, 9)
     J = np.zeros((m, 3, 3, 3, 2))  # [t, k, i, l, a]: corner k's row i, corner l's column a
@@ -273,8 +313,21 @@ def _parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.nd
     return np.transpose(J, (0, 2, 1)) @ H @ J
 
 
-def _assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
-    """``(2n, 2n)`` matrix from per-triangle ``(m, 6, 6)`` blocks over the corners' parameters."""
+def assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
+    """A sparse matrix over all parameters from per-triangle blocks (summed where they overlap).
+
+    Parameters
+    ----------
+    triangles : (m, 3) int64
+    blocks : (m, 6, 6) float64
+        Over each triangle's corners' parameters, vertex-major.
+    n : int
+        Vertices.
+
+    Returns
+    -------
+    matrix : (2n, 2n) scipy.sparse.csr_matrix
+    """
     m = len(triangles)
     dof = (2 * triangles[:, :, None] + np.arange(2)[None, None, :]).reshape(m, 6)
     rows = np.repeat(dof, 6, axis=1).ravel()
@@ -285,14 +338,23 @@ def _assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.cs
 def _assemble_hessian(membrane: Membrane, F: np.ndarray, M: np.ndarray, project: bool) -> sp.csr_matrix:
     """``(2n, 2n)`` Hessian in u from per-triangle blocks and per-vertex ``M (n, 3, 2)``;
     ``project`` clamps each triangle's 6x6 block in its corners' parameters to PSD."""
-    blocks = _parameter_blocks(membrane, F, M)
-    return _assemble_blocks(membrane.triangles, _project_psd(blocks) if project else blocks, len(M))
+    blocks = parameter_blocks(membrane, F, M)
+    return assemble_blocks(membrane.triangles, project_psd(blocks) if project else blocks, len(M))
 
 
-def _shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
-    """``(H + shift I)^-1 rhs`` for a square sparse ``H``: the shift is
-    :data:`REGULARISATION_SHARE` of its largest diagonal entry, as a projected Hessian may be
-    singular."""
+def shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """``(H + shift I)^-1 rhs``, the shift :data:`REGULARISATION_SHARE` of ``H``'s largest
+    diagonal entry, as a projected Hessian may be singular.
+
+    Parameters
+    ----------
+    H : (k, k) scipy.sparse matrix
+    rhs : (k,) float64
+
+    Returns
+    -------
+    solution : (k,) float64
+    """
     shift = REGULARISATION_SHARE * max(float(np.abs(H.diagonal()).max()), np.finfo(float).tiny)
     return np.atleast_1d(spla.spsolve((H + shift * sp.identity(H.shape[0])).tocsc(), rhs))
 
@@ -333,7 +395,7 @@ def membrane_gradient(membrane: Membrane, chart: HeadChart, u: np.ndarray) -> np
     gradient : (n, 2) float64 (J per uv unit)
     """
     host, x = _located(chart, u)
-    _, gx = _position_gradients(membrane, x)
+    _, gx = position_gradients(membrane, x)
     return np.einsum("nia,ni->na", chart.jacobians(host), gx)
 
 

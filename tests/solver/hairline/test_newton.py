@@ -4,8 +4,9 @@ known minimisers, stationarity, load stages and refusals."""
 import numpy as np
 import pytest
 
+from hairport.solver.hairline.kinks import KINK_BARYCENTRIC
 from hairport.solver.hairline.membrane import Membrane, membrane_gradient
-from hairport.solver.hairline.newton import KINK_BARYCENTRIC, relocate
+from hairport.solver.hairline.newton import ProjectedNewton, relocate
 from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.model.errors import InputError
 from tests.solver.hairline.charts import PARABOLOID, boundary_of, flat_chart, paraboloid_chart, rotated_scalp
@@ -116,3 +117,43 @@ def test_relocate_refuses_targets_outside_the_chart(flat_sheet):
         relocate(membrane, chart, u_rest, fixed, u_rest[fixed] + 10.0)
     with pytest.raises(InputError):
         relocate(membrane, chart, u_rest, fixed, u_rest[fixed][:-1])
+
+
+def test_a_mirrored_hairline_is_too_far(flat_sheet):
+    # the boundary mirrored in x: halfway there the sheet collapses onto the line x = 1/2
+    chart, membrane, u_rest, fixed = flat_sheet
+    mirrored = np.column_stack([1.0 - u_rest[fixed, 0], u_rest[fixed, 1]])
+    with pytest.raises(InputError, match="beyond 50 % of the hairline's motion") as caught:
+        relocate(membrane, chart, u_rest, fixed, mirrored, max_iterations=30)
+    assert caught.value.code == "hairline_too_far"
+
+
+def test_relocate_refuses_a_start_degenerate_in_uv(flat_sheet):
+    chart, membrane, u_rest, fixed = flat_sheet
+    collapsed = u_rest.copy()
+    collapsed[12] = collapsed[1]  # interior vertex (1, 1) onto (0, 1): its triangles lose their area
+    with pytest.raises(InputError, match="degenerate triangles in uv at the start"):
+        relocate(membrane, chart, collapsed, fixed, collapsed[fixed])
+
+
+def test_stage_starts_by_hand(flat_sheet):
+    chart, membrane, u_rest, fixed = flat_sheet
+    solver = ProjectedNewton(membrane, chart, u_rest, fixed, u_rest[fixed])
+    # an affine hairline motion: the graph-harmonic extension moves every vertex affinely
+    # (each inner vertex's six neighbours are symmetric about it), up to the 1e-12 shift
+    A, b = np.array([[1.1, 0.2], [-0.1, 0.9]]), np.array([0.05, -0.02])
+    extended = solver.harmonic_start(u_rest, u_rest[fixed] @ A.T + b)
+    np.testing.assert_allclose(extended[fixed], u_rest[fixed] @ A.T + b, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(extended, u_rest @ A.T + b, rtol=0, atol=1e-11)
+    # a small translation keeps every triangle: pinned; a 20 % push flips the pinned start
+    u, energy, how = solver.stage_start(u_rest, u_rest[fixed] + [0.01, 0.0])
+    assert how == "pinned" and energy > 0.0
+    np.testing.assert_array_equal(u[~fixed], u_rest[~fixed])
+    pushed = u_rest[fixed].copy()
+    pushed[:, 0] -= 0.2 * pushed[:, 0] ** 2
+    u, energy, how = solver.stage_start(u_rest, pushed)
+    assert how == "elastic" and energy == solver.admissible(u)
+    assert solver.admissible(np.where(fixed[:, None], u, u_rest)) is None  # the pinned start flips
+    assert solver.report.stages == 0  # stage_start does not record; next_stage does
+    u, _, reached = solver.next_stage(u_rest, 0.0)
+    assert reached == 1.0 and solver.report.stages == 1 and solver.report.start == ["pinned"]
