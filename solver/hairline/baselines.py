@@ -61,9 +61,10 @@ def harmonic_displacement(
 
     Solves ``L d = 0`` on the free vertices with ``d = u_fixed - u_rest[fixed]`` on the
     fixed ones, ``L`` the cotangent Laplacian of the scalp's *uv* triangles
-    (``igl.cotmatrix`` takes the ``(n, 2)`` parameters directly), and returns ``u_rest + d``. Harmonic fields reproduce affine ones, so a
-    hairline moved by an affine map of the plane moves every vertex by it (cotangent
-    weights are exact for linear functions). Vertices of scalp pieces holding no fixed
+    (``igl.cotmatrix`` takes the ``(n, 2)`` parameters directly), and returns
+    ``u_rest + d``. Harmonic fields reproduce affine ones, so a hairline moved by an affine
+    map of the plane moves every vertex by it (cotangent weights are exact for linear
+    functions). Vertices of scalp pieces holding no fixed
     vertex (and vertices in no triangle) keep ``d = 0``.
 
     Parameters

@@ -14,13 +14,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from hairport.solver.hairline.fold_barrier import FOLD_STIFFNESS, fold_barrier
 from hairport.solver.hairline.head_chart import HeadChart
 from hairport.solver.hairline.kinks import FREE, KINK_BARYCENTRIC, ON_EDGE, SNAP_BARYCENTRIC, kink_activity
 from hairport.solver.hairline.membrane import (
-    FOLD_STIFFNESS,
     Membrane,
     assemble_blocks,
-    fold_barrier,
     membrane_energy,
     parameter_blocks,
     position_gradients,

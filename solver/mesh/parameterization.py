@@ -19,6 +19,13 @@ ARAP_ITERATIONS = 50
 MIN_UV_AREA_FRACTION = 1e-12
 
 
+def check_parameterization(method: str) -> None:
+    """Refuse a method not in :data:`PARAMETERIZATIONS` (code ``bad_option``)."""
+    if method not in PARAMETERIZATIONS:
+        raise InputError(f"unknown parameterization {method!r}; expected one of {', '.join(PARAMETERIZATIONS)}",
+                         code="bad_option")
+
+
 def _segments_cross(polygon: np.ndarray) -> bool:
     """Whether two non-adjacent edges of a closed polygon ``(b, 2)`` intersect."""
     b = len(polygon)
@@ -93,9 +100,7 @@ def parameterize(vertices: np.ndarray, triangles: np.ndarray, method: str = "har
         Unknown method, bad shapes, unused vertices, a patch that is not a disk, or a map
         that is not injective.
     """
-    if method not in PARAMETERIZATIONS:
-        raise InputError(f"unknown parameterization {method!r}; expected one of {', '.join(PARAMETERIZATIONS)}",
-                         code="bad_option")
+    check_parameterization(method)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or triangles.ndim != 2 or triangles.shape[1] != 3:

@@ -3,19 +3,23 @@ finite differences."""
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from hairport.solver.hairline.membrane import (
     DEFAULT_LAM,
     DEFAULT_MU,
     Membrane,
+    assemble_blocks,
     deformation_gradients,
     energy_density,
-    fold_barrier,
     membrane_energy,
     membrane_gradient,
     membrane_hessian,
+    parameter_blocks,
+    position_gradients,
+    project_psd,
+    shifted_solve,
 )
-from hairport.solver.mesh.areas import signed_areas
 from tests.solver.hairline.charts import paraboloid_chart, rotated_scalp
 
 # ----------------------------------------------------------------------------------------
@@ -111,33 +115,46 @@ def test_projected_hessian_is_positive_semidefinite(perturbed):
     assert exact.min() < -1e-6 * exact.max()
 
 
-def test_fold_barrier_against_hand_values_and_differences():
-    triangles = np.array([[0, 1, 2], [1, 3, 2]])
-    rest = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
-    rest_areas = signed_areas(rest, triangles)
-    weights = np.array([2.0, 3.0])
-    energy, gradient, blocks = fold_barrier(triangles, rest, rest_areas, weights)
-    assert energy == 0.0 and not gradient.any() and not blocks.any()  # inactive above the threshold
-    # squeeze the first triangle to 4 % of its area: -(r - r^)^2 ln(r / r^) by hand
-    u = rest.copy()
-    u[2] = [0.3, 0.04]
-    r = 0.04
-    energy, gradient, blocks = fold_barrier(triangles, u, rest_areas, weights)
-    assert energy == pytest.approx(2.0 * -((r - 0.1) ** 2) * np.log(r / 0.1), rel=1e-12)
-    h = 1e-7
-    flat = u.ravel()
-    dofs = np.concatenate([2 * triangles[0][:, None] + np.arange(2)]).ravel()
+# ----------------------------------------------------------------------------------------
+# assembly helpers
+# ----------------------------------------------------------------------------------------
 
-    def at(v):
-        return fold_barrier(triangles, v.reshape(-1, 2), rest_areas, weights)
 
-    fd = np.array([(at(flat + h * e)[0] - at(flat - h * e)[0]) / (2 * h) for e in np.eye(len(flat))])
-    np.testing.assert_allclose(gradient.ravel(), fd, rtol=1e-6, atol=1e-9)
-    fd_hessian = np.array([((at(flat + h * e)[1] - at(flat - h * e)[1]) / (2 * h)).ravel()
-                           for e in np.eye(len(flat))])
-    np.testing.assert_allclose(blocks[0], fd_hessian[np.ix_(dofs, dofs)], rtol=1e-5, atol=1e-6)
-    assert not blocks[1].any()
-    # folded: infinite
-    u[2] = [0.3, -0.01]
-    assert fold_barrier(triangles, u, rest_areas, weights)[0] == np.inf
+def test_project_psd_clamps_negative_eigenvalues():
+    rotation = np.array([[0.6, -0.8], [0.8, 0.6]])
+    block = rotation @ np.diag([3.0, -2.0]) @ rotation.T
+    projected = project_psd(np.stack([block, np.eye(2)]))
+    np.testing.assert_allclose(projected[0], rotation @ np.diag([3.0, 0.0]) @ rotation.T, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(projected[1], np.eye(2), rtol=0, atol=1e-15)
 
+
+def test_assemble_blocks_sums_over_shared_corners():
+    triangles = np.array([[0, 1, 2], [2, 1, 3]])
+    blocks = np.stack([np.full((6, 6), 1.0), np.full((6, 6), 10.0)])
+    matrix = assemble_blocks(triangles, blocks, 4).toarray()
+    assert matrix.shape == (8, 8)
+    # parameters 2..5 belong to vertices 1 and 2, shared: 1 + 10; vertex 0 only in the first,
+    # vertex 3 only in the second, and they never meet
+    assert matrix[2, 5] == 11.0 and matrix[0, 1] == 1.0 and matrix[6, 7] == 10.0 and matrix[0, 6] == 0.0
+    assert matrix.sum() == 36.0 + 360.0
+
+
+def test_shifted_solve_regularises_a_singular_matrix():
+    H = sp.csr_matrix(np.diag([4.0, 2.0, 0.0]))
+    solution = shifted_solve(H, np.array([4.0, 2.0, 0.0]))
+    np.testing.assert_allclose(solution, [1.0, 1.0, 0.0], rtol=1e-9, atol=0)
+    # the null direction sees only the shift, 1e-10 of the largest diagonal entry (4)
+    np.testing.assert_allclose(shifted_solve(H, np.array([0.0, 0.0, 1.0])), [0.0, 0.0, 2.5e9], rtol=1e-9)
+
+
+def test_position_gradients_are_the_gradient_in_space(perturbed):
+    chart, membrane, u = perturbed
+    host, _ = chart.locate(u)
+    F, gradient = position_gradients(membrane, chart.embed(u))
+    np.testing.assert_array_equal(F, deformation_gradients(membrane, chart.embed(u)))
+    np.testing.assert_allclose(np.einsum("nia,ni->na", chart.jacobians(host), gradient),
+                               membrane_gradient(membrane, chart, u), rtol=0, atol=1e-15)
+    # Hessian blocks, assembled unprojected, are the exact Hessian
+    blocks = parameter_blocks(membrane, F, chart.jacobians(host))
+    np.testing.assert_allclose(assemble_blocks(membrane.triangles, blocks, len(u)).toarray(),
+                               membrane_hessian(membrane, chart, u, project=False).toarray(), rtol=0, atol=0)

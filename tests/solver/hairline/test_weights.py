@@ -33,3 +33,23 @@ def test_weights_refuse_a_wrong_shape():
     with pytest.raises(ValueError, match=r"expected \(2,\)"):
         adaptive_weights(straight_strands(), np.zeros(3))
 
+
+
+def test_weights_follow_the_arc_length_of_each_strand():
+    # a bent strand (3-4-5 segments: arc 0, 5, 10 cm) of 3 particles, then a straight one of 2
+    bent = np.array([[0.0, 0.0, 0.0], [0.03, 0.04, 0.0], [0.03, 0.04, 0.05]])
+    short = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.02]])
+    hair = Hair.from_strands([bent, short])
+    gamma = adaptive_weights(hair, np.array([0.05, 0.01]), sigma=0.5)
+    expected = np.concatenate([1.0 - np.exp(-0.5 * (np.array([0.0, 0.05, 0.10]) / 0.05) ** 2),
+                               1.0 - np.exp(-0.5 * (np.array([0.0, 0.02]) / 0.01) ** 2)])
+    np.testing.assert_allclose(gamma, expected, rtol=1e-15, atol=0)
+    np.testing.assert_array_equal(gamma[hair.roots], [0.0, 0.0])
+    # a larger sigma relaxes less: every weight off the root grows
+    stiffer = adaptive_weights(hair, np.array([0.05, 0.01]), sigma=2.0)
+    assert np.all(stiffer[1:3] > gamma[1:3]) and np.all(stiffer[hair.roots] == 0.0)
+
+
+def test_no_root_moved_keeps_every_weight_at_one():
+    hair = straight_strands()
+    np.testing.assert_array_equal(adaptive_weights(hair, np.zeros(2)), np.ones(8))

@@ -5,7 +5,13 @@ import pytest
 from scipy.spatial import Delaunay
 
 from hairport.solver.mesh.areas import signed_areas
-from hairport.solver.mesh.parameterization import _segments_cross, check_injective, parameterize
+from hairport.solver.mesh.parameterization import (
+    PARAMETERIZATIONS,
+    _segments_cross,
+    check_injective,
+    check_parameterization,
+    parameterize,
+)
 from hairport.solver.mesh.topology import boundary_loops
 from hairport.solver.model.errors import InputError
 
@@ -96,3 +102,11 @@ def test_boundary_crossings():
     bowtie = square[[0, 1, 3, 2]]
     assert not _segments_cross(square)
     assert _segments_cross(bowtie)
+
+
+def test_check_parameterization():
+    for method in PARAMETERIZATIONS:
+        check_parameterization(method)
+    with pytest.raises(InputError, match="unknown parameterization 'tutte'; expected one of harmonic, lscm, arap") as caught:
+        check_parameterization("tutte")
+    assert caught.value.code == "bad_option"
