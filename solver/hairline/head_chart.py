@@ -192,6 +192,24 @@ class HeadChart:
         barycentric[pair_point[first]] = weights[first]
         return host, barycentric
 
+    def place(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Hosts, barycentric coordinates and 3D positions of parameters (Eq. 18-19).
+
+        Parameters
+        ----------
+        u : (n, 2) float64
+
+        Returns
+        -------
+        host : (n,) int64
+            -1 outside the chart.
+        barycentric : (n, 3) float64
+        x : (n, 3) float64
+            NaN outside the chart.
+        """
+        host, barycentric = self.locate(u)
+        return host, barycentric, np.einsum("nk,nkc->nc", barycentric, self.vertices[self.faces[host]])
+
     def embed(self, u: np.ndarray) -> np.ndarray:
         """3D positions on the head of parameters (Eq. 18-19).
 
@@ -208,10 +226,10 @@ class HeadChart:
         ValueError
             If a point lies outside the chart.
         """
-        host, barycentric = self.locate(u)
+        host, _, x = self.place(u)
         if (host < 0).any():
             raise ValueError(f"{int((host < 0).sum())} parameter points lie outside the head chart")
-        return np.einsum("nk,nkc->nc", barycentric, self.vertices[self.faces[host]])
+        return x
 
     def jacobians(self, host: np.ndarray) -> np.ndarray:
         """``dx/du`` of host triangles, ``[X1-X0 | X2-X0] [u1-u0 | u2-u0]^-1``.

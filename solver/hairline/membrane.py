@@ -354,10 +354,10 @@ def shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
 
 def _located(chart: HeadChart, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hosts and 3D positions of ``u``; ``ValueError`` outside the chart."""
-    host, barycentric = chart.locate(u)
+    host, _, x = chart.place(u)
     if (host < 0).any():
         raise ValueError(f"{int((host < 0).sum())} scalp vertices lie outside the head chart")
-    return host, np.einsum("nk,nkc->nc", barycentric, chart.vertices[chart.faces[host]])
+    return host, x
 
 
 def membrane_energy(membrane: Membrane, chart: HeadChart, u: np.ndarray) -> float:

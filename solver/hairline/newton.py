@@ -124,7 +124,7 @@ def relocate(
     """Minimise Eq. 15 over the free scalp parameters with the hairline pinned (projected Newton).
 
     Each iteration solves ``(H + shift I) d = -g`` on the free unknowns with the projected
-    Hessian of :func:`membrane_hessian` (Teran et al. 2005) and backtracks (halving, at
+    Hessian of :func:`.membrane.membrane_hessian` (Teran et al. 2005) and backtracks (halving, at
     most :data:`MAX_BACKTRACKS`) until the trial point keeps every vertex inside the chart,
     every scalp triangle's signed uv area of its sign in ``u_start``, and satisfies Armijo;
     hosts are located anew at every evaluation. Stops when the largest vertex step
@@ -138,13 +138,15 @@ def relocate(
     re-decided every iteration (:mod:`.kinks`), and the line search lands exactly on the
     first edge a vertex would cross before halving past it.
 
-    The energy minimised is Eq. 15 plus :func:`fold_barrier` (zero unless a triangle is
-    compressed ten-fold in uv), which keeps triangles from folding across the head's bends.
+    The energy minimised is Eq. 15 plus :func:`.fold_barrier.fold_barrier` (zero unless a
+    triangle is compressed ten-fold in uv), which keeps triangles from folding across the
+    head's bends.
 
     The fixed vertices are first set to ``u_fixed``. If that flips a triangle, the boundary
-    motion is extended to the free vertices harmonically; if that flips too, the motion is
-    applied in load stages (halved until a stage starts unflipped, each solved to
-    convergence); ``u[fixed] == u_fixed`` unless ``max_iterations`` ran out first.
+    motion is extended to the free vertices by one elastic Newton step, else by a
+    graph-harmonic extension; if those flip too, the motion is applied in load stages
+    (halved until a stage starts unflipped, each solved to convergence); ``u[fixed] ==
+    u_fixed`` unless ``max_iterations`` ran out first.
 
     Parameters
     ----------
@@ -263,12 +265,6 @@ class ProjectedNewton:
             return g, projected, None
         return g, projected, assemble_blocks(triangles, blocks, n) + assemble_blocks(self.oriented, fold_blocks, n)
 
-    def positions(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Hosts ``(n,)``, barycentric coordinates ``(n, 3)`` and 3D positions ``(n, 3)`` of ``u``."""
-        host, barycentric = self.chart.locate(u)
-        x = np.einsum("nk,nkc->nc", barycentric, self.chart.vertices[self.chart.faces[host]])
-        return host, barycentric, x
-
     # -- the start of a load stage ----------------------------------------------------------------
 
     def elastic_start(self, u: np.ndarray, target: np.ndarray) -> np.ndarray | None:
@@ -276,7 +272,7 @@ class ProjectedNewton:
         inhomogeneous Dirichlet step): the free vertices follow the boundary motion as the
         linearised membrane does, at the current hosts. None if the step is not finite."""
         free, fixed = self.free, self.fixed
-        host, _, x = self.positions(u)
+        host, _, x = self.chart.place(u)
         F, gx = position_gradients(self.membrane, x)
         g, H, _ = self.derivatives(u, F, gx, self.chart.jacobians(host), exact=False)
         free2, fixed2 = np.repeat(free, 2), np.repeat(fixed, 2)
@@ -356,14 +352,14 @@ class ProjectedNewton:
         the unknowns (2 per free vertex, 1 along the edge per edge-held one), the hosts
         ``(n,)`` and the count of held vertices."""
         chart, free, n = self.chart, self.free, self.n
-        host, barycentric, x = self.positions(u)
+        host, barycentric, x = self.chart.place(u)
         F, gx = position_gradients(self.membrane, x)
         _, mode, _, snapped = kink_activity(chart, host, barycentric, gx, free, SNAP_BARYCENTRIC)
         if (mode != FREE).any() and not np.array_equal(snapped, u):
             snapped_energy = self.admissible(snapped)
             if snapped_energy is not None and snapped_energy <= energy:
                 u, energy = snapped, snapped_energy
-                host, barycentric, x = self.positions(u)
+                host, barycentric, x = self.chart.place(u)
                 F, gx = position_gradients(self.membrane, x)
         host, mode, tangent, _ = kink_activity(chart, host, barycentric, gx, free)
         M = chart.jacobians(host)

@@ -49,3 +49,15 @@ def test_embed_and_jacobians_follow_the_host_triangle():
         assert (chart.locate(u + step)[0] == host).all()
         np.testing.assert_allclose((chart.embed(u + step) - chart.embed(u - step)) / (2 * h), J[:, :, a], atol=1e-8)
 
+
+
+def test_place_is_locate_and_embed():
+    chart = paraboloid_chart()
+    u = np.array([[0.1, -0.2], [0.5, 0.5], [3.0, 0.0]])  # the last outside the [-1, 1]^2 chart
+    host, barycentric, x = chart.place(u)
+    expected_host, expected_barycentric = chart.locate(u)
+    np.testing.assert_array_equal(host, expected_host)
+    np.testing.assert_array_equal(barycentric, expected_barycentric)
+    assert host[2] == -1 and np.isnan(x[2]).all()
+    np.testing.assert_array_equal(x[:2], chart.embed(u[:2]))
+    np.testing.assert_allclose(x[:2, :2], u[:2], rtol=0, atol=1e-15)

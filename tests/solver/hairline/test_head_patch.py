@@ -45,3 +45,19 @@ def test_parameterizations_of_the_head_patch_are_injective_in_the_unit_disk(char
         assert np.abs(radius[loop] - 1.0).max() < 1e-12
         interior = np.setdiff1d(np.arange(len(vertices)), loop)
         assert radius[interior].max() < 1.0
+
+
+def test_each_margin_ring_adds_the_head_faces_touching_the_patch(character, frame, scalp):
+    faces = character.faces
+    head = frame.head_vertices[faces].all(axis=1)
+    region = np.zeros(len(faces), dtype=bool)
+    region[scalp.faces] = True
+    for rings, count in ((1, 565), (2, 678), (3, 804)):
+        touched = np.zeros(character.n_vertices, dtype=bool)
+        touched[faces[region].ravel()] = True
+        region |= head & touched[faces].any(axis=1)  # these rings need no disk repair
+        vertices, triangles, patch_faces = head_patch(character, scalp, rings, frame)
+        assert len(patch_faces) == count
+        np.testing.assert_array_equal(patch_faces, np.flatnonzero(region))
+        np.testing.assert_array_equal(vertices, np.unique(faces[patch_faces]))
+        np.testing.assert_array_equal(vertices[triangles], faces[patch_faces])
