@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hairport.solver.mesh.topology import corner_neighbours, vertex_faces
+from hairport.solver.mesh.triangles import interpolate_barycentric
 from hairport.solver.model.errors import InputError
 
 #: a point belongs to a triangle when its barycentric coordinates are all >= -this
@@ -208,7 +209,7 @@ class HeadChart:
             NaN outside the chart.
         """
         host, barycentric = self.locate(u)
-        return host, barycentric, np.einsum("nk,nkc->nc", barycentric, self.vertices[self.faces[host]])
+        return host, barycentric, interpolate_barycentric(self.vertices, self.faces, host, barycentric)
 
     def embed(self, u: np.ndarray) -> np.ndarray:
         """3D positions on the head of parameters (Eq. 18-19).

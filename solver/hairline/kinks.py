@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from hairport.solver.hairline.head_chart import HeadChart
+from hairport.solver.mesh.triangles import interpolate_barycentric
 
 #: a scalp vertex whose barycentric coordinate in its host is below this lies on the
 #: host's edge (one small coordinate) or vertex (two): where the piecewise-linear head
@@ -75,7 +76,7 @@ def kink_activity(
     mode = np.zeros(n, dtype=np.int8)
     tangent = np.zeros((n, 2))
     faces, uv = chart.faces, chart.uv
-    snapped = np.einsum("nk,nkc->nc", barycentric, uv[faces[host]])
+    snapped = interpolate_barycentric(uv, faces, host, barycentric)
     small = barycentric < reach
     on = barycentric < KINK_BARYCENTRIC
     count = small.sum(axis=1)
@@ -103,7 +104,7 @@ def kink_activity(
         w = barycentric[idx[held]].copy()
         w[np.arange(len(w)), k[held]] = 0.0
         w /= w.sum(axis=1, keepdims=True)
-        snapped[idx[held]] = np.einsum("nk,nkc->nc", w, uv[faces[t[held]]])
+        snapped[idx[held]] = interpolate_barycentric(uv, faces, t[held], w)
         switch = ~held & (slope_out < slope_in) & on[idx].any(axis=1)
         host[idx[switch]] = other[switch]
 

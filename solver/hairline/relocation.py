@@ -131,7 +131,7 @@ class ScalpChart:
         found = self.head.signed_distance(points)
         corners = self.chart.faces[found.faces]
         weights = barycentric_coordinates(found.closest, self.chart.vertices[corners])
-        return np.einsum("kc,kcd->kd", weights, self.chart.uv[corners]), np.abs(found.distance)
+        return interpolate_barycentric(self.chart.uv, self.chart.faces, found.faces, weights), np.abs(found.distance)
 
     def face_parameters(self, faces: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Chart parameters of points given on the character's faces.
@@ -153,7 +153,7 @@ class ScalpChart:
         local = np.minimum(local, len(self.patch_faces) - 1)
         inside = self.patch_faces[local] == faces
         uv = np.full((len(faces), 2), np.nan)
-        uv[inside] = np.einsum("kc,kcd->kd", barycentric[inside], self.chart.uv[self.chart.faces[local[inside]]])
+        uv[inside] = interpolate_barycentric(self.chart.uv, self.chart.faces, local[inside], barycentric[inside])
         return uv, inside
 
 
@@ -410,7 +410,7 @@ def relocate_roots(
     inside = host >= 0
     old = interpolate_barycentric(character.vertices, character.faces, root_faces, root_barycentric)
     roots = old.copy()
-    new_uv = np.einsum("kc,kcd->kd", weights[inside], u[setup.triangles[host[inside]]])
+    new_uv = interpolate_barycentric(u, setup.triangles, host[inside], weights[inside])
     roots[inside] = setup.chart.embed(new_uv)
     travel = np.linalg.norm(roots - old, axis=1)
     deformed = setup.chart.embed(u)
