@@ -1,15 +1,16 @@
-"""Section 7.5's alternatives to the embedded membrane for hair-root relocation, and Table 3's metric.
+"""Section 7.5's alternatives to the embedded membrane for hair-root relocation (harmonic, 2D and 3D
+thin-plate RBF displacements).
 
 Convention: the scalp is a triangle mesh with rest positions ``rest (n, 3) float64``
 (meters) on the head, ``triangles (m, 3) int64`` and rest parameters ``u_rest (n, 2)
-float64`` in the head's parameterization (uv units, :mod:`.parameterization`). The
+float64`` in the head's parameterization (uv units, :mod:`.mesh.parameterization`). The
 hairline is pinned: ``fixed (n,) bool`` marks its vertices and ``u_fixed (k, 2) float64``
 (``x_fixed (k, 3)`` in 3D) gives their new places, in the order of
 ``np.flatnonzero(fixed)``. Every method returns the new place of every vertex, the fixed
 ones exactly at their targets.
 
 The paper (Section 7.5, Figures 13 and 16, Table 3) compares the membrane of Eq. 15
-(:func:`.membrane.relocate`) with three models of how the scalp's interior follows the
+(:func:`.newton.relocate`) with three models of how the scalp's interior follows the
 hairline:
 
 ``harmonic`` (:func:`harmonic_displacement`)
@@ -28,26 +29,19 @@ hairline:
 The thin-plate splines use SciPy's :class:`~scipy.interpolate.RBFInterpolator` with its
 default degree-1 polynomial term, so they reproduce affine displacement fields exactly.
 
-Table 3's density change (:func:`density_change`): per scalp triangle, the roots in it
-divided by its area, before and after the relocation; the relative changes of the
-triangles holding roots form a vector whose mean absolute value (L1) and largest absolute
-value (L-infinity) are reported. Roots keep their triangle (barycentric coordinates), so a
-triangle's relative change is ``A / A' - 1`` with ``A``, ``A'`` its rest and deformed 3D
-areas, whatever its root count.
-
-Bad input raises :class:`.errors.InputError` with ``code="bad_relocation"``.
+Bad input raises :class:`.errors.InputError` with ``code="bad_relocation"`` (:mod:`.checks`).
 """
 
 from __future__ import annotations
 
 import igl
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import RBFInterpolator
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from hairport.solver.model.errors import InputError
+from hairport.solver.hairline.checks import check_pins, check_points, check_triangles, index_array, refuse
+from hairport.solver.mesh.topology import vertex_adjacency
 
 #: interior vertices pinned at zero displacement by the RBF alternatives. The paper only
 #: says "a sparse set"; a dozen spread over the scalp's core (the vertices at least half
@@ -60,70 +54,6 @@ RBF_KERNEL = "thin_plate_spline"
 #: a scalp vertex belongs to the core sampled by :func:`interior_seeds` when its hop
 #: distance from the boundary loop is at least this share of the largest one
 CORE_DEPTH_SHARE = 0.5
-#: error code of every refusal in this module
-ERROR_CODE = "bad_relocation"
-
-
-def _refuse(problem: str, source: str) -> InputError:
-    return InputError(problem, source, code=ERROR_CODE)
-
-
-def _index_array(values, ndim: int, what: str, source: str) -> np.ndarray:
-    """``values`` as int64 with ``ndim`` dimensions (an empty 2D array as ``(0, 3)``)."""
-    array = np.asarray(values)
-    if array.size == 0:
-        return np.zeros((0,) if ndim == 1 else (0, 3), dtype=np.int64)
-    if array.dtype.kind not in "iu":
-        raise _refuse(f"{what} must be integer ids, got dtype {array.dtype}", source)
-    if array.ndim != ndim:
-        raise _refuse(f"{what} must have {ndim} dimension(s), got shape {array.shape}", source)
-    return array.astype(np.int64, copy=False)
-
-
-def _check_triangles(triangles, n: int, source: str) -> np.ndarray:
-    triangles = _index_array(triangles, 2, "triangles", source)
-    if triangles.shape[1] != 3:
-        raise _refuse(f"triangles must be (m, 3), got shape {triangles.shape}", source)
-    if triangles.size and (triangles.min() < 0 or triangles.max() >= n):
-        raise _refuse(f"triangles index vertices outside 0 .. {n - 1}", source)
-    return triangles
-
-
-def _check_points(points, dim: int, what: str, source: str) -> np.ndarray:
-    points = np.asarray(points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != dim:
-        raise _refuse(f"{what} must be (n, {dim}), got shape {points.shape}", source)
-    if not np.isfinite(points).all():
-        raise _refuse(f"{what} has non-finite values", source)
-    return points
-
-
-def _check_pins(fixed, targets, n: int, dim: int, source: str) -> tuple[np.ndarray, np.ndarray]:
-    """``fixed (n,) bool`` and ``targets (fixed.sum(), dim)``, both checked."""
-    fixed = np.asarray(fixed)
-    if fixed.shape != (n,):
-        raise _refuse(f"fixed must be ({n},), got shape {fixed.shape}", source)
-    fixed = fixed.astype(bool)
-    targets = np.asarray(targets, dtype=np.float64)
-    k = int(fixed.sum())
-    if k == 0 and targets.size == 0:
-        targets = np.zeros((0, dim))
-    if targets.shape != (k, dim):
-        raise _refuse(f"the {k} fixed vertices need targets ({k}, {dim}), got shape {targets.shape}", source)
-    if not np.isfinite(targets).all():
-        raise _refuse("the fixed vertices' targets have non-finite values", source)
-    return fixed, targets
-
-
-def _edge_graph(triangles: np.ndarray, n: int) -> sp.csr_matrix:
-    """Symmetric unit-weight adjacency ``(n, n)`` of the mesh edges."""
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    graph = (graph + graph.T).tocsr()
-    graph.data[:] = 1.0
-    return graph
-
-
 def harmonic_displacement(
     u_rest: np.ndarray, triangles: np.ndarray, fixed: np.ndarray, u_fixed: np.ndarray
 ) -> np.ndarray:
@@ -131,9 +61,10 @@ def harmonic_displacement(
 
     Solves ``L d = 0`` on the free vertices with ``d = u_fixed - u_rest[fixed]`` on the
     fixed ones, ``L`` the cotangent Laplacian of the scalp's *uv* triangles
-    (``igl.cotmatrix`` takes the ``(n, 2)`` parameters directly), and returns ``u_rest + d``. Harmonic fields reproduce affine ones, so a
-    hairline moved by an affine map of the plane moves every vertex by it (cotangent
-    weights are exact for linear functions). Vertices of scalp pieces holding no fixed
+    (``igl.cotmatrix`` takes the ``(n, 2)`` parameters directly), and returns
+    ``u_rest + d``. Harmonic fields reproduce affine ones, so a hairline moved by an affine
+    map of the plane moves every vertex by it (cotangent weights are exact for linear
+    functions). Vertices of scalp pieces holding no fixed
     vertex (and vertices in no triangle) keep ``d = 0``.
 
     Parameters
@@ -158,14 +89,14 @@ def harmonic_displacement(
         Bad shapes or ids, non-finite values, degenerate uv triangles or a singular system.
     """
     source = "harmonic_displacement"
-    u_rest = _check_points(u_rest, 2, "u_rest", source)
+    u_rest = check_points(u_rest, 2, "u_rest", source)
     n = len(u_rest)
-    triangles = _check_triangles(triangles, n, source)
+    triangles = check_triangles(triangles, n, source)
     if len(triangles) == 0:
-        raise _refuse("the scalp has no triangles", source)
-    fixed, u_fixed = _check_pins(fixed, u_fixed, n, 2, source)
+        raise refuse("the scalp has no triangles", source)
+    fixed, u_fixed = check_pins(fixed, u_fixed, n, 2, source)
 
-    _, piece = connected_components(_edge_graph(triangles, n), directed=False)
+    _, piece = connected_components(vertex_adjacency(triangles, n), directed=False)
     anchored = np.bincount(piece, weights=fixed.astype(np.float64)) > 0
     free = anchored[piece] & ~fixed
     displacement = np.zeros((n, 2))
@@ -173,16 +104,16 @@ def harmonic_displacement(
     if free.any():
         laplacian = igl.cotmatrix(np.ascontiguousarray(u_rest), triangles).tocsr()
         if not np.isfinite(laplacian.data).all():
-            raise _refuse("the scalp has degenerate triangles in uv (infinite cotangent weights)", source)
+            raise refuse("the scalp has degenerate triangles in uv (infinite cotangent weights)", source)
         rows = laplacian[free]
         rhs = -(rows[:, fixed] @ displacement[fixed])
         try:
             factor = spla.splu(rows[:, free].tocsc())
         except RuntimeError as error:
-            raise _refuse(f"the cotangent Laplacian of the free vertices is singular ({error})", source) from None
+            raise refuse(f"the cotangent Laplacian of the free vertices is singular ({error})", source) from None
         displacement[free] = factor.solve(rhs)
         if not np.isfinite(displacement).all():
-            raise _refuse("the harmonic solve gave non-finite displacements", source)
+            raise refuse("the harmonic solve gave non-finite displacements", source)
     u = u_rest + displacement
     u[fixed] = u_fixed
     return u
@@ -191,16 +122,16 @@ def harmonic_displacement(
 def _rbf_displacement(points: np.ndarray, fixed, targets, seeds, source: str) -> np.ndarray:
     """TPS interpolation of ``targets - points[fixed]`` and zero at ``seeds``, applied to ``points``."""
     n, dim = points.shape
-    fixed, targets = _check_pins(fixed, targets, n, dim, source)
-    seeds = _index_array(seeds, 1, "seeds", source)
+    fixed, targets = check_pins(fixed, targets, n, dim, source)
+    seeds = index_array(seeds, 1, "seeds", source)
     if seeds.size and (seeds.min() < 0 or seeds.max() >= n):
-        raise _refuse(f"seeds index vertices outside 0 .. {n - 1}", source)
+        raise refuse(f"seeds index vertices outside 0 .. {n - 1}", source)
     seeds = np.unique(seeds)
     if fixed[seeds].any():
-        raise _refuse(f"seeds {seeds[fixed[seeds]][:5].tolist()} are fixed vertices", source)
+        raise refuse(f"seeds {seeds[fixed[seeds]][:5].tolist()} are fixed vertices", source)
     data = np.concatenate([np.flatnonzero(fixed), seeds])
     if len(data) < dim + 1:
-        raise _refuse(f"a thin-plate spline in {dim}D needs at least {dim + 1} fixed vertices and seeds, "
+        raise refuse(f"a thin-plate spline in {dim}D needs at least {dim + 1} fixed vertices and seeds, "
                       f"got {len(data)}", source)
     values = np.zeros((len(data), dim))
     values[: int(fixed.sum())] = targets - points[fixed]
@@ -212,7 +143,7 @@ def _rbf_displacement(points: np.ndarray, fixed, targets, seeds, source: str) ->
         try:
             field = RBFInterpolator(points[data], values, kernel=RBF_KERNEL)
         except np.linalg.LinAlgError as error:
-            raise _refuse(f"the thin-plate spline's system is singular (fixed vertices and seeds "
+            raise refuse(f"the thin-plate spline's system is singular (fixed vertices and seeds "
                           f"collinear/coplanar or repeated?): {error}", source) from None
         out[rest] = points[rest] + field(points[rest])
     return out
@@ -248,7 +179,7 @@ def rbf_displacement_2d(
         Bad shapes or ids, non-finite values, seeds that are fixed, fewer than 3 data
         points or a singular system (collinear or repeated data points).
     """
-    u_rest = _check_points(u_rest, 2, "u_rest", "rbf_displacement_2d")
+    u_rest = check_points(u_rest, 2, "u_rest", "rbf_displacement_2d")
     return _rbf_displacement(u_rest, fixed, u_fixed, seeds, "rbf_displacement_2d")
 
 
@@ -282,7 +213,7 @@ def rbf_displacement_3d(
         Bad shapes or ids, non-finite values, seeds that are fixed, fewer than 4 data
         points or a singular system (coplanar or repeated data points).
     """
-    rest = _check_points(rest, 3, "rest", "rbf_displacement_3d")
+    rest = check_points(rest, 3, "rest", "rbf_displacement_3d")
     return _rbf_displacement(rest, fixed, x_fixed, seeds, "rbf_displacement_3d")
 
 
@@ -320,19 +251,19 @@ def interior_seeds(
         Bad shapes or ids, an empty boundary or a negative count.
     """
     source = "interior_seeds"
-    rest = _check_points(rest, 3, "rest", source)
+    rest = check_points(rest, 3, "rest", source)
     n = len(rest)
-    triangles = _check_triangles(triangles, n, source)
-    boundary = _index_array(boundary, 1, "boundary", source)
+    triangles = check_triangles(triangles, n, source)
+    boundary = index_array(boundary, 1, "boundary", source)
     if boundary.size == 0:
-        raise _refuse("the boundary loop is empty", source)
+        raise refuse("the boundary loop is empty", source)
     if boundary.min() < 0 or boundary.max() >= n:
-        raise _refuse(f"boundary indexes vertices outside 0 .. {n - 1}", source)
+        raise refuse(f"boundary indexes vertices outside 0 .. {n - 1}", source)
     if not isinstance(count, (int, np.integer)) or count < 0:
-        raise _refuse(f"count must be a non-negative integer, got {count!r}", source)
+        raise refuse(f"count must be a non-negative integer, got {count!r}", source)
     count = int(count)
 
-    hops = dijkstra(_edge_graph(triangles, n), directed=False, indices=np.unique(boundary),
+    hops = dijkstra(vertex_adjacency(triangles, n), directed=False, indices=np.unique(boundary),
                     unweighted=True, min_only=True)
     reached = np.isfinite(hops)
     deepest = hops[reached].max()

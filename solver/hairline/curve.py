@@ -1,9 +1,9 @@
-"""Hairline edits: the user's new front hairline, and the adaptive weights of Eq. 20-21.
+"""A drawn front hairline (Sec. 6.1): the curve document, its checks on the head, and arc length
+measured on a smoothed copy.
 
-Convention: points ``(N, 3) float64`` in meters; strands in CSR layout (:mod:`.hair`). A
-hairline curve is a polyline over the front of the head, from one ear to the other, with
-optional *turning points* (indices of its corners) matched to the corners of the current
-hairline (:mod:`.scalp`).
+Convention: points ``(N, 3) float64`` in meters. A hairline curve is a polyline over the front
+of the head, from one ear to the other, with optional *turning points* (indices of its
+corners) matched to the corners of the current hairline (:mod:`.scalp`).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from hairport.solver.mesh.polyline import polyline_arc_length
 from hairport.solver.model.errors import InputError
@@ -145,8 +146,6 @@ def smooth_polyline(points: np.ndarray, width: float = ARC_SMOOTHING_M) -> np.nd
     -------
     smoothed : (k, 3) float64
     """
-    from scipy.ndimage import gaussian_filter1d
-
     points = np.asarray(points, dtype=np.float64)
     arc = polyline_arc_length(points)
     step = SMOOTHING_STEP_SHARE * width

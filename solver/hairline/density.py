@@ -1,4 +1,12 @@
-"""Table 3's root density change: roots per scalp triangle area before and after a relocation."""
+"""Table 3's root density change: roots per scalp triangle area before and after a relocation.
+
+Per scalp triangle, the roots in it divided by its area, before and after the relocation; the
+relative changes of the triangles holding roots form a vector whose mean absolute value (L1)
+and largest absolute value (L-infinity) are reported. Roots keep their triangle (barycentric
+coordinates), so a triangle's relative change is ``A / A' - 1`` with ``A``, ``A'`` its rest and
+deformed 3D areas, whatever its root count. Bad input raises :class:`.errors.InputError` with
+``code="bad_relocation"`` (:mod:`.checks`).
+"""
 
 from __future__ import annotations
 
@@ -6,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.hairline.baselines import _check_points, _check_triangles, _index_array, _refuse
+from hairport.solver.hairline.checks import check_points, check_triangles, index_array, refuse
+from hairport.solver.mesh.areas import triangle_areas
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,11 +39,6 @@ class DensityChange:
     linf: float
     changes: np.ndarray
     triangles: np.ndarray
-
-
-def _areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    corners = points[triangles]
-    return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
 
 
 def density_change(
@@ -69,22 +73,22 @@ def density_change(
         rest area.
     """
     source = "density_change"
-    rest = _check_points(rest, 3, "rest", source)
-    deformed = _check_points(deformed, 3, "deformed", source)
+    rest = check_points(rest, 3, "rest", source)
+    deformed = check_points(deformed, 3, "deformed", source)
     if deformed.shape != rest.shape:
-        raise _refuse(f"deformed {deformed.shape} and rest {rest.shape} differ in shape", source)
-    triangles = _check_triangles(triangles, len(rest), source)
-    root_triangles = _index_array(root_triangles, 1, "root_triangles", source)
+        raise refuse(f"deformed {deformed.shape} and rest {rest.shape} differ in shape", source)
+    triangles = check_triangles(triangles, len(rest), source)
+    root_triangles = index_array(root_triangles, 1, "root_triangles", source)
     if root_triangles.size and (root_triangles.min() < -1 or root_triangles.max() >= len(triangles)):
-        raise _refuse(f"root_triangles must lie in -1 .. {len(triangles) - 1}", source)
+        raise refuse(f"root_triangles must lie in -1 .. {len(triangles) - 1}", source)
 
     held = np.flatnonzero(np.bincount(root_triangles[root_triangles >= 0], minlength=len(triangles)))
     if held.size == 0:
         return DensityChange(0.0, 0.0, np.zeros(0), np.zeros(0, dtype=np.int64))
-    before = _areas(rest, triangles[held])
+    before = triangle_areas(rest, triangles[held])
     if (before <= 0).any():
-        raise _refuse(f"{int((before <= 0).sum())} scalp triangles holding roots have zero rest area", source)
-    after = _areas(deformed, triangles[held])
+        raise refuse(f"{int((before <= 0).sum())} scalp triangles holding roots have zero rest area", source)
+    after = triangle_areas(deformed, triangles[held])
     with np.errstate(divide="ignore"):
         changes = before / after - 1.0
     magnitude = np.abs(changes)

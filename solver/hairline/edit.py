@@ -5,15 +5,21 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from hairport.solver.hairline.curve import HairlineCurve, parse_hairline_curve, read_hairline_curve
-from hairport.solver.hairline.presets import PRESETS, check_amount, parse_preset
+from hairport.solver.hairline.presets import check_amount, check_preset, parse_preset
 from hairport.solver.hairline.scalp import DEFAULT_MIN_TRIANGLES
-from hairport.solver.mesh.parameterization import PARAMETERIZATIONS
+from hairport.solver.mesh.parameterization import check_parameterization
 from hairport.solver.model.errors import InputError
 
 #: smallest refined scalp accepted (triangles)
 MIN_REFINED_TRIANGLES = 16
 #: how the scalp's interior follows the hairline: Eq. 15 (ours), or Section 7.5's alternatives
 RELOCATION_METHODS = ("membrane", "harmonic", "rbf2d", "rbf3d")
+
+
+def unknown_method(method: str) -> InputError:
+    """The refusal of a relocation method not in :data:`RELOCATION_METHODS` (code ``bad_option``)."""
+    return InputError(f"unknown relocation method {method!r}; expected one of {', '.join(RELOCATION_METHODS)}",
+                      code="bad_option")
 
 
 @dataclass(frozen=True)
@@ -23,7 +29,7 @@ class HairlineEdit:
     Attributes
     ----------
     preset : str or None
-        One of :data:`.hairline_presets.PRESETS` (exclusive with ``curve``).
+        One of :data:`.presets.PRESETS` (exclusive with ``curve``).
     amount : float
         In [0, 1], for a preset.
     curve : HairlineCurve or None
@@ -31,7 +37,7 @@ class HairlineEdit:
     method : str
         One of :data:`RELOCATION_METHODS`.
     parameterization : str
-        One of :data:`.parameterization.PARAMETERIZATIONS`.
+        One of :data:`.mesh.parameterization.PARAMETERIZATIONS`.
     min_triangles : int
         Resolution of the refined scalp.
     """
@@ -47,16 +53,11 @@ class HairlineEdit:
         if (self.preset is None) == (self.curve is None):
             raise InputError("a hairline edit needs exactly one of a preset or a curve", code="bad_option")
         if self.preset is not None:
-            if self.preset not in PRESETS:
-                raise InputError(f"unknown hairline preset {self.preset!r}; expected one of {', '.join(PRESETS)}",
-                                 code="unknown_preset")
+            check_preset(self.preset)
             check_amount(self.amount)
         if self.method not in RELOCATION_METHODS:
-            raise InputError(f"unknown relocation method {self.method!r}; expected one of "
-                             f"{', '.join(RELOCATION_METHODS)}", code="bad_option")
-        if self.parameterization not in PARAMETERIZATIONS:
-            raise InputError(f"unknown parameterization {self.parameterization!r}; expected one of "
-                             f"{', '.join(PARAMETERIZATIONS)}", code="bad_option")
+            raise unknown_method(self.method)
+        check_parameterization(self.parameterization)
         if self.min_triangles < MIN_REFINED_TRIANGLES:
             raise InputError(f"option min_triangles must be >= {MIN_REFINED_TRIANGLES}", code="bad_option")
 

@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hairport.solver.mesh.topology import corner_neighbours, vertex_faces
+from hairport.solver.mesh.triangles import interpolate_barycentric
 from hairport.solver.model.errors import InputError
 
 #: a point belongs to a triangle when its barycentric coordinates are all >= -this
@@ -127,22 +129,7 @@ class HeadChart:
         cell_start = np.zeros(int(grid_shape.prod()) + 1, dtype=np.int64)
         np.cumsum(np.bincount(cell, minlength=int(grid_shape.prod())), out=cell_start[1:])
 
-        # edge adjacency: the edge opposite corner k joins corners k+1 and k+2
-        g = len(faces)
-        ends = np.stack([faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]], axis=2).reshape(-1, 2)  # (3g, 2)
-        key = np.sort(ends, axis=1)
-        key = key[:, 0] * len(vertices) + key[:, 1]
-        order_e = np.argsort(key, kind="stable")
-        same = key[order_e[1:]] == key[order_e[:-1]]
-        a, b = order_e[:-1][same], order_e[1:][same]
-        neighbours = np.full(3 * g, -1, dtype=np.int64)
-        neighbours[a] = b // 3
-        neighbours[b] = a // 3
-        # triangles around each vertex
-        corner_vertex = faces.ravel()
-        order_v = np.argsort(corner_vertex, kind="stable")
-        vertex_start = np.zeros(len(vertices) + 1, dtype=np.int64)
-        np.cumsum(np.bincount(corner_vertex, minlength=len(vertices)), out=vertex_start[1:])
+        vertex_start, vertex_triangles, vertex_corners = vertex_faces(faces, len(vertices))
         return cls(
             vertices=vertices,
             faces=faces,
@@ -154,10 +141,10 @@ class HeadChart:
             grid_shape=grid_shape,
             cell_start=cell_start,
             cell_triangles=owner[order],
-            neighbours=neighbours.reshape(g, 3),
+            neighbours=corner_neighbours(faces),
             vertex_start=vertex_start,
-            vertex_triangles=order_v // 3,
-            vertex_corners=order_v % 3,
+            vertex_triangles=vertex_triangles,
+            vertex_corners=vertex_corners,
         )
 
     def locate(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -195,7 +182,7 @@ class HeadChart:
         pair_triangle = self.cell_triangles[
             np.repeat(start, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
         ]
-        weights = self._barycentric(pair_triangle, u[pair_point])
+        weights = self.barycentric(pair_triangle, u[pair_point])
         score = weights.min(axis=1)
         keep = score >= -BARYCENTRIC_TOLERANCE
         pair_point, pair_triangle, weights, score = pair_point[keep], pair_triangle[keep], weights[keep], score[keep]
@@ -205,6 +192,24 @@ class HeadChart:
         host[pair_point[first]] = pair_triangle[first]
         barycentric[pair_point[first]] = weights[first]
         return host, barycentric
+
+    def place(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Hosts, barycentric coordinates and 3D positions of parameters (Eq. 18-19).
+
+        Parameters
+        ----------
+        u : (n, 2) float64
+
+        Returns
+        -------
+        host : (n,) int64
+            -1 outside the chart.
+        barycentric : (n, 3) float64
+        x : (n, 3) float64
+            NaN outside the chart.
+        """
+        host, barycentric = self.locate(u)
+        return host, barycentric, interpolate_barycentric(self.vertices, self.faces, host, barycentric)
 
     def embed(self, u: np.ndarray) -> np.ndarray:
         """3D positions on the head of parameters (Eq. 18-19).
@@ -222,10 +227,10 @@ class HeadChart:
         ValueError
             If a point lies outside the chart.
         """
-        host, barycentric = self.locate(u)
+        host, _, x = self.place(u)
         if (host < 0).any():
             raise ValueError(f"{int((host < 0).sum())} parameter points lie outside the head chart")
-        return np.einsum("nk,nkc->nc", barycentric, self.vertices[self.faces[host]])
+        return x
 
     def jacobians(self, host: np.ndarray) -> np.ndarray:
         """``dx/du`` of host triangles, ``[X1-X0 | X2-X0] [u1-u0 | u2-u0]^-1``.
@@ -241,7 +246,19 @@ class HeadChart:
         """
         return self.jacobian[np.asarray(host, dtype=np.int64)]
 
-    def _barycentric(self, triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``(k, 3)`` barycentric coordinates of ``u (k, 2)`` in head ``triangles (k,)``."""
+    def barycentric(self, triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Barycentric coordinates of parameters in given head triangles (Eq. 18).
+
+        Parameters
+        ----------
+        triangles : (k,) int64
+            Head triangle of each point.
+        u : (k, 2) float64
+
+        Returns
+        -------
+        weights : (k, 3) float64
+            Of the triangle's corners; negative outside it.
+        """
         local = np.einsum("kab,kb->ka", self.uv_inverse[triangles], u - self.uv[self.faces[triangles, 0]])
         return np.column_stack([1.0 - local[:, 0] - local[:, 1], local[:, 0], local[:, 1]])

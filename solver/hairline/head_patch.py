@@ -24,8 +24,8 @@ def head_patch(
     """A disk-shaped patch of the head around the scalp.
 
     The scalp's faces, grown ``margin_rings`` times by every head face (three head-dominant
-    vertices, :attr:`.groom.HeadFrame.head_vertices`) sharing a vertex with the patch, then
-    made a disk (holes filled, pinch vertices repaired; :func:`.scalp.make_disk`).
+    vertices, :attr:`.body.head_frame.HeadFrame.head_vertices`) sharing a vertex with the patch, then
+    made a disk (holes filled, pinch vertices repaired; :func:`.mesh.topology.make_disk`).
 
     Parameters
     ----------
@@ -35,7 +35,7 @@ def head_patch(
     margin_rings : int
         >= 0; 0 gives the scalp itself.
     frame : HeadFrame, optional
-        Reuse a frame from :func:`.groom.head_frame`.
+        Reuse a frame from :func:`.body.head_frame.head_frame`.
 
     Returns
     -------

@@ -1,9 +1,10 @@
-"""The scalp as a neo-Hookean membrane embedded in the head surface (Section 6.1, Eq. 15-19).
+"""The scalp as a neo-Hookean membrane embedded in the head surface (Section 6.1, Eq. 15-17): its
+energy and its derivatives in the scalp parameters.
 
 Convention: the head surface H is a triangle mesh ``head_vertices (h, 3) float64`` in
 meters with ``head_faces (g, 3) int64`` and a 2D parameterisation ``head_uv (h, 2)
 float64`` (a disk patch: injective, every triangle of positive signed area in uv), wrapped
-in a :class:`HeadChart`. The scalp S is a separate triangle mesh with rest positions
+in a :class:`.head_chart.HeadChart`. The scalp S is a separate triangle mesh with rest positions
 ``rest (n, 3)`` (meters) and ``triangles (m, 3) int64``, wrapped in a :class:`Membrane`.
 Each deformed scalp vertex lives on H and is described by its parameter ``u (n, 2)`` in
 uv units; its 3D position is the barycentric interpolation over its *host* triangle of H
@@ -27,10 +28,11 @@ The derivatives in ``u`` follow by the chain rule through ``F = sum_k x_k B_k``
 parameter ``E nu / (1 - nu^2)``.
 
 The energy is finite for a triangle flipped *on* the surface (``J`` only sees areas), so
-:func:`relocate` keeps every scalp triangle's signed area in uv of its starting sign. As
+:func:`.newton.relocate` keeps every scalp triangle's signed area in uv of its starting sign. As
 ``x(u)`` is only piecewise affine, ``E(u)`` has kinks along the head's edges, where a
-stretched scalp's minimiser often puts vertices; :func:`relocate` treats them as an
-active set (see there).
+stretched scalp's minimiser often puts vertices; :func:`.newton.relocate` treats them as an
+active set (:mod:`.kinks`) and adds :mod:`.fold_barrier` against triangles folding across the
+head's bends.
 
 Since ``mu`` and ``lam`` are both proportional to Young's modulus for a fixed Poisson
 ratio, ``E(u)`` scales linearly with it and its minimiser does not depend on it: any
@@ -46,6 +48,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from hairport.solver.hairline.head_chart import HeadChart
+from hairport.solver.mesh.areas import triangle_areas
 from hairport.solver.model.errors import InputError
 
 #: Young's modulus (Pa); the minimiser of Eq. 15 does not depend on it (the energy is
@@ -62,15 +65,6 @@ DEFAULT_POISSON = 0.45
 #: the free block of the projected Hessian is shifted by this share of its largest
 #: diagonal entry (the PSD projection may leave it singular)
 REGULARISATION_SHARE = 1e-10
-
-
-#: a scalp triangle whose uv area falls below this share of its starting one meets the fold
-#: barrier of :func:`fold_barrier`
-FOLD_THRESHOLD = 0.1
-#: weight of the fold barrier per triangle, in units of ``mu * A_t``: the barrier only grows
-#: like a logarithm, and at 1 a triangle folded to 1e-4 of its uv area costs less than
-#: the same triangle compressed three-fold in 3D
-FOLD_STIFFNESS = 1000.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,12 +126,12 @@ class Membrane:
         e1 = X[:, 1] - X[:, 0]
         e2 = X[:, 2] - X[:, 0]
         length = np.linalg.norm(e1, axis=1)
-        twice_area = np.linalg.norm(np.cross(e2, e1), axis=1)
-        if (length <= 0).any() or (twice_area <= 0).any():
+        areas = triangle_areas(rest, triangles)
+        if (length <= 0).any() or (areas <= 0).any():
             raise InputError("the scalp has degenerate rest triangles", "membrane")
         a = length
         b = np.einsum("ij,ij->i", e2, e1) / length
-        c = twice_area / length
+        c = 2.0 * areas / length
         # D = [[a, b], [0, c]] (Eq. 16), D^-1 = [[1/a, -b/(a c)], [0, 1/c]]
         rest_inverse = np.zeros((len(triangles), 2, 2))
         rest_inverse[:, 0, 0] = 1.0 / a
@@ -145,7 +139,7 @@ class Membrane:
         rest_inverse[:, 1, 1] = 1.0 / c
         mu = young / (2.0 * (1.0 + poisson))
         lam = young * poisson / (1.0 - poisson * poisson)
-        return cls(rest, triangles, rest_inverse, 0.5 * twice_area, float(mu), float(lam))
+        return cls(rest, triangles, rest_inverse, areas, float(mu), float(lam))
 
 
 #: Lame parameters (Pa) of DEFAULT_YOUNG and DEFAULT_POISSON, as Membrane.build sets them
@@ -242,15 +236,39 @@ def _position_hessians(F: np.ndarray, B: np.ndarray, areas: np.ndarray, mu: floa
     return areas[:, None, None, None, None] * H
 
 
-def _project_psd(H: np.ndarray) -> np.ndarray:
-    """Symmetric ``(m, d, d)`` blocks with negative eigenvalues set to 0."""
+def project_psd(H: np.ndarray) -> np.ndarray:
+    """Per-block projection onto the positive semi-definite matrices (projected Newton).
+
+    Parameters
+    ----------
+    H : (m, d, d) float64
+        Blocks, symmetrised before the projection.
+
+    Returns
+    -------
+    projected : (m, d, d) float64
+        Each block with its negative eigenvalues set to 0.
+    """
     H = 0.5 * (H + np.transpose(H, (0, 2, 1)))
     w, V = np.linalg.eigh(H)
     return (V * np.maximum(w, 0.0)[:, None, :]) @ np.transpose(V, (0, 2, 1))
 
 
-def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``F (m, 3, 2)`` and ``dE/dx (n, 3)`` at deformed positions ``x (n, 3)``."""
+def position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Deformation gradients and the gradient of Eq. 15 in the 3D positions.
+
+    Parameters
+    ----------
+    membrane : Membrane
+    x : (n, 3) float64
+        Deformed positions (m).
+
+    Returns
+    -------
+    F : (m, 3, 2) float64
+    gradient : (n, 3) float64
+        ``dE/dx`` (J/m).
+    """
     F = deformation_gradients(membrane, x)
     P, _ = _first_piola(F, membrane.mu, membrane.lam)
     gx = membrane.areas[:, None, None] * np.einsum("tia,tka->tki", P, _corner_weights(membrane))  # (m, 3, 3)
@@ -259,9 +277,25 @@ def _position_gradients(membrane: Membrane, x: np.ndarray) -> tuple[np.ndarray, 
     return F, np.column_stack([np.bincount(flat, gx[:, :, c].ravel(), minlength=n) for c in range(3)])
 
 
-def _parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.ndarray:
-    """Exact per-triangle Hessians ``(m, 6, 6)`` in the corners' parameters: ``J^T H_x J``
-    with the block-diagonal ``J (m, 9, 6)`` of the corners' Jacobians ``M (n, 3, 2)``."""
+def parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Exact per-triangle Hessians of Eq. 15 in the corners' parameters, hosts fixed.
+
+    ``J^T H_x J`` with ``H_x`` a triangle's 9x9 Hessian in its corners' positions and the
+    block-diagonal ``J (m, 9, 6)`` of the corners' Jacobians.
+
+    Parameters
+    ----------
+    membrane : Membrane
+    F : (m, 3, 2) float64
+        Deformation gradients.
+    M : (n, 3, 2) float64
+        ``dx/du`` of each scalp vertex's host (:meth:`.HeadChart.jacobians`).
+
+    Returns
+    -------
+    blocks : (m, 6, 6) float64
+        Over the corners' parameters, vertex-major.
+    """
     m = len(membrane.triangles)
     H = _position_hessians(F, _corner_weights(membrane), membrane.areas, membrane.mu, membrane.lam).reshape(m, 9, 9)
     J = np.zeros((m, 3, 3, 3, 2))  # [t, k, i, l, a]: corner k's row i, corner l's column a
@@ -272,8 +306,21 @@ def _parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.nd
     return np.transpose(J, (0, 2, 1)) @ H @ J
 
 
-def _assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
-    """``(2n, 2n)`` matrix from per-triangle ``(m, 6, 6)`` blocks over the corners' parameters."""
+def assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.csr_matrix:
+    """A sparse matrix over all parameters from per-triangle blocks (summed where they overlap).
+
+    Parameters
+    ----------
+    triangles : (m, 3) int64
+    blocks : (m, 6, 6) float64
+        Over each triangle's corners' parameters, vertex-major.
+    n : int
+        Vertices.
+
+    Returns
+    -------
+    matrix : (2n, 2n) scipy.sparse.csr_matrix
+    """
     m = len(triangles)
     dof = (2 * triangles[:, :, None] + np.arange(2)[None, None, :]).reshape(m, 6)
     rows = np.repeat(dof, 6, axis=1).ravel()
@@ -284,24 +331,33 @@ def _assemble_blocks(triangles: np.ndarray, blocks: np.ndarray, n: int) -> sp.cs
 def _assemble_hessian(membrane: Membrane, F: np.ndarray, M: np.ndarray, project: bool) -> sp.csr_matrix:
     """``(2n, 2n)`` Hessian in u from per-triangle blocks and per-vertex ``M (n, 3, 2)``;
     ``project`` clamps each triangle's 6x6 block in its corners' parameters to PSD."""
-    blocks = _parameter_blocks(membrane, F, M)
-    return _assemble_blocks(membrane.triangles, _project_psd(blocks) if project else blocks, len(M))
+    blocks = parameter_blocks(membrane, F, M)
+    return assemble_blocks(membrane.triangles, project_psd(blocks) if project else blocks, len(M))
 
 
-def _shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
-    """``(H + shift I)^-1 rhs`` for a square sparse ``H``: the shift is
-    :data:`REGULARISATION_SHARE` of its largest diagonal entry, as a projected Hessian may be
-    singular."""
+def shifted_solve(H: sp.spmatrix, rhs: np.ndarray) -> np.ndarray:
+    """``(H + shift I)^-1 rhs``, the shift :data:`REGULARISATION_SHARE` of ``H``'s largest
+    diagonal entry, as a projected Hessian may be singular.
+
+    Parameters
+    ----------
+    H : (k, k) scipy.sparse matrix
+    rhs : (k,) float64
+
+    Returns
+    -------
+    solution : (k,) float64
+    """
     shift = REGULARISATION_SHARE * max(float(np.abs(H.diagonal()).max()), np.finfo(float).tiny)
     return np.atleast_1d(spla.spsolve((H + shift * sp.identity(H.shape[0])).tocsc(), rhs))
 
 
 def _located(chart: HeadChart, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hosts and 3D positions of ``u``; ``ValueError`` outside the chart."""
-    host, barycentric = chart.locate(u)
+    host, _, x = chart.place(u)
     if (host < 0).any():
         raise ValueError(f"{int((host < 0).sum())} scalp vertices lie outside the head chart")
-    return host, np.einsum("nk,nkc->nc", barycentric, chart.vertices[chart.faces[host]])
+    return host, x
 
 
 def membrane_energy(membrane: Membrane, chart: HeadChart, u: np.ndarray) -> float:
@@ -332,7 +388,7 @@ def membrane_gradient(membrane: Membrane, chart: HeadChart, u: np.ndarray) -> np
     gradient : (n, 2) float64 (J per uv unit)
     """
     host, x = _located(chart, u)
-    _, gx = _position_gradients(membrane, x)
+    _, gx = position_gradients(membrane, x)
     return np.einsum("nia,ni->na", chart.jacobians(host), gx)
 
 
@@ -358,83 +414,3 @@ def membrane_hessian(membrane: Membrane, chart: HeadChart, u: np.ndarray, projec
     """
     host, x = _located(chart, u)
     return _assemble_hessian(membrane, deformation_gradients(membrane, x), chart.jacobians(host), project)
-
-
-#: d(2 * signed uv area) / d u as a constant (6, 6) Hessian over a triangle's corner
-#: parameters (vertex-major): twice the area is ``(u1 - u0) x (u2 - u0)``
-_AREA_HESSIAN = np.zeros((6, 6))
-for _k in range(3):
-    _AREA_HESSIAN[2 * _k, 2 * ((_k + 1) % 3) + 1] = 1.0  # d/du_{k,x} of (u_{k+1,y} - u_{k+2,y})
-    _AREA_HESSIAN[2 * _k, 2 * ((_k + 2) % 3) + 1] = -1.0
-    _AREA_HESSIAN[2 * _k + 1, 2 * ((_k + 2) % 3)] = 1.0  # d/du_{k,y} of (u_{k+2,x} - u_{k+1,x})
-    _AREA_HESSIAN[2 * _k + 1, 2 * ((_k + 1) % 3)] = -1.0
-_AREA_HESSIAN *= 0.5
-
-
-def fold_barrier(
-    triangles: np.ndarray, u: np.ndarray, rest_uv_areas: np.ndarray, weights: np.ndarray,
-    threshold: float = FOLD_THRESHOLD,
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """A barrier against folding the scalp over the head, in the parameterization.
-
-    Eq. 15's ``J`` measures a deformed triangle's 3D area, which a triangle folded across a
-    bend of the piecewise-flat head keeps (its corners are not collinear in 3D even where
-    they are in uv): near a fold the membrane feels little resistance. Each triangle whose
-    uv area ratio ``r = a / a_0`` to its starting one is below ``r^ = threshold`` adds
-    ``w_t b(r)`` with the C2 log barrier ``b(r) = -(r - r^)^2 ln(r / r^)`` (zero with its
-    first two derivatives at ``r^``, infinite at 0). Above the threshold, i.e. away from
-    ten-fold compressions, it is exactly zero and the result is Eq. 15's.
-
-    Parameters
-    ----------
-    triangles : (m, 3) int64
-    u : (n, 2) float64
-    rest_uv_areas : (m,) float64
-        Positive signed uv areas at the start.
-    weights : (m,) float64
-        ``w_t`` (J), e.g. ``mu * A_t``.
-    threshold : float
-
-    Returns
-    -------
-    energy : float
-        ``+inf`` if a triangle has ``r <= 0``.
-    gradient : (n, 2) float64
-    blocks : (m, 6, 6) float64
-        Per-triangle Hessians over the corners' parameters (zero where inactive).
-    """
-    n, m = len(u), len(triangles)
-    ratio = signed_uv_areas(triangles, u) / rest_uv_areas
-    gradient = np.zeros((n, 2))
-    blocks = np.zeros((m, 6, 6))
-    active = np.flatnonzero(ratio < threshold)
-    if len(active) == 0:
-        return 0.0, gradient, blocks
-    r = ratio[active]
-    if (r <= 0).any():
-        return np.inf, gradient, blocks
-    log = np.log(r / threshold)
-    gap = r - threshold
-    energy = float(np.sum(weights[active] * -(gap**2) * log))
-    db = -2.0 * gap * log - gap**2 / r
-    d2b = -2.0 * log - 4.0 * gap / r + gap**2 / r**2
-    U = u[triangles[active]]  # (a, 3, 2)
-    nxt, prv = U[:, [1, 2, 0]], U[:, [2, 0, 1]]
-    # d(signed area)/du_k = 0.5 (u_{k+1,y} - u_{k+2,y}, u_{k+2,x} - u_{k+1,x})
-    d_area = 0.5 * np.stack([nxt[..., 1] - prv[..., 1], prv[..., 0] - nxt[..., 0]], axis=2).reshape(-1, 6)
-    d_ratio = d_area / rest_uv_areas[active, None]
-    w = weights[active]
-    per_corner = ((w * db)[:, None] * d_ratio).reshape(-1, 3, 2)
-    for c in range(2):
-        gradient[:, c] = np.bincount(triangles[active].ravel(), per_corner[..., c].ravel(), minlength=n)
-    blocks[active] = (w * d2b)[:, None, None] * d_ratio[:, :, None] * d_ratio[:, None, :] + (
-        (w * db) / rest_uv_areas[active])[:, None, None] * _AREA_HESSIAN[None]
-    return energy, gradient, blocks
-
-
-def signed_uv_areas(triangles: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Signed areas ``(m,)`` of the scalp triangles in the parameter plane (uv units^2)."""
-    U = np.asarray(u, dtype=np.float64)[triangles]
-    e1 = U[:, 1] - U[:, 0]
-    e2 = U[:, 2] - U[:, 0]
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])

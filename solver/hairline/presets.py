@@ -2,12 +2,12 @@
 
 Convention: the current front hairline is ``front (f, 3) float64`` (meters, on the head),
 ordered from the character's right ear to its left ear, as :mod:`.scalp` extracts it. A
-preset returns a :class:`.hairline.HairlineCurve` with the same number of points, each the
+preset returns a :class:`.curve.HairlineCurve` with the same number of points, each the
 old point moved along the head, and the old turning points, so that it goes through the
 same correspondence as a drawn curve.
 
 Points are described in spherical coordinates about the middle of the skull
-(:attr:`.groom.HeadFrame.centre`) in the head frame: azimuth ``theta`` around the up axis
+(:attr:`.body.head_frame.HeadFrame.centre`) in the head frame: azimuth ``theta`` around the up axis
 (0 straight ahead) and elevation ``phi`` above the horizontal. A circle of constant
 elevation on a round head looks straight from the front, and raising the elevation moves a
 point back toward the crown (receding); lowering it moves it down the forehead or, near the
@@ -17,20 +17,21 @@ the azimuths evenly across the forehead band, so that parts of the hairline runn
 temple (constant azimuth) are not folded onto one point; the new point is where the ray
 from the skull centre in that direction first meets the head.
 
-The shapes are computed on a smoothed copy of the hairline (:func:`.hairline.smooth_polyline`:
+The shapes are computed on a smoothed copy of the hairline (:func:`.curve.smooth_polyline`:
 the hairline follows mesh edges in a staircase a few mm deep whose azimuth goes back and
 forth, which a new elevation per point would fold): the full preset is a smooth curve, and
 ``amount`` blends each hairline point toward its point on it (then onto the head), so the
 staircase fades out as the shape fades in. The ends never move.
 
 The lateral position ``x`` in [-1, 1] is the smoothed arc length from the face's midline
-(azimuth 0), normalised by the arc length from there to each end (the ears). Shapes act on the forehead band ``|x| <= BAND`` and fade out toward the ears over
-``BAND .. TAPER_END`` (a cosine taper), so the ends, shared with the fixed back part of the
-hairline, never move; ``sideburns`` acts on the other side of the taper, in front of the
-ears. With ``phi0`` the current elevation, ``phi_b`` its median over the middle of the
-forehead (``|x| <= CENTRE``), ``R`` the median distance of the hairline from the skull
-centre and ``A`` each preset's amplitude in meters along the head (for a head of crown
-height :data:`.groom.REFERENCE_CROWN_M`, scaled with the head), the full shapes are::
+(azimuth 0), normalised by the arc length from there to each end (the ears). Shapes act on
+the forehead band ``|x| <= BAND`` and fade out toward the ears over ``BAND .. TAPER_END`` (a
+cosine taper), so the ends, shared with the fixed back part of the hairline, never move;
+``sideburns`` acts on the other side of the taper, in front of the ears. With ``phi0`` the
+current elevation, ``phi_b`` its median over the middle of the forehead (``|x| <= CENTRE``),
+``R`` the median distance of the hairline from the skull centre and ``A`` each preset's
+amplitude in meters along the head (for a head of crown height
+:data:`.body.head_frame.REFERENCE_CROWN_M`, scaled with the head), the full shapes are::
 
     straight     phi_b                                 a line straight across the forehead
     round        phi_b - A/R (x/BAND)^2                an arch: the sides come down
@@ -86,6 +87,17 @@ SIDEBURNS_SPAN = (0.62, 0.9)
 UNMOVED_RAD = 1e-12
 
 
+def unknown_preset(name: str) -> InputError:
+    """The refusal of a preset name not in :data:`PRESETS` (code ``unknown_preset``)."""
+    return InputError(f"unknown hairline preset {name!r}; expected one of {', '.join(PRESETS)}", code="unknown_preset")
+
+
+def check_preset(name: str) -> None:
+    """Refuse a preset name not in :data:`PRESETS` (:func:`unknown_preset`)."""
+    if name not in PRESETS:
+        raise unknown_preset(name)
+
+
 def parse_preset(spec: str) -> tuple[str, float]:
     """``"NAME"`` or ``"NAME:AMOUNT"`` -> ``(name, amount)``.
 
@@ -96,9 +108,7 @@ def parse_preset(spec: str) -> tuple[str, float]:
     """
     name, _, amount_text = str(spec).partition(":")
     name = name.strip()
-    if name not in PRESETS:
-        raise InputError(f"unknown hairline preset {name!r}; expected one of {', '.join(PRESETS)}",
-                         code="unknown_preset")
+    check_preset(name)
     amount = DEFAULT_AMOUNT
     if amount_text.strip():
         try:
@@ -196,8 +206,7 @@ def preset_elevation(name: str, x: np.ndarray, phi0: np.ndarray, radius: float, 
         t = np.clip((np.abs(x) - low) / (high - low), 0.0, 1.0)
         return phi0 - amplitude(SIDEBURNS_LENGTH_M) * np.sin(np.pi * t) ** 2
     else:
-        raise InputError(f"unknown hairline preset {name!r}; expected one of {', '.join(PRESETS)}",
-                         code="unknown_preset")
+        raise unknown_preset(name)
     return phi0 + taper(x) * (shape - phi0)
 
 

@@ -2,16 +2,16 @@
 
 Convention: a target ``character`` (meters) whose roots, after the initial transfer, lie on
 its faces ``root_faces (S,) int64`` at ``root_barycentric (S, 3) float64``. The edit is a
-:class:`HairlineEdit`: a preset (:mod:`.hairline_presets`) or a drawn curve
-(:class:`.hairline.HairlineCurve`), the relocation method and the head parameterization.
+:class:`HairlineEdit`: a preset (:mod:`.presets`) or a drawn curve
+(:class:`.curve.HairlineCurve`), the relocation method and the head parameterization.
 
 Steps (:func:`relocate_roots`):
 
 1. The scalp (:func:`.scalp.extract_scalp`): the faces holding roots made a disk, its
    hairline split at the ears, the front part's turning points.
-2. A head patch around it (:func:`.parameterization.head_patch`) mapped to the unit disk
-   (:func:`.parameterization.parameterize`): the chart of Eq. 18-19
-   (:class:`.membrane.HeadChart`).
+2. A head patch around it (:func:`.head_patch.head_patch`) mapped to the unit disk
+   (:func:`.mesh.parameterization.parameterize`): the chart of Eq. 18-19
+   (:class:`.head_chart.HeadChart`).
 3. The scalp copy: its ears (triangles with two hairline edges, which a straighter
    hairline would flatten) split (:func:`.scalp.split_boundary_ears`), refined in
    the parameterization to at least ``min_triangles`` triangles
@@ -19,14 +19,14 @@ Steps (:func:`relocate_roots`):
 4. The new front hairline. A drawn curve: its ends and turning points matched to the
    current ones, every front vertex mapped by normalised arc length between matched
    turning points (Section 6.1), then projected onto the head patch. A preset moves each
-   front vertex to its own point (:mod:`.hairline_presets` builds one per vertex), which
+   front vertex to its own point (:mod:`.presets` builds one per vertex), which
    spares the hairline the arc-length re-parameterisation: on the mesh-edge staircase of
    a real hairline that squeezes and stretches the triangles along it (Table 3's L1 over 8
    grooms, straight edit: 0.053 with it, 0.043 without). The back part stays.
 5. The scalp's interior follows: the embedded neo-Hookean membrane (Eq. 15,
-   :func:`.membrane.relocate`) or, for comparison (Section 7.5), a harmonic or thin-plate
+   :func:`.newton.relocate`) or, for comparison (Section 7.5), a harmonic or thin-plate
    RBF displacement in the parameterization, or a 3D thin-plate RBF displacement reprojected
-   onto the head (:mod:`.relocation_baselines`).
+   onto the head (:mod:`.baselines`).
 6. Each root keeps its barycentric coordinates in its refined scalp triangle. The paper
    interpolates in 3D and projects onto the head; interpolating the *parameters* and
    embedding them lands on the head directly (the same point up to the projection's
@@ -50,7 +50,7 @@ from hairport.solver.hairline.baselines import (
 )
 from hairport.solver.hairline.curve import HairlineCurve, check_curve_on_head, smoothed_arc_length
 from hairport.solver.hairline.density import DensityChange, density_change
-from hairport.solver.hairline.edit import RELOCATION_METHODS, HairlineEdit
+from hairport.solver.hairline.edit import HairlineEdit, unknown_method
 from hairport.solver.hairline.head_chart import HeadChart
 from hairport.solver.hairline.head_patch import head_patch
 from hairport.solver.hairline.membrane import Membrane
@@ -131,7 +131,7 @@ class ScalpChart:
         found = self.head.signed_distance(points)
         corners = self.chart.faces[found.faces]
         weights = barycentric_coordinates(found.closest, self.chart.vertices[corners])
-        return np.einsum("kc,kcd->kd", weights, self.chart.uv[corners]), np.abs(found.distance)
+        return interpolate_barycentric(self.chart.uv, self.chart.faces, found.faces, weights), np.abs(found.distance)
 
     def face_parameters(self, faces: np.ndarray, barycentric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Chart parameters of points given on the character's faces.
@@ -153,7 +153,7 @@ class ScalpChart:
         local = np.minimum(local, len(self.patch_faces) - 1)
         inside = self.patch_faces[local] == faces
         uv = np.full((len(faces), 2), np.nan)
-        uv[inside] = np.einsum("kc,kcd->kd", barycentric[inside], self.chart.uv[self.chart.faces[local[inside]]])
+        uv[inside] = interpolate_barycentric(self.chart.uv, self.chart.faces, local[inside], barycentric[inside])
         return uv, inside
 
 
@@ -210,7 +210,7 @@ def hairline_targets(setup: ScalpChart, curve: HairlineCurve, source: str = "hai
     be as many as the hairline has, or none). Between matched turning points, the front
     vertex at normalised arc length ``t`` goes to the curve point at normalised arc length
     ``t``, projected onto the head patch. Arc lengths are measured on smoothed copies
-    (:func:`.hairline.smoothed_arc_length`): the hairline follows mesh edges in a staircase
+    (:func:`.curve.smoothed_arc_length`): the hairline follows mesh edges in a staircase
     whose extra length would otherwise bunch the vertices up on a smooth curve. With
     ``pointwise`` the curve has one point per front vertex, which goes there (presets).
 
@@ -284,7 +284,7 @@ def deform_scalp(setup: ScalpChart, targets: np.ndarray, method: str = "membrane
     targets : (f, 3) float64
         New front hairline on the head patch.
     method : str
-        One of :data:`RELOCATION_METHODS`.
+        One of :data:`.edit.RELOCATION_METHODS`.
 
     Returns
     -------
@@ -320,8 +320,7 @@ def deform_scalp(setup: ScalpChart, targets: np.ndarray, method: str = "membrane
             u, _ = setup.parameters(moved)
             u[fixed] = u_fixed
         else:
-            raise InputError(f"unknown relocation method {method!r}; expected one of "
-                             f"{', '.join(RELOCATION_METHODS)}", code="bad_option")
+            raise unknown_method(method)
     outside = int((setup.chart.locate(u)[0] < 0).sum())
     if outside:
         raise InputError(f"the {method} relocation moved {outside} scalp vertices off the head patch",
@@ -411,7 +410,7 @@ def relocate_roots(
     inside = host >= 0
     old = interpolate_barycentric(character.vertices, character.faces, root_faces, root_barycentric)
     roots = old.copy()
-    new_uv = np.einsum("kc,kcd->kd", weights[inside], u[setup.triangles[host[inside]]])
+    new_uv = interpolate_barycentric(u, setup.triangles, host[inside], weights[inside])
     roots[inside] = setup.chart.embed(new_uv)
     travel = np.linalg.norm(roots - old, axis=1)
     deformed = setup.chart.embed(u)

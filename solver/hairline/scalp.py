@@ -29,7 +29,7 @@ Hairline
 --------
 The boundary loop of the scalp, oriented by the triangles (the scalp on the left, seen from
 outside): counter-clockwise seen from above the head. It is split at the ears, found from
-the head bone (:func:`.groom.head_frame`), not from vertex ids: the ears are where the loop
+the head bone (:func:`.body.head_frame.head_frame`), not from vertex ids: the ears are where the loop
 crosses the coronal plane ``(p - origin) . forward = EAR_PLANE_FORWARD_M`` farthest to the
 left and to the right. The part between them in front is :attr:`Scalp.front`, the rest
 :attr:`Scalp.back`; the loop starts with the front part, which runs from the character's
@@ -57,10 +57,10 @@ import scipy.sparse as sp
 from hairport.solver.body.head_frame import REFERENCE_CROWN_M, HeadFrame, head_frame
 from hairport.solver.mesh.polyline import polyline_arc_length
 from hairport.solver.mesh.topology import (
-    _largest_piece,
     boundary_edges,
     check_disk,
     face_adjacency,
+    largest_piece,
     make_disk,
     subdivide,
     submesh,
@@ -266,12 +266,12 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     Parameters
     ----------
     character : Character
-        Needs a skeleton with a ``head`` bone (for the ears; see :func:`.groom.head_frame`).
+        Needs a skeleton with a ``head`` bone (for the ears; see :func:`.body.head_frame.head_frame`).
     root_faces : (S,) int64
         The face holding each root (duplicates count as more roots; e.g.
         ``adaptable.anchors.face[adaptable.hair.roots]``).
     frame : HeadFrame, optional
-        Reuse a frame from :func:`.groom.head_frame`.
+        Reuse a frame from :func:`.body.head_frame.head_frame`.
 
     Returns
     -------
@@ -307,7 +307,7 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     best = (-1.0, 0, None)  # roots held, rings, piece
     for rings in range(MAX_CLOSING_RINGS + 1):
         region = seed_faces if rings == 0 else _closed_faces(faces, seed_vertices, rings, vadj)
-        piece = _largest_piece(region, adjacency, roots_per_face)
+        piece = largest_piece(region, adjacency, roots_per_face)
         held = float(roots_per_face[piece].sum())
         if held > best[0]:
             best = (held, rings, piece)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import igl
 import numpy as np
 
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.topology import check_disk
 from hairport.solver.model.errors import InputError
 
@@ -18,11 +19,11 @@ ARAP_ITERATIONS = 50
 MIN_UV_AREA_FRACTION = 1e-12
 
 
-def signed_areas(uv: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(q,) signed areas of ``triangles (q, 3)`` in ``uv (p, 2)``, positive counter-clockwise."""
-    a, b, c = uv[triangles[:, 0]], uv[triangles[:, 1]], uv[triangles[:, 2]]
-    e1, e2 = b - a, c - a
-    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+def check_parameterization(method: str) -> None:
+    """Refuse a method not in :data:`PARAMETERIZATIONS` (code ``bad_option``)."""
+    if method not in PARAMETERIZATIONS:
+        raise InputError(f"unknown parameterization {method!r}; expected one of {', '.join(PARAMETERIZATIONS)}",
+                         code="bad_option")
 
 
 def _segments_cross(polygon: np.ndarray) -> bool:
@@ -99,9 +100,7 @@ def parameterize(vertices: np.ndarray, triangles: np.ndarray, method: str = "har
         Unknown method, bad shapes, unused vertices, a patch that is not a disk, or a map
         that is not injective.
     """
-    if method not in PARAMETERIZATIONS:
-        raise InputError(f"unknown parameterization {method!r}; expected one of {', '.join(PARAMETERIZATIONS)}",
-                         code="bad_option")
+    check_parameterization(method)
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or triangles.ndim != 2 or triangles.shape[1] != 3:

@@ -1,4 +1,9 @@
-"""Mesh topology over face arrays ``(F, 3) int64``: adjacency, sub-meshes, boundary loops, disks, subdivision."""
+"""Mesh topology over face arrays ``(F, 3) int64``: edges and adjacency (the one edge graph and
+its Laplacian), sub-meshes, boundary loops, disks, subdivision.
+
+Every edge table here comes from :func:`half_edges`: row ``3 f + j`` is face ``f``'s edge from
+corner ``j`` to corner ``j + 1``, so the half-edge opposite corner ``k`` is row ``3 f + (k + 1) % 3``.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,34 @@ from hairport.solver.model.errors import InputError
 
 #: rounds of "add the faces around pinch vertices, fill holes" before a region is refused
 MAX_DISK_REPAIRS = 4
+
+
+def half_edges(faces: np.ndarray) -> np.ndarray:
+    """The directed edges of every face, face by face.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+
+    Returns
+    -------
+    edges : (3F, 2) int64
+        Row ``3 f + j`` runs from corner ``j`` to corner ``(j + 1) % 3`` of face ``f``.
+    """
+    return np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+
+
+def _edge_twins(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of half-edges ``(a, b)`` (rows of :func:`half_edges`) on the same undirected edge.
+
+    On a non-manifold edge its half-edges are chained in face order, ``(h1, h2), (h2, h3)``.
+    """
+    edges = half_edges(faces)
+    n = int(edges.max()) + 1
+    key = np.minimum(edges[:, 0], edges[:, 1]) * n + np.maximum(edges[:, 0], edges[:, 1])
+    order = np.argsort(key, kind="stable")
+    same = key[order[1:]] == key[order[:-1]]
+    return order[:-1][same], order[1:][same]
 
 
 def face_adjacency(faces: np.ndarray) -> sp.csr_matrix:
@@ -25,25 +58,94 @@ def face_adjacency(faces: np.ndarray) -> sp.csr_matrix:
         Symmetric; ``[i, j]`` when faces ``i`` and ``j`` share an edge (on a non-manifold
         edge its faces are chained in id order, which keeps them connected).
     """
-    faces = np.asarray(faces, dtype=np.int64)
     n_faces = len(faces)
-    edges = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = np.minimum(edges[:, 0], edges[:, 1]) * (int(faces.max()) + 1) + np.maximum(edges[:, 0], edges[:, 1])
-    order = np.argsort(key, kind="stable")
-    same = key[order[1:]] == key[order[:-1]]
-    owner = np.repeat(np.arange(n_faces), 3)
-    a, b = owner[order[:-1][same]], owner[order[1:][same]]
+    a, b = (twin // 3 for twin in _edge_twins(faces))
     data = np.ones(2 * len(a), dtype=bool)
     return sp.csr_matrix((data, (np.concatenate([a, b]), np.concatenate([b, a]))), shape=(n_faces, n_faces))
 
 
+def corner_neighbours(faces: np.ndarray) -> np.ndarray:
+    """The face across the edge opposite each corner.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+
+    Returns
+    -------
+    neighbours : (F, 3) int64
+        ``[f, k]``: the face sharing the edge from corner ``k + 1`` to ``k + 2`` of face ``f``,
+        -1 on the border (on a non-manifold edge, a neighbour in the chain of
+        :func:`face_adjacency`).
+    """
+    a, b = _edge_twins(faces)
+    across = np.full(3 * len(faces), -1, dtype=np.int64)
+    across[a] = b // 3
+    across[b] = a // 3
+    # half-edge j of a face runs from corner j to j + 1: it is opposite corner j + 2
+    return across.reshape(-1, 3)[:, [1, 2, 0]]
+
+
+def vertex_faces(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces around each vertex, in CSR layout.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+    n_vertices : int
+
+    Returns
+    -------
+    start : (V + 1,) int64
+        Vertex ``v``'s faces are ``faces_around[start[v]:start[v + 1]]``.
+    faces_around : (3F,) int64
+        Face ids, ascending per vertex.
+    corners : (3F,) int64
+        The vertex's corner in each of those faces.
+    """
+    corner_vertex = np.asarray(faces, dtype=np.int64).ravel()
+    order = np.argsort(corner_vertex, kind="stable")
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    np.cumsum(np.bincount(corner_vertex, minlength=n_vertices), out=start[1:])
+    return start, order // 3, order % 3
+
+
 def vertex_adjacency(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
-    """(V, V) symmetric bool csr_matrix: vertices joined by an edge of ``faces (F, 3)``."""
-    edges = np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    """The mesh's edge graph.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+    n_vertices : int
+
+    Returns
+    -------
+    adjacency : (V, V) csr_matrix of bool
+        Symmetric; ``[i, j]`` when an edge of ``faces`` joins vertices ``i`` and ``j``.
+    """
+    edges = half_edges(faces)
     data = np.ones(2 * len(edges), dtype=bool)
     rows = np.concatenate([edges[:, 0], edges[:, 1]])
     cols = np.concatenate([edges[:, 1], edges[:, 0]])
     return sp.csr_matrix((data, (rows, cols)), shape=(n_vertices, n_vertices))
+
+
+def graph_laplacian(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
+    """The unit-weight graph Laplacian ``D - A`` of the edge graph (:func:`vertex_adjacency`).
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+        No face repeats a vertex.
+    n_vertices : int
+
+    Returns
+    -------
+    laplacian : (V, V) csr_matrix of float64
+        Each vertex's neighbour count on the diagonal, -1 per edge off it; rows sum to 0.
+    """
+    adjacency = vertex_adjacency(faces, n_vertices).astype(np.float64)
+    return (sp.diags(np.asarray(adjacency.sum(axis=1)).ravel()) - adjacency).tocsr()
 
 
 def submesh(faces: np.ndarray, face_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -71,7 +173,7 @@ def euler_characteristic(triangles: np.ndarray) -> int:
     triangles = np.asarray(triangles, dtype=np.int64)
     if len(triangles) == 0:
         return 0
-    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges = np.sort(half_edges(triangles), axis=1)
     n_edges = len(np.unique(edges, axis=0))
     return len(np.unique(triangles)) - n_edges + len(triangles)
 
@@ -99,7 +201,7 @@ def boundary_loops(triangles: np.ndarray) -> list[np.ndarray]:
     if len(triangles) == 0:
         return []
     n = int(triangles.max()) + 1
-    half = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    half = half_edges(triangles)
     key = half[:, 0] * n + half[:, 1]
     reverse = half[:, 1] * n + half[:, 0]
     if len(np.unique(key)) != len(key):
@@ -186,7 +288,7 @@ def fill_holes(region: np.ndarray, adjacency: sp.csr_matrix) -> np.ndarray:
     return filled
 
 
-def _largest_piece(region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndarray) -> np.ndarray:
+def largest_piece(region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndarray) -> np.ndarray:
     """The edge-connected piece of ``region (F,) bool`` with the largest ``weight (F,)`` sum
     (ties: the most faces), as an (F,) bool mask."""
     inside = np.flatnonzero(region)
@@ -199,8 +301,7 @@ def _largest_piece(region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndar
 
 def _pinch_vertices(faces: np.ndarray, region: np.ndarray) -> np.ndarray:
     """Ids of vertices where the region's boundary touches itself."""
-    chosen = faces[region]
-    half = chosen[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    half = half_edges(faces[region])
     n = int(faces.max()) + 1
     key = half[:, 0] * n + half[:, 1]
     boundary = half[~np.isin(half[:, 1] * n + half[:, 0], key)]
@@ -239,7 +340,7 @@ def make_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, w
         raise InputError(f"the {what} is empty", code="not_a_disk")
     disk = region
     for _ in range(MAX_DISK_REPAIRS + 1):
-        disk = fill_holes(_largest_piece(disk, adjacency, weight), adjacency)
+        disk = fill_holes(largest_piece(disk, adjacency, weight), adjacency)
         pinch = _pinch_vertices(faces, disk)
         if len(pinch) == 0:
             break
@@ -252,7 +353,7 @@ def make_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, w
 
 def boundary_edges(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     """(k, 3) bool: whether edge ``j`` (corner ``j`` to ``j + 1``) of each triangle is on the boundary."""
-    directed = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2)
+    directed = half_edges(triangles).reshape(-1, 3, 2)
     key = directed[..., 0] * n_vertices + directed[..., 1]
     reverse = directed[..., 1] * n_vertices + directed[..., 0]
     return ~np.isin(key, reverse.ravel())
@@ -279,7 +380,7 @@ def subdivide(points: np.ndarray, triangles: np.ndarray, loop: np.ndarray) -> tu
         The old loop with the midpoint of each loop edge inserted after its first vertex.
     """
     n = len(points)
-    half = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    half = half_edges(triangles)
     key = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
     unique, inverse = np.unique(key, return_inverse=True)
     mid = (n + inverse).reshape(-1, 3)  # columns: ab, bc, ca

@@ -1,4 +1,4 @@
-"""Hairline inputs and the adaptive weights of Eq. 20 (solver/hairline.py)."""
+"""Drawn hairline curves: parsing, reading, checks on the head and the smoothed arc length."""
 
 import json
 
@@ -13,36 +13,7 @@ from hairport.solver.hairline.curve import (
     smooth_polyline,
     smoothed_arc_length,
 )
-from hairport.solver.hairline.weights import GAMMA_SIGMA, adaptive_weights
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import Hair
-
-
-def straight_strands():
-    """Two strands of 4 particles, 1 cm apart along z."""
-    strand = np.array([[0, 0, 0], [0, 0, 0.01], [0, 0, 0.02], [0, 0, 0.03]], dtype=float)
-    return Hair.from_strands([strand, strand + [0.1, 0, 0]])
-
-
-def test_weights_are_zero_at_a_moved_root_and_one_for_unmoved_strands():
-    hair = straight_strands()
-    gamma = adaptive_weights(hair, np.array([0.02, 0.0]))
-    assert gamma[0] == 0.0
-    np.testing.assert_array_equal(gamma[4:], 1.0)  # root did not move: r = 0 -> gamma = 1
-    s = np.array([0.0, 0.01, 0.02, 0.03])
-    np.testing.assert_allclose(gamma[:4], 1 - np.exp(-GAMMA_SIGMA * (s / 0.02) ** 2), rtol=0, atol=1e-15)
-    assert np.all(np.diff(gamma[:4]) > 0)  # grows along the strand
-
-
-def test_weights_tend_to_one_far_along_the_strand():
-    long = Hair.from_strands([np.column_stack([np.zeros(50), np.zeros(50), np.linspace(0, 1.0, 50)])])
-    gamma = adaptive_weights(long, np.array([0.01]))
-    assert gamma[-1] > 1 - 1e-12 and gamma[0] == 0
-
-
-def test_weights_refuse_a_wrong_shape():
-    with pytest.raises(ValueError, match=r"expected \(2,\)"):
-        adaptive_weights(straight_strands(), np.zeros(3))
 
 
 def test_curve_parsing_converts_units_and_keeps_turning_points():

@@ -12,6 +12,8 @@ from hairport.solver.hairline.scalp import (
     split_boundary_ears,
     turning_points,
 )
+from hairport.solver.mesh.areas import signed_areas
+from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize
 from hairport.solver.mesh.topology import (
     boundary_edges,
     boundary_loops,
@@ -147,6 +149,14 @@ def test_refine_scalp_keeps_the_surface_and_the_hairline(character, scalp, query
     assert np.array_equal(few[2][::2], scalp.boundary)
 
 
+@pytest.mark.parametrize("method", PARAMETERIZATIONS)
+def test_parameterizations_of_the_refined_scalp(character, scalp, method):
+    vertices, triangles, boundary = refine_scalp(character.vertices[scalp.vertices], scalp.triangles, scalp.boundary)
+    uv = parameterize(vertices, triangles, method)
+    assert (signed_areas(uv, triangles) > 0).all()
+    assert np.linalg.norm(uv, axis=1).max() <= 1.0 + 1e-9
+
+
 def test_refine_scalp_with_enough_triangles_is_a_copy(character, scalp):
     vertices, triangles, boundary = refine_scalp(
         character.vertices[scalp.vertices], scalp.triangles, scalp.boundary, min_triangles=len(scalp.faces)
@@ -186,11 +196,9 @@ def test_ears_are_split_into_triangles_with_one_hairline_edge():
     np.testing.assert_array_equal(new_points[:5], points)
     # midpoints of the inner edges, same orientation and covered area
     np.testing.assert_allclose(new_points[5:], [[0.5, 0.0], [0.5, 0.5]])
-    def areas(p, t):
-        e1, e2 = p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]
-        return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    assert (areas(new_points, new_triangles) > 0).all()
-    assert areas(new_points, new_triangles).sum() == pytest.approx(areas(points, triangles).sum(), abs=1e-15)
+    assert (signed_areas(new_points, new_triangles) > 0).all()
+    assert signed_areas(new_points, new_triangles).sum() == pytest.approx(signed_areas(points, triangles).sum(),
+                                                                          abs=1e-15)
     loop = boundary_loops(new_triangles)[0]
     assert set(loop.tolist()) == {0, 1, 2, 3, 4}  # the hairline keeps its vertices
 

@@ -1,65 +1,19 @@
-"""Head patch and its disk parameterizations (harmonic, LSCM, ARAP) on the MakeHuman head."""
+"""Disk parameterizations (harmonic, LSCM, ARAP) of flat disks and their injectivity checks."""
 
 import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from hairport.solver.hairline.head_patch import DEFAULT_MARGIN_RINGS, head_patch
-from hairport.solver.hairline.scalp import refine_scalp
+from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.parameterization import (
     PARAMETERIZATIONS,
     _segments_cross,
     check_injective,
+    check_parameterization,
     parameterize,
-    signed_areas,
 )
-from hairport.solver.mesh.topology import boundary_loops, euler_characteristic
+from hairport.solver.mesh.topology import boundary_loops
 from hairport.solver.model.errors import InputError
-
-
-@pytest.fixture(scope="module")
-def patch(character, scalp, frame):
-    return head_patch(character, scalp, frame=frame)
-
-
-def test_head_patch_is_a_disk_around_the_scalp(character, frame, scalp, patch):
-    vertices, triangles, faces = patch
-    assert (len(vertices), len(triangles)) == (721, 1310)  # margin 6 around a 466-face scalp
-    assert np.array_equal(character.faces[faces], vertices[triangles])
-    assert np.isin(scalp.faces, faces).all()
-    assert euler_characteristic(triangles) == 1 and len(boundary_loops(triangles)) == 1
-    extra = np.setdiff1d(faces, scalp.faces)
-    assert frame.head_vertices[character.faces[extra]].all()
-    # margin 0 is the scalp itself; more rings, more faces
-    v0, t0, f0 = head_patch(character, scalp, 0, frame)
-    assert np.array_equal(f0, scalp.faces) and np.array_equal(v0, scalp.vertices)
-    assert len(head_patch(character, scalp, DEFAULT_MARGIN_RINGS + 1, frame)[2]) > len(faces)
-    with pytest.raises(InputError, match="margin_rings"):
-        head_patch(character, scalp, -1, frame)
-
-
-@pytest.mark.parametrize("method", PARAMETERIZATIONS)
-def test_parameterizations_of_the_head_patch_are_injective_in_the_unit_disk(character, patch, method):
-    vertices, triangles, _ = patch
-    uv = parameterize(character.vertices[vertices], triangles, method)
-    assert uv.shape == (len(vertices), 2)
-    radius = np.linalg.norm(uv, axis=1)
-    assert radius.max() <= 1.0 + 1e-9
-    assert abs(radius.max() - 1.0) < 1e-9  # fitted to the disk, not just inside it
-    assert (signed_areas(uv, triangles) > 0).all()
-    if method == "harmonic":
-        loop = boundary_loops(triangles)[0]
-        assert np.abs(radius[loop] - 1.0).max() < 1e-12
-        interior = np.setdiff1d(np.arange(len(vertices)), loop)
-        assert radius[interior].max() < 1.0
-
-
-@pytest.mark.parametrize("method", PARAMETERIZATIONS)
-def test_parameterizations_of_the_refined_scalp(character, scalp, method):
-    vertices, triangles, boundary = refine_scalp(character.vertices[scalp.vertices], scalp.triangles, scalp.boundary)
-    uv = parameterize(vertices, triangles, method)
-    assert (signed_areas(uv, triangles) > 0).all()
-    assert np.linalg.norm(uv, axis=1).max() <= 1.0 + 1e-9
 
 
 def flat_disk(rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -148,3 +102,11 @@ def test_boundary_crossings():
     bowtie = square[[0, 1, 3, 2]]
     assert not _segments_cross(square)
     assert _segments_cross(bowtie)
+
+
+def test_check_parameterization():
+    for method in PARAMETERIZATIONS:
+        check_parameterization(method)
+    with pytest.raises(InputError, match="unknown parameterization 'tutte'; expected one of harmonic, lscm, arap") as caught:
+        check_parameterization("tutte")
+    assert caught.value.code == "bad_option"

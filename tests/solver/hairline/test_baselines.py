@@ -1,8 +1,7 @@
-"""Section 7.5's relocation alternatives (harmonic, 2D/3D thin-plate RBF), the interior seeds and
-Table 3's density change, against hand values and the fields each method must reproduce."""
+"""Section 7.5's relocation alternatives (harmonic, 2D/3D thin-plate RBF) and the interior seeds,
+against hand values and the fields each method must reproduce."""
 
 import numpy as np
-import pytest
 
 from hairport.solver.hairline.baselines import (
     RBF_INTERIOR_SEEDS,
@@ -11,41 +10,7 @@ from hairport.solver.hairline.baselines import (
     rbf_displacement_2d,
     rbf_displacement_3d,
 )
-from hairport.solver.hairline.density import density_change
-from hairport.solver.model.errors import InputError
-
-CELLS = 8  # grid cells per side: (CELLS + 1)^2 vertices on [0, 1]^2
-BOWL = 0.3  # curved scalp for the 3D RBF: z = BOWL (x^2 + y^2)
-
-
-def grid(cells=CELLS):
-    """Vertices ``((cells+1)^2, 2)`` of ``[0, 1]^2``, id ``i (cells+1) + j`` at ``(i, j) / cells``,
-    and ``2 cells^2`` counter-clockwise triangles (diagonals from ``(i, j)`` to ``(i+1, j+1)``)."""
-    xs, ys = np.meshgrid(np.linspace(0.0, 1.0, cells + 1), np.linspace(0.0, 1.0, cells + 1), indexing="ij")
-    points = np.column_stack([xs.ravel(), ys.ravel()])
-    index = np.arange((cells + 1) ** 2).reshape(cells + 1, cells + 1)
-    a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
-    return points, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-
-
-def outer_ring(points):
-    return (np.isclose(points, 0.0) | np.isclose(points, 1.0)).any(axis=1)
-
-
-def flat(points):
-    return np.column_stack([points, np.zeros(len(points))])
-
-
-def bowl(points):
-    return np.column_stack([points, BOWL * (points**2).sum(axis=1)])
-
-
-def expect_refusal(call, *args, **kwargs):
-    with pytest.raises(InputError) as raised:
-        call(*args, **kwargs)
-    assert raised.value.code == "bad_relocation"
-    return raised.value
-
+from tests.solver.hairline.unit_square import CELLS, bowl, expect_refusal, flat, outer_ring, square_grid
 
 # ----------------------------------------------------------------------------------------
 # harmonic displacement
@@ -53,7 +18,7 @@ def expect_refusal(call, *args, **kwargs):
 
 
 def test_harmonic_translation_moves_every_vertex_by_it():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     fixed = outer_ring(uv)
     shift = np.array([0.13, -0.07])
     u = harmonic_displacement(uv, triangles, fixed, uv[fixed] + shift)
@@ -61,7 +26,7 @@ def test_harmonic_translation_moves_every_vertex_by_it():
 
 
 def test_harmonic_reproduces_linear_maps():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     fixed = outer_ring(uv)
     centre = np.array([0.5, 0.5])
     u = harmonic_displacement(uv, triangles, fixed, centre + 1.2 * (uv[fixed] - centre))
@@ -76,7 +41,7 @@ def test_harmonic_uses_cotangent_weights_of_the_uv_triangles():
     # its axis edges two 45-degree angles (weight 1 each): it moves by the mean of its 4 axis
     # neighbours' motions; moving only the right-middle vertex (id 7) by 0.4 moves it by 0.1
     # (a uniform graph Laplacian, 6 neighbours, would give 0.4 / 6).
-    uv, triangles = grid(2)
+    uv, triangles = square_grid(2)
     fixed = outer_ring(uv)
     target = uv.copy()
     target[7, 0] += 0.4
@@ -93,7 +58,7 @@ def test_harmonic_uses_cotangent_weights_of_the_uv_triangles():
 
 
 def test_harmonic_identity_is_exact_and_unanchored_pieces_stay():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     fixed = outer_ring(uv)
     n = len(uv)
     # an extra triangle with no fixed vertex, and a vertex in no triangle
@@ -108,7 +73,7 @@ def test_harmonic_identity_is_exact_and_unanchored_pieces_stay():
 
 
 def test_harmonic_fixed_vertices_get_their_targets_exactly():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     fixed = outer_ring(uv)
     rng = np.random.default_rng(3)
     target = uv[fixed] + 0.02 * rng.standard_normal((int(fixed.sum()), 2))
@@ -126,7 +91,7 @@ def test_harmonic_fixed_vertices_get_their_targets_exactly():
 
 
 def test_rbf_2d_reproduces_affine_displacements_without_seeds():
-    uv, _ = grid()
+    uv, _ = square_grid()
     fixed = outer_ring(uv)
     A = np.array([[0.2, -0.1], [0.05, 0.15]])
     b = np.array([0.03, -0.02])
@@ -135,7 +100,7 @@ def test_rbf_2d_reproduces_affine_displacements_without_seeds():
 
 
 def test_rbf_3d_reproduces_affine_displacements_without_seeds():
-    uv, _ = grid()
+    uv, _ = square_grid()
     rest = bowl(uv)
     fixed = outer_ring(uv)
     A = np.array([[0.1, 0.0, -0.05], [0.02, -0.1, 0.0], [0.0, 0.03, 0.08]])
@@ -145,7 +110,7 @@ def test_rbf_3d_reproduces_affine_displacements_without_seeds():
 
 
 def test_rbf_seeds_stay_and_fixed_vertices_reach_their_targets():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     fixed = outer_ring(uv)
     seeds = interior_seeds(triangles, np.flatnonzero(fixed), flat(uv), count=5)
     shift = np.array([0.0, 0.1])
@@ -168,7 +133,7 @@ def test_rbf_seeds_stay_and_fixed_vertices_reach_their_targets():
 def test_rbf_2d_is_symmetric_with_a_symmetric_setup():
     # translation along y, a single seed at the centre: mirroring x -> 1 - x maps the data
     # onto itself, so the field is mirror-symmetric
-    uv, _ = grid()
+    uv, _ = square_grid()
     fixed = outer_ring(uv)
     centre = CELLS // 2 * (CELLS + 1) + CELLS // 2
     u = rbf_displacement_2d(uv, fixed, uv[fixed] + [0.0, 0.1], np.array([centre]))
@@ -178,7 +143,7 @@ def test_rbf_2d_is_symmetric_with_a_symmetric_setup():
 
 
 def test_every_method_leaves_an_identity_edit_exact():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     rest = bowl(uv)
     fixed = outer_ring(uv)
     seeds = interior_seeds(triangles, np.flatnonzero(fixed), rest)
@@ -200,7 +165,7 @@ def hops_from_ring(cells=CELLS):
 
 
 def test_interior_seeds_lie_in_the_core_and_are_distinct():
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     boundary = np.flatnonzero(outer_ring(uv))
     seeds = interior_seeds(triangles, boundary, flat(uv))
     hops = hops_from_ring()
@@ -216,7 +181,7 @@ def test_interior_seeds_farthest_point_order_by_hand():
     # The core is the 5x5 block i, j in 2..6 (hops >= 2). The start is the centre (4, 4), id 40;
     # the farthest core vertices from it are the block's corners, the lowest id (2, 2) = 20;
     # then (2, 6), (6, 2) and (6, 6) are all 2 sqrt(2) cells from the picked set: (2, 6) = 24.
-    uv, triangles = grid()
+    uv, triangles = square_grid()
     boundary = np.flatnonzero(outer_ring(uv))
     rest = flat(uv)
     np.testing.assert_array_equal(interior_seeds(triangles, boundary, rest, count=1), [40])
@@ -229,71 +194,12 @@ def test_interior_seeds_farthest_point_order_by_hand():
 
 
 def test_interior_seeds_small_scalp():
-    uv, triangles = grid(2)  # one interior vertex
+    uv, triangles = square_grid(2)  # one interior vertex
     boundary = np.flatnonzero(outer_ring(uv))
     np.testing.assert_array_equal(interior_seeds(triangles, boundary, flat(uv)), [4])
-    uv, triangles = grid(1)  # every vertex on the boundary
+    uv, triangles = square_grid(1)  # every vertex on the boundary
     assert interior_seeds(triangles, np.arange(4), flat(uv)).shape == (0,)
 
-
-# ----------------------------------------------------------------------------------------
-# density change (Table 3)
-# ----------------------------------------------------------------------------------------
-
-
-def test_density_change_of_a_uniform_scaling():
-    uv, triangles = grid()
-    rest = bowl(uv)
-    roots = np.array([0, 0, 5, -1, 17, 17, 17, 100, -1])
-    for s in (0.8, 1.0, 1.25):
-        density = density_change(rest, s * rest, triangles, roots)
-        np.testing.assert_array_equal(density.triangles, [0, 5, 17, 100])
-        np.testing.assert_allclose(density.changes, np.full(4, 1.0 / s**2 - 1.0), rtol=0, atol=1e-12)
-        assert density.l1 == pytest.approx(abs(1.0 / s**2 - 1.0), abs=1e-12)
-        assert density.linf == pytest.approx(abs(1.0 / s**2 - 1.0), abs=1e-12)
-    identity = density_change(rest, rest, triangles, roots)
-    assert identity.l1 == identity.linf == 0.0
-    np.testing.assert_array_equal(identity.changes, np.zeros(4))
-
-
-def test_density_change_by_hand():
-    rest = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
-    triangles = np.array([[0, 1, 2], [1, 3, 2]])
-    # one triangle: its area doubles (0.5 -> 1), the density halves
-    stretched = rest.copy()
-    stretched[1, 0] = 2.0
-    density = density_change(rest, stretched, triangles[:1], np.array([0, 0, 0]))
-    np.testing.assert_allclose(density.changes, [-0.5], rtol=0, atol=1e-15)
-    assert (density.l1, density.linf) == pytest.approx((0.5, 0.5), abs=1e-15)
-    # lifted out of the plane: area 0.5 sqrt(2), change 1 / sqrt(2) - 1
-    lifted = rest.copy()
-    lifted[2, 2] = 1.0
-    density = density_change(rest, lifted, triangles[:1], np.array([0]))
-    np.testing.assert_allclose(density.changes, [1.0 / np.sqrt(2.0) - 1.0], rtol=0, atol=1e-15)
-    # two triangles: the first stretched to twice its area (-0.5), the second compressed to
-    # half (+1); roots outside the scalp (-1) are ignored
-    deformed = rest.copy()
-    deformed[0] = [-0.5, -0.5, 0.0]  # first triangle (0, 1, 2): area 0.5 -> 1.0
-    deformed[3] = [0.75, 0.75, 0.0]  # second triangle (1, 3, 2): area 0.5 -> 0.25
-    density = density_change(rest, deformed, triangles, np.array([1, -1, 0, 1]))
-    np.testing.assert_array_equal(density.triangles, [0, 1])
-    np.testing.assert_allclose(density.changes, [-0.5, 1.0], rtol=0, atol=1e-15)
-    assert density.l1 == pytest.approx(0.75, abs=1e-15)
-    assert density.linf == pytest.approx(1.0, abs=1e-15)
-    # a collapsed triangle holding roots: infinite change
-    collapsed = rest.copy()
-    collapsed[2] = [0.5, 0.0, 0.0]
-    density = density_change(rest, collapsed, triangles, np.array([0, 1]))
-    assert np.isinf(density.changes[0]) and density.linf == np.inf
-
-
-def test_density_change_without_roots():
-    uv, triangles = grid(2)
-    for roots in (np.zeros(0, dtype=np.int64), np.array([-1, -1]), []):
-        density = density_change(flat(uv), 2.0 * flat(uv), triangles, roots)
-        assert density.l1 == density.linf == 0.0
-        assert density.changes.shape == density.triangles.shape == (0,)
-        assert density.triangles.dtype == np.int64
 
 
 # ----------------------------------------------------------------------------------------
@@ -302,7 +208,7 @@ def test_density_change_without_roots():
 
 
 def test_bad_input_is_refused():
-    uv, triangles = grid(4)
+    uv, triangles = square_grid(4)
     fixed = outer_ring(uv)
     rest = bowl(uv)
     seeds = np.array([12])
@@ -337,11 +243,3 @@ def test_bad_input_is_refused():
     expect_refusal(interior_seeds, triangles, boundary + 100, rest)
     expect_refusal(interior_seeds, triangles, boundary, rest, count=-1)
     expect_refusal(interior_seeds, triangles, boundary, rest[:, :2])
-
-    expect_refusal(density_change, rest, rest[:-1], triangles, [0])
-    expect_refusal(density_change, rest, rest, triangles, [-2])
-    expect_refusal(density_change, rest, rest, triangles, [len(triangles)])
-    expect_refusal(density_change, rest, np.where(np.isclose(rest, 0.0), np.nan, rest), triangles, [0])
-    degenerate = rest.copy()
-    degenerate[5] = degenerate[0]  # triangle 0 is (0, 5, 6)
-    expect_refusal(density_change, degenerate, rest, triangles, [0])

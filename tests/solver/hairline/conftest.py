@@ -1,0 +1,56 @@
+"""The MakeHuman head the hairline tests share: the average female with the roots of a
+300-strand "short" groom on her (seed 0), their scalp, and the scalp's parameterized chart."""
+
+import pytest
+
+from hairport.solver.body.head_frame import head_frame
+from hairport.solver.hairline.relocation import scalp_chart
+from hairport.solver.hairline.scalp import extract_scalp
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import barycentric_coordinates
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+
+@pytest.fixture(scope="session")
+def character():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="session")
+def frame(character):
+    return head_frame(character)
+
+
+@pytest.fixture(scope="session")
+def query(character):
+    return MeshQuery(character.vertices, character.faces)
+
+
+@pytest.fixture(scope="session")
+def roots(character, query):
+    """(S, 3) root positions and (S,) faces holding them (8 particles per strand)."""
+    hair = generate_groom(character, "short", 300, 8, seed=0)
+    points = hair.points[hair.roots]
+    return points, query.signed_distance(points).faces
+
+
+@pytest.fixture(scope="session")
+def scalp(character, roots, frame):
+    return extract_scalp(character, roots[1], frame)
+
+
+@pytest.fixture(scope="session")
+def root_anchors(character):
+    """(faces, barycentric, points) of the roots of the same groom grown with 4 particles per strand."""
+    hair = generate_groom(character, "short", 300, 4, seed=0)
+    points = hair.points[hair.roots]
+    found = MeshQuery(character.vertices, character.faces).signed_distance(points)
+    weights = barycentric_coordinates(found.closest, character.vertices[character.faces[found.faces]])
+    return found.faces, weights, points
+
+
+@pytest.fixture(scope="session")
+def scalp_setup(character, root_anchors):
+    """The refined scalp of ``root_anchors`` in its harmonic head chart."""
+    return scalp_chart(character, root_anchors[0])
