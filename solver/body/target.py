@@ -2,16 +2,46 @@
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
-from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.body.skeleton_transfer import ensure_skeleton
 from hairport.solver.model.character import Character, Skeleton, check_same_topology
 from hairport.solver.model.errors import InputError
 
 
-def prepare_target(adaptable: AdaptableHairstyle, target: Character) -> Character:
-    """Check topology, give the target a skeleton if it has none, and check its bones."""
+class RiggedSource(Protocol):
+    """What a target is prepared for: the source character and the bone order its hair uses
+    (an :class:`~hairport.solver.adaptable.AdaptableHairstyle`)."""
+
+    source: Character
+    bone_names: tuple[str, ...]
+
+
+def prepare_target(adaptable: RiggedSource, target: Character) -> Character:
+    """Check topology, give the target a skeleton if it has none, and put its bones in the source's order.
+
+    Parameters
+    ----------
+    adaptable : RiggedSource
+        The source character and its bone names, in the order of the hairstyle's weights.
+    target : Character
+
+    Returns
+    -------
+    target : Character
+        ``target`` itself when its bones are already those of the source, in that order;
+        else the same mesh with the source's skeleton transferred (no skeleton) or with
+        its bones, parents and skin-weight columns permuted into ``adaptable.bone_names``.
+
+    Raises
+    ------
+    TopologyMismatch
+    InputError
+        ``bad_skeleton`` when the target lacks a bone of the source; ``no_skeleton`` when
+        neither character has a skeleton.
+    """
     check_same_topology(adaptable.source, target)
     target = ensure_skeleton(adaptable.source, target)
     if target.skeleton.names != adaptable.bone_names:

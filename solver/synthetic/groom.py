@@ -1,19 +1,18 @@
 """Procedural grooms: strands grown from the scalp of any rigged character.
 
-The generator works on any :class:`~.character.Character` whose skeleton has a ``head``
-bone and (ideally) skin weights: the toy character of :mod:`.toy` for fast tests, and the
-MakeHuman body (game-engine rig) for demos and benchmarks. Conventions: meters, Y up,
-the face looks along +Z.
+The generator works on any :class:`~hairport.solver.model.character.Character` whose
+skeleton has a ``head`` bone and (ideally) skin weights: the toy character of
+:mod:`hairport.solver.synthetic.toy` for fast tests, and the MakeHuman body (game-engine rig)
+for demos and benchmarks. Conventions: meters, Y up, the face looks along +Z.
 
 Pipeline (:func:`generate_groom`):
 
-1. **Head frame** (:func:`head_frame`): the head bone gives the up axis and the head joint;
-   the head-dominant vertices (head skin weight >= ``HEAD_WEIGHT_MIN``) give the crown
-   height, the front (forehead) and back extents and the half-width.
+1. **Head frame** (:func:`hairport.solver.body.head_frame.head_frame`): up axis, head
+   joint, crown height, front and back extents and half-width of the head.
 2. **Scalp** (:func:`scalp_faces`): head-dominant faces above a plane tilted from the
    front hairline (high, above the forehead) over the ears to the nape (low).
-3. **Roots**: area-weighted random points on scalp faces (face + barycentric, exactly on
-   the surface), seeded.
+3. **Roots** (:func:`sample_roots`): area-weighted random points on scalp faces (face +
+   barycentric, exactly on the surface), seeded.
 4. **Growth**, vectorised over all strands, a Python loop over the particle steps only:
    the first segment leaves along the surface normal; each later direction blends the
    previous direction, gravity (-Y), a per-style "comb" direction (projected onto the
@@ -21,8 +20,9 @@ Pipeline (:func:`generate_groom`):
    drape. Step length = length / (particles - 1). Wavy and curly styles add a sinusoidal
    (planar) or helical offset perpendicular to the growth direction. After every step
    the new particles closer to the body than ``clearance`` are pushed out along the
-   distance normal to ``clearance`` (:meth:`.geometry.MeshQuery.signed_distance`; one
-   query per step, since each query has a fixed cost).
+   distance normal to ``clearance``
+   (:meth:`hairport.solver.mesh.query.MeshQuery.signed_distance`; one query per step,
+   since each query has a fixed cost).
 5. A final check over all particles pushes out any particle still below ``clearance``
    (repeated normal pushes; particles stuck in crevices narrower than twice the clearance,
    such as behind a MakeHuman ear, move away from the skull centre), so every non-root
@@ -50,13 +50,11 @@ from hairport.solver.model.hair import Hair
 #: default distance (m) every non-root particle keeps from the body
 DEFAULT_CLEARANCE_M = 3e-3
 
-
 #: scalp boundary: normalised height (0 = head joint, 1 = crown) at the front and the back
 HAIRLINE_FRONT_HEIGHT = 0.64
 HAIRLINE_BACK_HEIGHT = 0.02
 #: normalised height of the jaw line (0 = head joint, 1 = crown)
 JAW_HEIGHT = -0.35
-
 
 #: pushes overshoot the clearance by this much (m), to avoid re-pushing on round-off
 PUSH_MARGIN_M = 1e-7
@@ -69,6 +67,7 @@ NEAR_BODY_M = 0.015
 #: gravity's weight rises to its full value over about this arc length (m) from the root
 GRAVITY_ONSET_M = 0.03
 
+#: the hairstyles :func:`generate_groom` grows
 STYLES = ("short", "long", "wavy", "curly", "fringe")
 
 #: default strand lengths (m): mean and relative spread (uniform, +-)

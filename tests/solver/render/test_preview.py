@@ -7,6 +7,8 @@ from PIL import Image
 from hairport.solver.render.preview import HIGHLIGHT_COLOR, TITLE_HEIGHT_PX, render_preview, write_result_preview
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.toy import toy_character
+from tests.solver.synthetic.toy_fixtures import PRESET_B, toy_grooms
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +47,9 @@ def test_bad_calls_are_refused(tmp_path, scene):
 
 
 def test_a_retarget_preview(tmp_path, scene):
-    from hairport.solver.options import RetargetOptions
+    from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character
+from hairport.solver.options import RetargetOptions
     from hairport.solver.pipeline import preprocess, retarget
 
     character, hair = scene
@@ -53,3 +57,38 @@ def test_a_retarget_preview(tmp_path, scene):
     result = retarget(adaptable, character, RetargetOptions(method="root-translate"))
     write_result_preview(tmp_path / "r.png", adaptable, result, character)
     assert Image.open(tmp_path / "r.png").size == (2 * 2 * 360, 480 + TITLE_HEIGHT_PX)
+
+
+@pytest.fixture(scope="module")
+def toy_a() -> Character:
+    return toy_character()
+
+
+@pytest.fixture(scope="module")
+def toy_b() -> Character:
+    return toy_character(**PRESET_B, name="toy-b")
+
+
+@pytest.fixture(scope="module")
+def query_a(toy_a) -> MeshQuery:
+    return MeshQuery(toy_a.vertices, toy_a.faces)
+
+
+@pytest.fixture(scope="module")
+def grooms(toy_a, query_a) -> dict:
+    return toy_grooms(toy_a, query_a, ("long", "curly"))
+
+
+def test_render_preview(tmp_path, grooms, toy_a, toy_b, query_a):
+    hair = grooms["long"]
+    inside = query_a.signed_distance(hair.points).distance < 0.004
+    path = render_preview(
+        tmp_path / "sub" / "preview.png",
+        [(hair, toy_a, inside, "source"), (grooms["curly"], toy_b, None, "other"), (None, toy_a, None, "bare")],
+        view_size=(200, 260),
+    )
+    image = Image.open(path)
+    assert image.size[0] == 3 * 2 * 200 and image.size[1] > 260
+    pixels = np.asarray(image.convert("RGB")).reshape(-1, 3)
+    assert ((pixels[:, 0] > 200) & (pixels[:, 1] < 60)).any()  # red highlight dots
+    assert len(np.unique(pixels, axis=0)) > 20  # mesh shading and strands, not a blank image

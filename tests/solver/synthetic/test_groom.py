@@ -1,47 +1,23 @@
-"""Toy character, procedural grooms and preview images."""
+"""Tests for solver/synthetic/groom.py: the scalp, the roots and procedural grooms on the toy."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import igl
 import numpy as np
 import pytest
-import trimesh
-from PIL import Image
 
 from hairport.solver.body.head_frame import HEAD_WEIGHT_MIN, head_frame
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
-from hairport.solver.render.preview import render_preview
-from hairport.solver.synthetic.groom import DEFAULT_CLEARANCE_M, STYLES, generate_groom, scalp_faces
-from hairport.solver.synthetic.toy import TOY_BONES, toy_character
+from hairport.solver.synthetic.groom import DEFAULT_CLEARANCE_M, STYLES, generate_groom, sample_roots, scalp_faces
+from hairport.solver.synthetic.toy import toy_character
+from tests.solver.synthetic.toy_fixtures import N_STRANDS, PARTICLES, PRESET_B
 
-N_STRANDS = 200
-PARTICLES = 24
 #: the solver's clearance eps_c is 0.5 mm; grooms must stay at least twice that far out
 MIN_CLEARANCE_M = 1e-3
-
-PRESET_B = dict(head_scale=(1.1, 0.95, 1.05), neck_radius=0.065, shoulder_width=0.44, neck_length=0.11)
-
-
-@pytest.fixture(scope="module")
-def toy_a() -> Character:
-    return toy_character()
-
-
-@pytest.fixture(scope="module")
-def toy_b() -> Character:
-    return toy_character(**PRESET_B, name="toy-b")
-
-
-@pytest.fixture(scope="module")
-def query_a(toy_a) -> MeshQuery:
-    return MeshQuery(toy_a.vertices, toy_a.faces)
-
-
-@pytest.fixture(scope="module")
-def grooms(toy_a, query_a) -> dict:
-    return {style: generate_groom(toy_a, style, N_STRANDS, PARTICLES, seed=3, query=query_a) for style in STYLES}
 
 
 def turning_per_length(hair) -> float:
@@ -52,59 +28,6 @@ def turning_per_length(hair) -> float:
     u = d / length[..., None]
     angle = np.arccos(np.clip((u[:, 1:] * u[:, :-1]).sum(axis=2), -1.0, 1.0))
     return float(angle.sum() / length.sum())
-
-
-# ---------------------------------------------------------------- toy character
-
-
-def test_toy_topology_identical_across_parameters(toy_a, toy_b):
-    others = [toy_b, toy_character(head_scale=(0.8, 1.2, 0.9), neck_radius=0.04, chest_depth=0.3, nose=False)]
-    for other in others:
-        assert other.n_vertices == toy_a.n_vertices
-        assert np.array_equal(other.faces, toy_a.faces)
-        assert not np.allclose(other.vertices, toy_a.vertices)
-    assert 2000 <= toy_a.n_faces <= 20000
-
-
-@pytest.mark.parametrize("preset", [{}, PRESET_B])
-def test_toy_is_watertight_and_outward(preset):
-    c = toy_character(**preset)
-    mesh = trimesh.Trimesh(c.vertices, c.faces, process=False)
-    assert mesh.is_watertight
-    assert mesh.is_winding_consistent
-    assert mesh.volume > 0.01  # m^3: head + neck + torso
-    assert np.all(mesh.area_faces > 0)
-    lo, hi = c.vertices.min(0), c.vertices.max(0)
-    assert hi[1] - lo[1] == pytest.approx(0.6, abs=0.1)  # Y up, meters
-
-
-@pytest.mark.parametrize("preset", [{}, PRESET_B])
-def test_toy_skeleton_inside_and_weights(preset):
-    c = toy_character(**preset)
-    sk = c.skeleton
-    assert set(TOY_BONES) <= set(sk.names)
-    assert sk.parents[sk.index("head")] == sk.index("neck_01")
-    assert sk.parents[sk.index("neck_01")] == sk.index("spine_03")
-    assert sk.parents[sk.index("upperarm_l")] == sk.index("clavicle_l")
-    assert sk.heads[sk.index("upperarm_l")][0] > 0 > sk.heads[sk.index("upperarm_r")][0]  # left = +X
-    t = np.linspace(0.02, 0.98, 25)[:, None]
-    for b in range(sk.n_bones):
-        samples = sk.heads[b] + t * (sk.tails[b] - sk.heads[b])
-        assert igl.fast_winding_number(c.vertices, c.faces, samples).min() > 0.5, sk.names[b]
-    # the head bone runs up through the head to near its top
-    head = sk.index("head")
-    assert sk.tails[head][1] > sk.heads[head][1]
-    assert c.vertices[:, 1].max() - sk.tails[head][1] < 0.03
-    rows = np.asarray(c.weights.sum(axis=1)).ravel()
-    np.testing.assert_allclose(rows, 1.0, atol=1e-12)
-    assert c.weights.min() >= 0
-    head_w = c.weights[:, head].toarray().ravel()
-    top = c.vertices[:, 1] > sk.tails[head][1] - 0.05
-    assert head_w[top].min() == 1.0
-    assert head_w[c.vertices[:, 1] < sk.heads[sk.index("neck_01")][1]].max() == 0.0
-
-
-# ---------------------------------------------------------------- scalp
 
 
 @pytest.mark.parametrize("preset", [{}, PRESET_B])
@@ -136,9 +59,6 @@ def test_groom_needs_head_bone(toy_a):
         generate_groom(Character(toy_a.vertices, toy_a.faces), "short", 10, 8)
     with pytest.raises(InputError, match="style"):
         generate_groom(toy_a, "mohawk", 10, 8)
-
-
-# ---------------------------------------------------------------- grooms
 
 
 @pytest.mark.parametrize("style", STYLES)
@@ -242,19 +162,39 @@ def test_groom_counts_for_a_larger_groom(toy_a):
     assert hair.n_particles == 32000 and hair.n_strands == 1000
 
 
-# ---------------------------------------------------------------- preview
+def test_roots_are_area_weighted_points_on_the_faces():
+    """Two triangles of areas 1/2 and 3/2: a quarter of the roots on the first."""
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [4, 0, 0], [4, 1, 0], [0, 3, 1]], dtype=float)
+    faces = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+    character = Character(vertices, faces)
+    small, large = 0, 1
+    corners = vertices[faces[[small, large]]]
+    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    np.testing.assert_allclose(areas, [0.5, 1.5])
+    face_ids, barycentric, points = sample_roots(character, np.array([small, large]), 4000, np.random.default_rng(0))
+    assert set(face_ids.tolist()) == {small, large}
+    assert abs(np.mean(face_ids == small) - 0.25) < 0.02
+    assert (barycentric >= 0).all()
+    np.testing.assert_allclose(barycentric.sum(axis=1), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(points, np.einsum("nk,nkd->nd", barycentric, vertices[faces[face_ids]]), atol=1e-15)
+    again = sample_roots(character, np.array([small, large]), 4000, np.random.default_rng(0))
+    np.testing.assert_array_equal(again[2], points)
 
 
-def test_render_preview(tmp_path, grooms, toy_a, toy_b, query_a):
-    hair = grooms["long"]
-    inside = query_a.signed_distance(hair.points).distance < 0.004
-    path = render_preview(
-        tmp_path / "sub" / "preview.png",
-        [(hair, toy_a, inside, "source"), (grooms["curly"], toy_b, None, "other"), (None, toy_a, None, "bare")],
-        view_size=(200, 260),
-    )
-    image = Image.open(path)
-    assert image.size[0] == 3 * 2 * 200 and image.size[1] > 260
-    pixels = np.asarray(image.convert("RGB")).reshape(-1, 3)
-    assert ((pixels[:, 0] > 200) & (pixels[:, 1] < 60)).any()  # red highlight dots
-    assert len(np.unique(pixels, axis=0)) > 20  # mesh shading and strands, not a blank image
+def test_groom_sizes_are_checked(toy_a):
+    for n_strands, particles, clearance in [(0, 8, 3e-3), (10, 1, 3e-3), (10, 8, 0.0)]:
+        with pytest.raises(InputError) as error:
+            generate_groom(toy_a, "short", n_strands, particles, clearance=clearance)
+        assert error.value.code == "bad_groom"
+    with pytest.raises(InputError) as error:
+        generate_groom(toy_a, "mohawk", 10, 8)
+    assert error.value.code == "bad_style" and "short, long, wavy, curly, fringe" in error.value.problem
+
+
+def test_a_head_without_scalp_is_refused(toy_a):
+    # a frame whose head has no vertex: no face can be scalp
+    frame = head_frame(toy_a)
+    bald = dataclasses.replace(frame, head_vertices=np.zeros_like(frame.head_vertices))
+    with pytest.raises(InputError) as error:
+        scalp_faces(Character(toy_a.vertices, toy_a.faces, name="bald"), bald)
+    assert error.value.code == "no_scalp" and error.value.source == "bald"

