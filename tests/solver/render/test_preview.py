@@ -4,6 +4,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character
+from hairport.solver.options import RetargetOptions
+from hairport.solver.pipeline import preprocess, retarget
 from hairport.solver.render.preview import HIGHLIGHT_COLOR, TITLE_HEIGHT_PX, render_preview, write_result_preview
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
@@ -47,11 +51,6 @@ def test_bad_calls_are_refused(tmp_path, scene):
 
 
 def test_a_retarget_preview(tmp_path, scene):
-    from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.model.character import Character
-from hairport.solver.options import RetargetOptions
-    from hairport.solver.pipeline import preprocess, retarget
-
     character, hair = scene
     adaptable = preprocess(character, hair)
     result = retarget(adaptable, character, RetargetOptions(method="root-translate"))
