@@ -1,11 +1,12 @@
-"""An API app over a temporary storage and the in-memory broker (no worker: these tests send no task)."""
+"""An API app over a temporary storage and Celery's in-memory broker, with no worker: the tests see
+what the API sends, nothing runs it."""
 
 import pytest
 from fastapi.testclient import TestClient
 
 from hairport.service.app import create_app
 from hairport.settings import Settings
-from hairport.worker.app import MEMORY_BROKER, make_celery
+from hairport.worker.app import MEMORY_BROKER, QUEUES, make_celery
 from hairport.worker.queue import TaskQueue
 
 KEY = "unit-key"
@@ -19,6 +20,11 @@ def settings(tmp_path) -> Settings:
 
 @pytest.fixture
 def client(settings) -> TestClient:
+    celery = make_celery(settings, MEMORY_BROKER)
+    # the in-memory transport is one per process: start every test with empty queues
+    with celery.connection_for_write() as connection:
+        for name in QUEUES:
+            connection.SimpleQueue(name).clear()
     app = create_app(settings, readiness=lambda: {"redis": True, "worker": False}, queue_depths=lambda: {"retarget": 3},
-                     queue=TaskQueue(make_celery(settings, MEMORY_BROKER)))
+                     queue=TaskQueue(celery))
     return TestClient(app)

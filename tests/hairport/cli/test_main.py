@@ -1,4 +1,4 @@
-"""The installed ``hairport`` console script: exit codes propagate."""
+"""``main``: errors become one line and an exit code; the installed console script propagates it."""
 
 from __future__ import annotations
 
@@ -10,10 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from hairport.cli import EXIT_BAD_INPUT, EXIT_FAILURE, build_parser, main
 from tests.hairport.cli.helpers import assert_input_error, assert_nothing_written, retarget_args
-
-# a subprocess of the installed console script
-pytestmark = pytest.mark.integration
 
 
 def hairport_executable() -> str:
@@ -26,6 +24,7 @@ def hairport_executable() -> str:
     return found
 
 
+@pytest.mark.integration  # a subprocess of the installed console script
 def test_console_script_propagates_exit_code(world, out, tmp_path):
     bad = tmp_path / "cut.data"
     data = (world["dir"] / "hair.data").read_bytes()
@@ -39,3 +38,21 @@ def test_console_script_propagates_exit_code(world, out, tmp_path):
     assert done.stdout == ""
     assert_input_error(done.returncode, done.stderr, str(bad), "past the end of the file")
     assert_nothing_written(out)
+
+
+def test_missing_files_and_write_failures_are_one_line(world, tmp_path, capsys):
+    code = main(["retarget", "--source", str(tmp_path / "nowhere.obj"), "--hair", str(world["dir"] / "hair.data"),
+                 "--target", str(world["dir"] / "target.obj"), "--out", str(tmp_path / "out.data"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == EXIT_BAD_INPUT and err == f"hairport: error: {tmp_path / 'nowhere.obj'}: file not found\n"
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file where a folder should be")
+    code = main(["openapi", "--out", str(blocked / "api.yaml")])
+    err = capsys.readouterr().err
+    assert code == EXIT_FAILURE and err.startswith("hairport: error: ") and err.count("\n") == 1
+
+
+def test_the_commands():
+    assert "{preprocess,retarget,demo,assets,serve,worker,purge,openapi,hairline}" in build_parser().format_help()
+    args = build_parser().parse_args(["purge"])
+    assert args.run.__name__ == "cmd_purge"

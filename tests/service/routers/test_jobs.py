@@ -1,6 +1,9 @@
 """``/v1/jobs``: listing from the index, one job, outputs of unfinished jobs, cancelling a queued job."""
 
-from hairport.records import JobRecord, PreprocessSettings, now
+import numpy as np
+
+from hairport import solver
+from hairport.records import BlobRef, JobRecord, PreprocessSettings, now
 from hairport.service.auth import owner_of
 
 from ..conftest import AUTH, KEY
@@ -46,3 +49,31 @@ def test_cancelling_a_queued_job(client):
     again = client.delete(f"/v1/jobs/{job_id}", headers=AUTH).json()
     assert again == cancelled
     assert client.get("/v1/jobs", headers=AUTH, params={"state": "cancelled"}).json()["total"] == 1
+
+
+def test_results_in_any_format_and_gone_outputs(client, tmp_path):
+    repository = client.app.state.repository
+    job_id = add_jobs(client, 1)[0]
+    hair = solver.Hair.from_strands([np.array([[0, 0, 0], [0, 0.01, 0], [0, 0.02, 0.0]]),
+                                     np.array([[0.01, 0, 0], [0.01, 0.01, 0.0]])])
+    solver.write_hair(tmp_path / "r.npz", hair, format="npz")
+    blob = repository.storage.save_file(tmp_path / "r.npz", ".npz")
+    gone = BlobRef(sha256="f" * 64, suffix=".png")
+    repository.set_job(job_id, state="succeeded", outputs={"npz": BlobRef(sha256=blob.sha256, suffix=".npz"),
+                                                           "preview": gone, "report": gone})
+    stored = client.get(f"/v1/jobs/{job_id}/result", headers=AUTH, params={"format": "npz"})
+    assert stored.status_code == 200 and stored.content == (tmp_path / "r.npz").read_bytes()
+    converted = client.get(f"/v1/jobs/{job_id}/result", headers=AUTH, params={"format": "obj"})
+    assert converted.status_code == 200 and converted.headers["content-type"].startswith("text/plain")
+    np.testing.assert_allclose(solver.read_hair(write(tmp_path / "c.obj", converted.content)).points, hair.points,
+                               atol=1e-7)
+    assert list((repository.storage.root / "work").iterdir()) == []  # the scratch folder went with the response
+    missing = client.get(f"/v1/jobs/{job_id}/preview.png", headers=AUTH)
+    assert (missing.status_code, missing.json()["code"]) == (410, "gone")
+    links = client.get(f"/v1/jobs/{job_id}", headers=AUTH).json()["links"]
+    assert sorted(links) == ["preview", "report", "result", "self"]
+
+
+def write(path, content: bytes):
+    path.write_bytes(content)
+    return path

@@ -1,4 +1,6 @@
-"""``hairport retarget``: bad inputs exit 2 with one line and leave nothing; outputs, report, preview, units."""
+"""``hairport preprocess``, ``retarget`` and ``hairline``: bad inputs exit 2 with one line and leave nothing;
+outputs, report, preview, units; the artifact gives the one-shot result; hairline edits (on MakeHuman
+characters: the toy groom does not reach the ears)."""
 
 from __future__ import annotations
 
@@ -10,13 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hairport import solver
+from hairport import cli, solver
 from hairport.settings import get_settings
 from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
-from hairport.solver.io.hair import read_hair
+from hairport.solver.io.hair import read_hair, write_hair
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
+from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
 from hairport.solver.transfer.anchors import root_targets
 from tests.hairport.cli.helpers import (
@@ -346,3 +349,131 @@ def test_target_without_skeleton_gets_the_source_skeleton(capsys, world, out):
     report = json.loads((out / "report.json").read_text())
     assert report["metrics"]["root_to_target_max"] < 1e-9
     assert report["inputs"]["target"] == str(d / "bare.obj")
+
+
+def test_preprocess_then_retarget_from_the_artifact_equals_the_one_shot_run(capsys, world, out):
+    d = world["dir"]
+    artifact = out / "groom.hpa"
+    code, stdout, err = run(capsys, ["preprocess", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"),
+                                     "--guides", "20", "--out", str(artifact), "--quiet"])
+    assert code == 0, err
+    assert f"{N_STRANDS} strands" in stdout and "20 guides" in stdout
+    common = ["--target", str(d / "target.obj"), "--max-iterations", "5", "--workers", "1", "--quiet"]
+    code, _, err = run(capsys, ["retarget", "--adaptable", str(artifact), "--out", str(out / "a.npz"),
+                                "--report", str(out / "a.json")] + common)
+    assert code == 0, err
+    code, _, err = run(capsys, ["retarget", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"),
+                                "--guides", "20", "--out", str(out / "b.npz")] + common)
+    assert code == 0, err
+    a, b = read_hair(out / "a.npz"), read_hair(out / "b.npz")
+    assert np.array_equal(a.points, b.points)
+    report = json.loads((out / "a.json").read_text())
+    assert report["metrics"]["method"] == "multiscale"  # the default
+    assert report["inputs"]["guides"] == 20 and report["inputs"]["adaptable"] == str(artifact)
+    assert report["metrics"]["penetrating_particles"] == 0
+    for stage in ("coarse_solve", "fine_solve", "initial_transfer"):
+        assert report["timings_s"][stage] >= 0
+    assert report["solver"]["guides"] == 20
+
+
+def test_adaptable_and_source_together_are_refused(capsys, world, out):
+    d = world["dir"]
+    code, _, err = run(capsys, ["retarget", "--adaptable", str(d / "x.hpa"), "--hair", str(d / "hair.data"),
+                                "--target", str(d / "target.obj"), "--out", str(out / "r.data"), "--quiet"])
+    assert_input_error(code, err, "--adaptable", "not both")
+    assert_nothing_written(out)
+
+
+def test_retarget_without_any_source_is_refused(capsys, world, out):
+    d = world["dir"]
+    code, _, err = run(capsys, ["retarget", "--target", str(d / "target.obj"), "--out", str(out / "r.data"), "--quiet"])
+    assert_input_error(code, err, "--adaptable", "--source")
+
+
+def test_corrupted_artifact_is_one_line_error(capsys, world, out, tmp_path):
+    bad = tmp_path / "bad.hpa"
+    bad.write_bytes(b"PK\x03\x04 not really a zip")
+    code, _, err = run(capsys, ["retarget", "--adaptable", str(bad), "--target", str(world["dir"] / "target.obj"),
+                                "--out", str(out / "r.data"), "--quiet"])
+    assert_input_error(code, err, str(bad), "adaptable hairstyle")
+    assert_nothing_written(out)
+
+
+def test_preprocess_refuses_a_wrong_extension_and_zero_guides(capsys, world, out):
+    d = world["dir"]
+    base = ["preprocess", "--source", str(d / "source.obj"), "--hair", str(d / "hair.data"), "--quiet"]
+    code, _, err = run(capsys, base + ["--out", str(out / "groom.npz")])
+    assert_input_error(code, err, ".hpa")
+    code, _, err = run(capsys, base + ["--out", str(out / "groom.hpa"), "--guides", "0"])
+    assert_input_error(code, err, "guides", ">= 1")
+    assert_nothing_written(out)
+
+
+@pytest.fixture(scope="module")
+def human_world(tmp_path_factory) -> dict:
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+    d = tmp_path_factory.mktemp("cli-human")
+    for name in ("average-female", "heavy-male"):
+        character = build_character(PRESETS[name])
+        write_character(character, d / f"{name}.obj", d / f"{name}.skeleton.json")
+        if name == "average-female":
+            write_hair(d / "short.data", generate_groom(character, "short", 80, 6, seed=2))
+    code = cli.main(["preprocess", "--source", str(d / "average-female.obj"), "--hair", str(d / "short.data"),
+                     "--guides", "20", "--out", str(d / "short.hpa"), "--quiet"])
+    assert code == 0
+    return {"dir": d, "adaptable": d / "short.hpa", "target": d / "heavy-male.obj"}
+
+
+def hairline_args(world, out: Path, *extra: str) -> list[str]:
+    return ["retarget", "--adaptable", str(world["adaptable"]), "--target", str(world["target"]),
+            "--out", str(out / "result.npz"), "--report", str(out / "report.json"), "--max-iterations", "8",
+            "--workers", "1", "--quiet", *extra]
+
+
+def test_hairline_preset_on_the_command_line(capsys, human_world, out):
+    code, stdout, err = run(capsys, hairline_args(human_world, out, "--hairline", "widows-peak:0.6"))
+    assert code == 0, err
+    assert "hairline widows-peak:0.6 (membrane)" in stdout and "density change L1" in stdout
+    report = json.loads((out / "report.json").read_text())
+    hairline = report["metrics"]["hairline"]
+    assert hairline["edit"] == "widows-peak:0.6" and hairline["roots_moved"] > 0
+    assert report["metrics"]["penetrating_particles"] == 0 and report["timings_s"]["hairline"] > 0
+
+
+def test_current_hairline_round_trips_as_a_curve(capsys, human_world, out, tmp_path):
+    curve = tmp_path / "current.json"
+    code, stdout, err = run(capsys, ["hairline", "--adaptable", str(human_world["adaptable"]), "--target",
+                                     str(human_world["target"]), "--out", str(curve), "--quiet"])
+    assert code == 0, err
+    document = json.loads(curve.read_text())
+    assert document["units"] == "m" and len(document["points"]) > 20 and document["turning_points"][0] == 0
+    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline-curve", str(curve)))
+    assert code == 0, err
+    hairline = json.loads((out / "report.json").read_text())["metrics"]["hairline"]
+    assert hairline["max_travel_m"] < 1e-6  # the hairline as it is: nothing moves
+
+
+@pytest.mark.parametrize("document, words", [
+    ({"points": [[0, 1.6, 0], [0.1, 1.6, 0]]}, ["at least 3 points"]),
+    ({"units": "ft", "points": [[0, 1.6, 0], [0.1, 1.6, 0], [0.2, 1.6, 0]]}, ["unknown units"]),
+    ({"points": [[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]]}, ["off the head"]),
+    ("not json", ["not valid json"]),
+])
+def test_bad_hairline_curves_are_one_line_errors(capsys, human_world, out, tmp_path, document, words):
+    path = tmp_path / "curve.json"
+    path.write_text(document if isinstance(document, str) else json.dumps(document))
+    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline-curve", str(path)))
+    assert_input_error(code, err, "curve", *words)
+    assert_nothing_written(out)
+
+
+def test_bad_hairline_presets_are_refused_before_any_work(capsys, human_world, out, monkeypatch):
+    calls = call_log(monkeypatch, solver, "retarget")
+    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "mohawk"))
+    assert_input_error(code, err, "unknown hairline preset", "widows-peak")
+    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round:2"))
+    assert_input_error(code, err, "[0, 1]")
+    code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round", "--method", "global-translate"))
+    assert_input_error(code, err, "baseline")
+    assert calls == [] and not any(out.iterdir())

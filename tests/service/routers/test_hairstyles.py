@@ -1,0 +1,54 @@
+"""``/v1/hairstyles``: validated uploads, one record per content, preprocessing sent once (no worker here)."""
+
+import pytest
+
+from hairport.worker.app import PREPROCESS_QUEUE
+
+from ..conftest import AUTH
+from .uploads import upload_character, write_inputs
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    return write_inputs(tmp_path_factory.mktemp("hairstyles"))
+
+
+def waiting(client, queue: str) -> int:
+    celery = client.app.state.queue.celery
+    with celery.connection_for_read() as connection:
+        return connection.SimpleQueue(queue).qsize()
+
+
+def test_one_record_and_one_preprocessing_per_content(client, files):
+    source = upload_character(client, files, "source")
+    form = {"source_character_id": source, "guides": "5"}
+    first = client.post("/v1/hairstyles", headers=AUTH, data=form, files={"hair": ("g.data", files["groom.data"])})
+    second = client.post("/v1/hairstyles", headers=AUTH, data=form, files={"hair": ("h.data", files["groom.data"])})
+    assert first.status_code == second.status_code == 201 and first.json()["id"] == second.json()["id"]
+    body = first.json()
+    assert (body["strands"], body["particles"], body["format"]) == (20, 120, "data")
+    assert body["options"] == {"k": 5, "guides": 5} and body["preprocessing"] == {"state": "queued", "error": None}
+    assert waiting(client, PREPROCESS_QUEUE) == 1
+    assert client.get(f"/v1/hairstyles/{body['id']}", headers=AUTH).json() == body
+    other = client.post("/v1/hairstyles", headers=AUTH, data={**form, "guides": "6"},
+                        files={"hair": ("g.data", files["groom.data"])})
+    assert other.json()["id"] != body["id"] and waiting(client, PREPROCESS_QUEUE) == 2
+
+
+@pytest.mark.parametrize("form, name, status, code", [
+    ({"units": "ft"}, "g.data", 422, "bad_units"),
+    ({"k": "0"}, "g.data", 422, "bad_option"),
+    ({}, "g.fbx", 415, "unknown_format"),
+])
+def test_bad_uploads(client, files, form, name, status, code):
+    source = upload_character(client, files, "source")
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source, **form},
+                           files={"hair": (name, files["groom.data"])})
+    assert (response.status_code, response.json()["code"]) == (status, code)
+
+
+def test_a_character_without_a_skeleton_cannot_have_hairstyles(client, files):
+    bare = client.post("/v1/characters", headers=AUTH, files={"mesh": ("b.obj", files["source.obj"])}).json()["id"]
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare},
+                           files={"hair": ("g.data", files["groom.data"])})
+    assert (response.status_code, response.json()["code"]) == (422, "no_skeleton")
