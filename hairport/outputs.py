@@ -9,6 +9,8 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 
 class OutputSet:
     """Collect output files, then :meth:`commit` them together (or :meth:`abort`)."""
@@ -52,8 +54,6 @@ class OutputSet:
 
 def json_default(value):
     """``json.dumps`` fallback for numpy scalars and arrays."""
-    import numpy as np
-
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):

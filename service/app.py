@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import redis
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
@@ -51,8 +52,6 @@ class ContentLengthLimit:
 
 def redis_checks(redis_url: str, queue: TaskQueue) -> tuple[Callable[[], dict], Callable[[], dict]]:
     """Readiness (Redis answers, a worker answers) and queue depths against a Redis broker."""
-    import redis
-
     client = redis.Redis.from_url(redis_url, socket_timeout=READY_TIMEOUT_SECONDS,
                                   socket_connect_timeout=READY_TIMEOUT_SECONDS)
 

@@ -25,11 +25,14 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from hairport import __version__
+from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.multiscale import MultiscaleModel
 from hairport.solver.adaptation.neighbours import Neighbours
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
+from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import Anchors
 
 FORMAT_NAME = "hairport-adaptable-hairstyle"
@@ -82,14 +85,12 @@ def _digest(arrays: dict[str, np.ndarray]) -> str:
 
 
 def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
-    """Write ``adaptable`` (a :class:`.pipeline.AdaptableHairstyle`) to ``path`` atomically.
+    """Write ``adaptable`` (an :class:`~hairport.solver.adaptable.AdaptableHairstyle`) to ``path`` atomically.
 
     Returns
     -------
     path : Path
     """
-    from hairport import __version__
-
     path = Path(path)
     arrays = _arrays(adaptable)
     meta = {
@@ -131,9 +132,6 @@ def load_adaptable(path: str | os.PathLike):
         altered, another format), ``code="artifact_version"`` for another format version.
     FileNotFoundError
     """
-    from hairport.solver.adaptable import AdaptableHairstyle
-    from hairport.solver.options import PreprocessOptions
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such artifact")

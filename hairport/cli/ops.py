@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 from pathlib import Path
 
 from hairport.outputs import OutputSet
@@ -105,8 +106,6 @@ def add_openapi(sub) -> None:
 
 def openapi_yaml() -> str:
     """The API's OpenAPI document as YAML (what openapi.yaml holds)."""
-    import tempfile
-
     import yaml
 
     from hairport.service.app import create_app
