@@ -6,7 +6,7 @@ guides and both kNN sets (Eq. 8-9, Eq. 14), and a ``meta`` JSON record: the form
 and version, the hairport version that wrote it, the preprocessing options, and a SHA-256
 digest of every array's dtype, shape and bytes. Loading checks the format, the version
 and the digest before anything is used, so an artifact of another format version, a
-truncated or an altered one is refused with an :class:`.errors.InputError`.
+truncated or an altered one is refused with an :class:`~hairport.solver.model.errors.InputError`.
 
 Everything else retargeting needs (Eq. 5/7/10 operators, the fine level's source arrays)
 is rebuilt from these arrays deterministically, so a retarget from a loaded artifact equals

@@ -51,7 +51,7 @@ class RetargetOptions:
     baseline name, optionally with the ``+pushout`` suffix. ``workers`` processes share the
     multi-scale fine level (``None``: the CPUs available), in chunks of ``chunk_particles``.
     ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
-    active-set method of :mod:`.strand_solver` or OSQP. ``hairline`` edits the front
+    active-set method of :mod:`~hairport.solver.adaptation.active_set` or OSQP. ``hairline`` edits the front
     hairline (Sec. 6; solver methods only).
     """
 

@@ -29,7 +29,7 @@ class BodyDistance:
     """Signed distance to the target for the particles that can be near it.
 
     Without a broad phase every particle gets an exact query. With one (a function giving a
-    lower bound of ``|distance|`` per point, such as :meth:`.distance_grid.DistanceGrid.lower_bound`),
+    lower bound of ``|distance|`` per point, such as :meth:`~hairport.solver.mesh.distance_grid.DistanceGrid.lower_bound`),
     particles whose bound is ``band`` or more get no query: distance ``inf``, a zero normal,
     and no constraint (they are not near).
     """
@@ -146,7 +146,7 @@ def push_out_short(
 
     A loop stopped by its cap, possibly after a shortened step, may leave some free particle
     short of its clearance: then every free particle closer than ``eps_c`` goes out along the
-    distance normal (:func:`.clearance.push_out`); the result never breaks Eq. 13.
+    distance normal (:func:`~hairport.solver.mesh.clearance.push_out`); the result never breaks Eq. 13.
 
     Parameters
     ----------

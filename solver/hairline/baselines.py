@@ -3,7 +3,7 @@ thin-plate RBF displacements).
 
 Convention: the scalp is a triangle mesh with rest positions ``rest (n, 3) float64``
 (meters) on the head, ``triangles (m, 3) int64`` and rest parameters ``u_rest (n, 2)
-float64`` in the head's parameterization (uv units, :mod:`.mesh.parameterization`). The
+float64`` in the head's parameterization (uv units, :mod:`hairport.solver.mesh.parameterization`). The
 hairline is pinned: ``fixed (n,) bool`` marks its vertices and ``u_fixed (k, 2) float64``
 (``x_fixed (k, 3)`` in 3D) gives their new places, in the order of
 ``np.flatnonzero(fixed)``. Every method returns the new place of every vertex, the fixed
@@ -29,7 +29,7 @@ hairline:
 The thin-plate splines use SciPy's :class:`~scipy.interpolate.RBFInterpolator` with its
 default degree-1 polynomial term, so they reproduce affine displacement fields exactly.
 
-Bad input raises :class:`.errors.InputError` with ``code="bad_relocation"`` (:mod:`.checks`).
+Bad input raises :class:`~hairport.solver.model.errors.InputError` with ``code="bad_relocation"`` (:mod:`.checks`).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Per scalp triangle, the roots in it divided by its area, before and after the re
 relative changes of the triangles holding roots form a vector whose mean absolute value (L1)
 and largest absolute value (L-infinity) are reported. Roots keep their triangle (barycentric
 coordinates), so a triangle's relative change is ``A / A' - 1`` with ``A``, ``A'`` its rest and
-deformed 3D areas, whatever its root count. Bad input raises :class:`.errors.InputError` with
+deformed 3D areas, whatever its root count. Bad input raises :class:`~hairport.solver.model.errors.InputError` with
 ``code="bad_relocation"`` (:mod:`.checks`).
 """
 

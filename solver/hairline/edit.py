@@ -37,7 +37,7 @@ class HairlineEdit:
     method : str
         One of :data:`RELOCATION_METHODS`.
     parameterization : str
-        One of :data:`.mesh.parameterization.PARAMETERIZATIONS`.
+        One of :data:`~hairport.solver.mesh.parameterization.PARAMETERIZATIONS`.
     min_triangles : int
         Resolution of the refined scalp.
     """

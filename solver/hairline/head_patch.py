@@ -25,7 +25,7 @@ def head_patch(
 
     The scalp's faces, grown ``margin_rings`` times by every head face (three head-dominant
     vertices, :attr:`.body.head_frame.HeadFrame.head_vertices`) sharing a vertex with the patch, then
-    made a disk (holes filled, pinch vertices repaired; :func:`.mesh.topology.make_disk`).
+    made a disk (holes filled, pinch vertices repaired; :func:`~hairport.solver.mesh.topology.make_disk`).
 
     Parameters
     ----------
@@ -35,7 +35,7 @@ def head_patch(
     margin_rings : int
         >= 0; 0 gives the scalp itself.
     frame : HeadFrame, optional
-        Reuse a frame from :func:`.body.head_frame.head_frame`.
+        Reuse a frame from :func:`~hairport.solver.body.head_frame.head_frame`.
 
     Returns
     -------

@@ -289,7 +289,7 @@ def parameter_blocks(membrane: Membrane, F: np.ndarray, M: np.ndarray) -> np.nda
     F : (m, 3, 2) float64
         Deformation gradients.
     M : (n, 3, 2) float64
-        ``dx/du`` of each scalp vertex's host (:meth:`.HeadChart.jacobians`).
+        ``dx/du`` of each scalp vertex's host (:meth:`~hairport.solver.hairline.head_chart.HeadChart.jacobians`).
 
     Returns
     -------

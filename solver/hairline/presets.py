@@ -7,7 +7,7 @@ old point moved along the head, and the old turning points, so that it goes thro
 same correspondence as a drawn curve.
 
 Points are described in spherical coordinates about the middle of the skull
-(:attr:`.body.head_frame.HeadFrame.centre`) in the head frame: azimuth ``theta`` around the up axis
+(:attr:`~hairport.solver.body.head_frame.HeadFrame.centre`) in the head frame: azimuth ``theta`` around the up axis
 (0 straight ahead) and elevation ``phi`` above the horizontal. A circle of constant
 elevation on a round head looks straight from the front, and raising the elevation moves a
 point back toward the crown (receding); lowering it moves it down the forehead or, near the
@@ -31,7 +31,7 @@ cosine taper), so the ends, shared with the fixed back part of the hairline, nev
 current elevation, ``phi_b`` its median over the middle of the forehead (``|x| <= CENTRE``),
 ``R`` the median distance of the hairline from the skull centre and ``A`` each preset's
 amplitude in meters along the head (for a head of crown height
-:data:`.body.head_frame.REFERENCE_CROWN_M`, scaled with the head), the full shapes are::
+:data:`~hairport.solver.body.head_frame.REFERENCE_CROWN_M`, scaled with the head), the full shapes are::
 
     straight     phi_b                                 a line straight across the forehead
     round        phi_b - A/R (x/BAND)^2                an arch: the sides come down

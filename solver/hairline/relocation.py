@@ -10,7 +10,7 @@ Steps (:func:`relocate_roots`):
 1. The scalp (:func:`.scalp.extract_scalp`): the faces holding roots made a disk, its
    hairline split at the ears, the front part's turning points.
 2. A head patch around it (:func:`.head_patch.head_patch`) mapped to the unit disk
-   (:func:`.mesh.parameterization.parameterize`): the chart of Eq. 18-19
+   (:func:`~hairport.solver.mesh.parameterization.parameterize`): the chart of Eq. 18-19
    (:class:`.head_chart.HeadChart`).
 3. The scalp copy: its ears (triangles with two hairline edges, which a straighter
    hairline would flatten) split (:func:`.scalp.split_boundary_ears`), refined in

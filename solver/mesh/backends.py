@@ -7,7 +7,7 @@ from operator import attrgetter
 import igl
 import numpy as np
 
-#: face-search backends for :meth:`MeshQuery.signed_distance`, the first importable one is
+#: face-search backends for :meth:`~hairport.solver.mesh.query.MeshQuery.signed_distance`, the first importable one is
 #: used: ``("fcpw", "igl")`` opts in to fcpw (float32)
 CLOSEST_FACE_BACKENDS = ("igl",)
 
