@@ -1,4 +1,4 @@
-"""Benchmark of the distance-grid broad phase in solver/distance_grid.py.
+"""Benchmark of the distance-grid broad phase in solver/mesh/distance_grid.py.
 
 Prints, for the MakeHuman "heavy-male" body (13,380 vertices, 26,756 faces) and its
 procedural ``long`` groom, the median over runs of:
