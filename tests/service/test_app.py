@@ -1,20 +1,10 @@
-"""The app: health, readiness, metrics, the declared-size limit, CORS."""
+"""The app: the declared-size limit before any body is read, CORS."""
 
 from fastapi.testclient import TestClient
 
 from hairport.service.app import create_app
 
 from .conftest import AUTH
-
-
-def test_health_readiness_and_metrics(client):
-    assert client.get("/healthz").json() == {"status": "ok"}
-    ready = client.get("/readyz")
-    assert ready.status_code == 503 and ready.json() == {"status": "not ready",
-                                                          "checks": {"redis": True, "worker": False}}
-    text = client.get("/metrics").text
-    assert 'hairport_queue_depth{queue="retarget"} 3.0' in text
-    assert 'hairport_jobs{state="queued"} 0.0' in text and "hairport_stage_jobs 0.0" in text
 
 
 def test_a_declared_body_over_the_limit_is_refused_unread(settings):

@@ -4,6 +4,9 @@ import json
 import os
 from pathlib import Path
 
+import yaml
+
+from hairport import __version__
 from hairport.cli import main
 from hairport.cli.ops import openapi_yaml
 from hairport.records import JobRecord, PreprocessSettings
@@ -16,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[3]
 def test_openapi_yaml_is_generated_from_the_app():
     committed = (ROOT / "openapi.yaml").read_text()
     assert openapi_yaml() == committed, "openapi.yaml drifted from the app: run `hairport openapi --out openapi.yaml`"
+    assert yaml.safe_load(committed)["info"]["version"] == __version__
 
 
 def test_openapi_command_writes_the_contract_and_nothing_else(tmp_path, monkeypatch):
