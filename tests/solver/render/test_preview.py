@@ -4,15 +4,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.model.character import Character
 from hairport.solver.options import RetargetOptions
 from hairport.solver.pipeline import preprocess, retarget
 from hairport.solver.render.preview import HIGHLIGHT_COLOR, TITLE_HEIGHT_PX, render_preview, write_result_preview
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
-from hairport.solver.synthetic.toy import toy_character
-from tests.solver.synthetic.toy_fixtures import PRESET_B, toy_grooms
+from tests.solver.synthetic.toy_fixtures import toy_grooms
 
 
 @pytest.fixture(scope="module")
@@ -56,21 +53,6 @@ def test_a_retarget_preview(tmp_path, scene):
     result = retarget(adaptable, character, RetargetOptions(method="root-translate"))
     write_result_preview(tmp_path / "r.png", adaptable, result, character)
     assert Image.open(tmp_path / "r.png").size == (2 * 2 * 360, 480 + TITLE_HEIGHT_PX)
-
-
-@pytest.fixture(scope="module")
-def toy_a() -> Character:
-    return toy_character()
-
-
-@pytest.fixture(scope="module")
-def toy_b() -> Character:
-    return toy_character(**PRESET_B, name="toy-b")
-
-
-@pytest.fixture(scope="module")
-def query_a(toy_a) -> MeshQuery:
-    return MeshQuery(toy_a.vertices, toy_a.faces)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Fixtures of the synthetic-character tests: the MakeHuman assets (or a skip) and presets, the toys and their grooms."""
+"""Fixtures of the synthetic-character tests: the MakeHuman assets (or a skip) and presets, the toy grooms."""
 
 from __future__ import annotations
 
@@ -6,13 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.model.character import Character
 from hairport.solver.synthetic.groom import STYLES
 from hairport.solver.synthetic.makehuman import PRESETS, build_preset
-from hairport.solver.synthetic.toy import toy_character
 from tests.solver.synthetic.makehuman_fixtures import makehuman_assets
-from tests.solver.synthetic.toy_fixtures import PRESET_B, toy_grooms
+from tests.solver.synthetic.toy_fixtures import toy_grooms
 
 
 @pytest.fixture(scope="session")
@@ -23,21 +20,6 @@ def assets() -> Path:
 @pytest.fixture(scope="session")
 def presets(assets) -> dict:
     return {name: build_preset(name, assets) for name in PRESETS}
-
-
-@pytest.fixture(scope="module")
-def toy_a() -> Character:
-    return toy_character()
-
-
-@pytest.fixture(scope="module")
-def toy_b() -> Character:
-    return toy_character(**PRESET_B, name="toy-b")
-
-
-@pytest.fixture(scope="module")
-def query_a(toy_a) -> MeshQuery:
-    return MeshQuery(toy_a.vertices, toy_a.faces)
 
 
 @pytest.fixture(scope="module")
