@@ -2,6 +2,7 @@
 
 import ast
 import re
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,3 +73,13 @@ def test_the_architecture_table_names_existing_packages():
     assert len(named) >= 8
     for name in named:
         assert (ROOT / "solver" / name).exists(), name
+
+
+def test_every_package_folder_is_installed():
+    setup = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    folders = {}
+    for name, folder in setup["package-dir"].items():
+        for init in (ROOT / folder).rglob("__init__.py"):
+            relative = init.parent.relative_to(ROOT / folder).parts
+            folders[".".join((name, *relative))] = init.parent
+    assert sorted(setup["packages"]) == sorted(folders)
