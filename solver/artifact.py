@@ -18,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -31,6 +30,7 @@ from hairport.solver.adaptation.multiscale import MultiscaleModel
 from hairport.solver.adaptation.neighbours import Neighbours
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.files import atomic_write
 from hairport.solver.model.hair import Hair
 from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import Anchors
@@ -109,17 +109,7 @@ def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
         "digest": _digest(arrays),
     }
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, **arrays)
-            out.flush()
-            os.fsync(out.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write(path, lambda handle: np.savez(handle, **arrays))
 
 
 def load_adaptable(path: str | os.PathLike):

@@ -1,1 +1,2 @@
-"""The job queue (Celery over Redis): tasks that orchestrate solver.pipeline, and the shared storage."""
+"""The job queue (Celery over Redis): the app, the queue the API sends through, the job bodies and
+the tasks that wrap them. The folder ``worker/`` is installed as ``hairport.worker``."""
