@@ -1,4 +1,18 @@
-"""Eq. 8-9: each particle's k nearest particles on other strands and their inverse-distance weights."""
+"""Eq. 8-9: each particle's k nearest particles on other strands and their inverse-distance weights.
+
+The search is linear in memory for any strand layout. Most particles find ``k`` particles of
+other strands among a few dozen nearest candidates of one k-d tree (rounds that double the
+candidates while some are missing). A particle whose own strand holds so many candidates
+that the rounds could grow to the whole pool (a long strand with no neighbour near: the
+rounds once took 4.3 GB for one 10,000-point strand) goes instead to an exact search that
+never sees its own strand: the strands are split in halves recursively, and each half's
+particles query a tree of the other half's, so every particle meets every other strand
+once, in ``log2(S)`` levels of trees whose sizes add up to the pool per level.
+
+A particle may find fewer than ``k`` neighbours (the pool holds fewer particles of other
+strands, or none: a groom of one strand). Eq. 9's weights are normalised over the
+neighbours found; a row without any has weight 0 and adds no Eq. 10 term.
+"""
 
 from __future__ import annotations
 
@@ -10,10 +24,18 @@ from scipy.spatial import cKDTree
 
 #: neighbour distances are clamped to this (m) before inverting (Eq. 9)
 MIN_NEIGHBOUR_DISTANCE = 1e-9
-#: extra candidates asked of the k-d tree per round, to skip particles of the same strand
+#: extra candidates asked of the k-d tree in the first round, to skip particles of the same strand
 KNN_EXTRA_CANDIDATES = 16
-#: queries per k-d tree call (bounds the candidate arrays to ~20 MB)
+#: queries per k-d tree call in the first round (bounds the candidate arrays to ~20 MB)
 KNN_QUERY_CHUNK = 65536
+#: candidate entries (rows x candidates) per k-d tree call in every round: the first round's
+#: size at the default k = 5, so later rounds, with more candidates, take fewer rows per call
+KNN_CANDIDATE_BUDGET = KNN_QUERY_CHUNK * (5 + KNN_EXTRA_CANDIDATES)
+#: a particle whose strand holds more pool particles than this (less k) leaves the doubling
+#: rounds for the exact other-strand search when the first round misses neighbours: the
+#: rounds' cost grows with the strand's length, the exact search's does not. Strands of
+#: ordinary grooms (up to a few hundred particles) stay below it and keep the rounds' result
+KNN_MAX_ROUND_CANDIDATES = 512
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,42 +80,146 @@ def knn_other_strands(
     Returns
     -------
     neighbours : Neighbours
-        Rows for ``queries`` (or all particles).
+        Rows for ``queries`` (or all particles); fewer than ``k`` neighbours where the pool
+        holds fewer particles of other strands (padding: the particle itself, weight 0).
     """
     n = len(points)
+    strand_of = np.asarray(strand_of, dtype=np.int64)
     queries = np.arange(n, dtype=np.int64) if queries is None else np.asarray(queries, dtype=np.int64)
     pool = np.arange(n, dtype=np.int64) if candidates is None else np.flatnonzero(candidates)
     index = np.repeat(queries[:, None], k, axis=1)
     distance = np.full((len(queries), k), np.inf)
-    if len(pool) == 0 or k == 0:
+    if len(pool) == 0 or k == 0 or len(queries) == 0:
         return Neighbours(index, np.zeros((len(queries), k)))
     tree = cKDTree(points[pool])
-    # queries go in chunks so the (chunk, k + extra) candidate arrays stay small
-    for first in range(0, len(queries), KNN_QUERY_CHUNK):
-        todo = np.arange(first, min(first + KNN_QUERY_CHUNK, len(queries)))
-        ask = k + KNN_EXTRA_CANDIDATES
-        while len(todo):
-            ask_now = min(ask, len(pool))
-            dist, local = tree.query(points[queries[todo]], k=ask_now, workers=workers)
-            dist = dist.reshape(len(todo), ask_now)
-            found = pool[np.minimum(local.reshape(len(todo), ask_now), len(pool) - 1)]
-            other = (strand_of[found] != strand_of[queries[todo], None]) & np.isfinite(dist)
-            enough = (other.sum(axis=1) >= k) | (ask_now >= len(pool))
-            rows = todo[enough]
-            sel = other[enough]
-            # stable order: keep the first k valid columns of each row (they are sorted by distance)
-            rank = np.cumsum(sel, axis=1) - 1
-            keep = sel & (rank < k)
-            r, c = np.nonzero(keep)
-            index[rows[r], rank[keep]] = found[enough][keep]
-            distance[rows[r], rank[keep]] = dist[enough][keep]
-            todo = todo[~enough]
-            ask *= 2
+    own = np.bincount(strand_of[pool], minlength=int(strand_of.max()) + 1)[strand_of[queries]]
+    # only after missing neighbours in the first round does a particle go to the exact search
+    long_strand = own + k > KNN_MAX_ROUND_CANDIDATES
+    todo = np.arange(len(queries))
+    ask = k + KNN_EXTRA_CANDIDATES
+    exact: list[np.ndarray] = []
+    first_round = True
+    while len(todo):
+        ask_now = min(ask, len(pool))
+        missing = []
+        rows_per_call = max(1, KNN_CANDIDATE_BUDGET // ask_now)
+        for first in range(0, len(todo), rows_per_call):
+            rows = todo[first : first + rows_per_call]
+            missing.append(_round(points, strand_of, tree, pool, queries, rows, k, ask_now, workers, index, distance))
+        todo = np.concatenate(missing)
+        if first_round:
+            exact.append(todo[long_strand[todo]])
+            todo = todo[~long_strand[todo]]
+            first_round = False
+        ask *= 2
+    hard = np.concatenate(exact)
+    if len(hard):
+        index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
     valid = np.isfinite(distance)
     inverse = np.where(valid, 1.0 / np.maximum(distance, MIN_NEIGHBOUR_DISTANCE), 0.0)
     total = inverse.sum(axis=1, keepdims=True)
     weight = np.divide(inverse, total, out=np.zeros_like(inverse), where=total > 0)
     return Neighbours(index, weight)
+
+
+def _round(
+    points: np.ndarray,
+    strand_of: np.ndarray,
+    tree: cKDTree,
+    pool: np.ndarray,
+    queries: np.ndarray,
+    rows: np.ndarray,
+    k: int,
+    ask: int,
+    workers: int,
+    index: np.ndarray,
+    distance: np.ndarray,
+) -> np.ndarray:
+    """One k-d tree call for ``rows`` of ``queries`` with ``ask`` candidates.
+
+    Fills ``index`` and ``distance`` (``(Q, k)``, in place) for the rows that found ``k``
+    particles of other strands (or saw the whole pool).
+
+    Returns
+    -------
+    missing : (M,) int64
+        The rows that did not.
+    """
+    dist, local = tree.query(points[queries[rows]], k=ask, workers=workers)
+    dist = dist.reshape(len(rows), ask)
+    found = pool[np.minimum(local.reshape(len(rows), ask), len(pool) - 1)]
+    other = (strand_of[found] != strand_of[queries[rows], None]) & np.isfinite(dist)
+    enough = (other.sum(axis=1) >= k) | (ask >= len(pool))
+    done = rows[enough]
+    sel = other[enough]
+    # stable order: keep the first k valid columns of each row (they are sorted by distance)
+    rank = np.cumsum(sel, axis=1) - 1
+    keep = sel & (rank < k)
+    r, c = np.nonzero(keep)
+    index[done[r], rank[keep]] = found[enough][keep]
+    distance[done[r], rank[keep]] = dist[enough][keep]
+    return rows[~enough]
+
+
+def _other_strand_search(
+    points: np.ndarray, strand_of: np.ndarray, pool: np.ndarray, queries: np.ndarray, k: int, workers: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ``k`` nearest pool particles of other strands, never looking at a query's own strand.
+
+    The strand ids are halved recursively; at each split the queries of one half query a
+    tree of the other half's pool particles, and the ``k`` best so far are kept. Memory:
+    ``O(Q k)`` for the results plus one tree of at most the pool.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    strand_of : (N,) int64
+    pool : (P,) int64
+        Particles allowed as neighbours.
+    queries : (Q,) int64
+    k : int
+    workers : int
+
+    Returns
+    -------
+    index : (Q, k) int64
+        Neighbours sorted by distance; the query itself where fewer than ``k`` exist.
+    distance : (Q, k) float64
+        ``inf`` for the padding.
+    """
+    order = np.argsort(strand_of[pool], kind="stable")
+    pool = pool[order]
+    pool_strand = strand_of[pool]
+    query_strand = strand_of[queries]
+    best_index = np.repeat(queries[:, None], k, axis=1)
+    best_distance = np.full((len(queries), k), np.inf)
+    lowest = int(min(pool_strand[0], query_strand.min()))
+    highest = int(max(pool_strand[-1], query_strand.max())) + 1
+    # (first strand, end strand, query rows whose strand is in that range)
+    stack = [(lowest, highest, np.arange(len(queries)))]
+    while stack:
+        lo, hi, rows = stack.pop()
+        if hi - lo < 2 or len(rows) == 0:
+            continue
+        mid = (lo + hi) // 2
+        left = rows[query_strand[rows] < mid]
+        right = rows[query_strand[rows] >= mid]
+        for side, first, end in ((left, mid, hi), (right, lo, mid)):
+            a, b = np.searchsorted(pool_strand, [first, end])
+            if len(side) == 0 or a == b:
+                continue
+            ask = min(k, int(b - a))
+            dist, local = cKDTree(points[pool[a:b]]).query(points[queries[side]], k=ask, workers=workers)
+            dist = dist.reshape(len(side), ask)
+            found = pool[a:b][local.reshape(len(side), ask)]
+            merged_distance = np.concatenate([best_distance[side], dist], axis=1)
+            merged_index = np.concatenate([best_index[side], found], axis=1)
+            best = np.argsort(merged_distance, axis=1, kind="stable")[:, :k]
+            best_distance[side] = np.take_along_axis(merged_distance, best, axis=1)
+            best_index[side] = np.take_along_axis(merged_index, best, axis=1)
+        stack.append((lo, mid, left))
+        stack.append((mid, hi, right))
+    return best_index, best_distance
 
 
 def laplacian_operator(neighbours: Neighbours, rows: np.ndarray, n: int) -> sp.csr_matrix:
@@ -102,7 +228,7 @@ def laplacian_operator(neighbours: Neighbours, rows: np.ndarray, n: int) -> sp.c
     Parameters
     ----------
     neighbours : Neighbours
-        Rows for the particles ``rows``.
+        Rows for the particles ``rows``; rows with fewer neighbours carry zero weights.
     rows : (Q,) int64
         Particle of each neighbour row.
     n : int
@@ -111,7 +237,7 @@ def laplacian_operator(neighbours: Neighbours, rows: np.ndarray, n: int) -> sp.c
     Returns
     -------
     K : (n, n) csr_matrix
-        Zero rows for particles not in ``rows``.
+        Zero rows for particles not in ``rows`` and for particles without neighbours.
     """
     q, k = neighbours.index.shape
     row_ids = np.repeat(rows, k + 1)

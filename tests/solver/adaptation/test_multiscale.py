@@ -4,12 +4,19 @@ import numpy as np
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.adaptation.multiscale import COARSE_PROGRESS_SHARE, chunk_strands, solve_multiscale
+from hairport.solver.adaptation.multiscale import (
+    COARSE_PROGRESS_SHARE,
+    build_multiscale_model,
+    chunk_strands,
+    fine_source,
+    solve_multiscale,
+)
 from hairport.solver.adaptation.options import SolveOptions
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import particle_indices
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
+from tests.solver.hair_shapes import outward_strands, parallel_strands, sphere_character
 
 EPS_C = 5e-4
 
@@ -95,3 +102,26 @@ def test_progress_of_the_coarse_then_the_fine_level(case):
     ] + [("solve", 0.5 + 0.5 * i / report.chunks, f"strands: chunk {i}/{report.chunks}")
          for i in range(1, report.chunks + 1)]
 
+
+
+def test_fine_rows_with_fewer_guide_particles_than_k_pull_towards_those_found():
+    hair = parallel_strands(n_strands=3, n_points=3, spacing=0.01)
+    model = build_multiscale_model(hair, 1, 5)  # one guide: 3 candidate particles for k = 5
+    fine = fine_source(hair, model)
+    nb = model.fine_neighbours
+    assert len(fine.particles) == 6 and (np.count_nonzero(nb.weight, axis=1) == 3).all()
+    np.testing.assert_allclose(fine.pull_weight, 1.0, atol=1e-15)
+    expected = hair.points[fine.particles] - np.einsum("nk,nkd->nd", nb.weight, hair.points[nb.index])
+    np.testing.assert_allclose(fine.source_features, expected, atol=1e-15)
+
+
+def test_a_single_strand_has_no_inter_strand_term_and_retargets():
+    source, target = sphere_character(), sphere_character(scale=(1.1, 1.0, 1.05))
+    hair = outward_strands(source, n_strands=1, n_points=30)
+    adaptable = pipeline.preprocess(source, hair)
+    assert abs(adaptable.coarse_model.K).sum() == 0.0 and len(adaptable.fine_source.strands) == 0
+    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(workers=1))
+    assert result.metrics["penetrating_particles"] == 0
+    assert result.metrics["interstrand_error_m"] == 0.0
+    assert result.metrics["root_to_target_max"] <= 1e-12
+    assert np.isfinite(result.hair.points).all()

@@ -1,8 +1,12 @@
 """Eq. 8-9 (solver/adaptation/neighbours.py): kNN of other strands, inverse-distance weights, the Laplacian K."""
 
-import numpy as np
+import tracemalloc
 
-from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
+import numpy as np
+import pytest
+
+from hairport.solver.adaptation import neighbours
+from hairport.solver.adaptation.neighbours import KNN_MAX_ROUND_CANDIDATES, knn_other_strands, laplacian_operator
 from tests.solver.hair_shapes import model_of, parallel_strands
 
 
@@ -50,3 +54,91 @@ def test_laplacian_is_translation_invariant():
     model = model_of(hair, k=2)
     shifted = hair.points + np.array([0.3, -1.0, 2.0])
     np.testing.assert_allclose(model.K @ shifted, model.source_features, atol=1e-14)
+
+
+def _brute_force_distances(points, strand_of, k, pool):
+    """(N, k) sorted distances to the k nearest pool particles of other strands (inf padding)."""
+    d = np.linalg.norm(points[:, None] - points[pool][None], axis=2)
+    d[strand_of[:, None] == strand_of[pool][None]] = np.inf
+    d = np.sort(d, axis=1)[:, :k]
+    return np.pad(d, ((0, 0), (0, k - d.shape[1])), constant_values=np.inf)
+
+
+def _found_distances(points, nb):
+    return np.where(nb.weight > 0, np.linalg.norm(points[nb.index] - points[:, None], axis=2), np.inf)
+
+
+def _random_walk_groom(counts, seed):
+    rng = np.random.default_rng(seed)
+    counts = np.asarray(counts)
+    points = np.cumsum(rng.normal(scale=0.01, size=(counts.sum(), 3)), axis=0)
+    return points, np.repeat(np.arange(len(counts)), counts)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_knn_is_exact_for_long_and_short_strands_alike(seed):
+    # strands longer than the rounds' candidate cap take the exact other-strand search
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(2, 900, rng.integers(2, 6))
+    points, strand_of = _random_walk_groom(counts, seed)
+    candidates = rng.random(len(points)) < 0.6 if seed % 2 else None
+    pool = np.arange(len(points)) if candidates is None else np.flatnonzero(candidates)
+    k = int(rng.integers(1, 8))
+    nb = knn_other_strands(points, strand_of, k, candidates=candidates)
+    assert (counts + k > KNN_MAX_ROUND_CANDIDATES).any()
+    np.testing.assert_allclose(_found_distances(points, nb), _brute_force_distances(points, strand_of, k, pool),
+                               rtol=1e-12)
+    found = nb.weight > 0
+    assert (strand_of[nb.index][found] != np.broadcast_to(strand_of[:, None], nb.index.shape)[found]).all()
+
+
+def test_the_exact_search_gives_the_rounds_neighbours(monkeypatch):
+    points, strand_of = _random_walk_groom([40] * 60, seed=3)
+    rounds = knn_other_strands(points, strand_of, 5)
+    monkeypatch.setattr(neighbours, "KNN_MAX_ROUND_CANDIDATES", 0)  # every missed particle goes exact
+    exact = knn_other_strands(points, strand_of, 5)
+    assert neighbours.KNN_EXTRA_CANDIDATES + 5 < 40  # so the first round misses on some particles
+    np.testing.assert_array_equal(exact.index, rounds.index)
+    np.testing.assert_array_equal(exact.weight, rounds.weight)
+
+
+def test_a_long_lonely_strand_takes_memory_linear_in_its_particles():
+    # before: the rounds doubled up to the whole strand, (N, N) candidate arrays (~1 GB here)
+    n = 5_000
+    hair = parallel_strands(n_strands=1, n_points=n, step=1e-4)
+    tracemalloc.start()
+    try:
+        nb = knn_other_strands(hair.points, hair.strand_of, 5)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak / n < 2_000, f"{peak / n:.0f} bytes per particle"
+    assert np.all(nb.weight == 0.0) and np.array_equal(nb.index, np.repeat(np.arange(n)[:, None], 5, axis=1))
+
+
+def test_a_long_strand_beside_a_short_one_finds_the_short_one_exactly():
+    long = np.stack([np.linspace(0, 1, 4_000), np.zeros(4_000), np.zeros(4_000)], axis=1)
+    short = np.array([[0.0, 0.05, 0.0], [0.5, 0.05, 0.0], [1.0, 0.05, 0.0]])
+    points, strand_of = np.concatenate([long, short]), np.repeat([0, 1], [4_000, 3])
+    nb = knn_other_strands(points, strand_of, 5)
+    # the long strand's particles have 3 neighbours, the short strand's 5
+    assert (np.count_nonzero(nb.weight[:4_000], axis=1) == 3).all()
+    assert (np.count_nonzero(nb.weight[4_000:], axis=1) == 5).all()
+    np.testing.assert_allclose(_found_distances(points, nb), _brute_force_distances(points, strand_of, 5,
+                                                                                    np.arange(len(points))))
+
+
+def test_fewer_than_k_neighbours_renormalise_eq9_and_pad_with_the_particle():
+    hair = parallel_strands(n_strands=3, n_points=4, spacing=0.01)
+    guides = hair.strand_of == 0  # 4 candidates, k = 6
+    queries = np.flatnonzero(hair.strand_of == 2)
+    nb = knn_other_strands(hair.points, hair.strand_of, 6, candidates=guides, queries=queries)
+    found = nb.weight > 0
+    assert (found.sum(axis=1) == 4).all()
+    np.testing.assert_allclose(nb.weight.sum(axis=1), 1.0, atol=1e-15)
+    d = np.linalg.norm(hair.points[nb.index[:, :4]] - hair.points[queries, None], axis=2)
+    np.testing.assert_allclose(nb.weight[:, :4], (1 / d) / (1 / d).sum(axis=1, keepdims=True), rtol=1e-14)
+    assert (nb.index[:, 4:] == queries[:, None]).all()
+    # K's row of such a particle still sums to zero: translation invariance holds
+    K = laplacian_operator(nb, queries, hair.n_particles)
+    np.testing.assert_allclose(K @ np.ones(hair.n_particles), 0.0, atol=1e-15)
