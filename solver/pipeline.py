@@ -36,7 +36,7 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import SOLVER_METHODS, PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, root_targets
@@ -92,6 +92,7 @@ def preprocess(
     """
     progress = progress or no_progress
     options.validate()
+    require_hair(hair.points, hair.offsets, "hair")  # never an artifact without hair
     if source.skeleton is None or source.weights is None:
         raise InputError("the source character needs a skeleton with skin weights", source.name, "no_skeleton")
     timings: dict[str, float] = {}

@@ -16,6 +16,8 @@ import numpy as np
 from hairport.solver.model.errors import InputError
 
 MIN_PARTICLES_PER_STRAND = 2
+#: code of the :class:`InputError` for a hairstyle with nothing to retarget
+EMPTY_HAIR = "empty_hair"
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,3 +175,36 @@ def validate_layout(points: np.ndarray, offsets: np.ndarray, source: str | None 
     if not np.isfinite(points).all():
         bad = int(np.argmax(~np.isfinite(points).all(axis=1)))
         raise InputError(f"particle {bad} has a non-finite coordinate (NaN or inf)", source, "non_finite")
+
+
+def require_hair(points: np.ndarray, offsets: np.ndarray, source: str | None = None) -> None:
+    """Refuse a hairstyle with no strand, or whose every strand has zero length.
+
+    A strand of zero length (all its particles at one place) has no direction to keep; when
+    every strand is like that there is nothing to retarget.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    offsets : (S+1,) int64
+        Strands of at least two particles.
+    source : str, optional
+        The file, for the message.
+
+    Raises
+    ------
+    InputError
+        ``empty_hair`` (the code is named in the message too: a user sees only the message).
+    """
+    if len(offsets) < 2:
+        raise InputError(f"no strand of two or more points: there is no hair to retarget (code {EMPTY_HAIR})",
+                         source, EMPTY_HAIR)
+    moves = (points[1:] != points[:-1]).any(axis=1)
+    moves[offsets[1:-1] - 1] = False  # a strand's tip to the next strand's root is no segment
+    if not moves.any():
+        raise InputError(
+            f"every strand ({len(offsets) - 1:,}) has zero length (all its points at one place): there is no hair "
+            f"to retarget (code {EMPTY_HAIR})",
+            source,
+            EMPTY_HAIR,
+        )

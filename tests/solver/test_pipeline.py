@@ -59,6 +59,14 @@ def test_unknown_method_lists_the_valid_ones(female, fringe):
     assert error.value.code == "unknown_method"
 
 
+@pytest.mark.parametrize("points, offsets", [(np.zeros((0, 3)), [0]), (np.ones((5, 3)), [0, 2, 5])],
+                         ids=["no-strand", "zero-length-strands"])
+def test_preprocess_refuses_a_hairstyle_without_hair(female, points, offsets):
+    with pytest.raises(InputError, match=r"^hair: .*there is no hair to retarget \(code empty_hair\)$") as error:
+        pipeline.preprocess(female, pipeline.Hair(points, np.array(offsets)))
+    assert error.value.code == "empty_hair"
+
+
 #: the issue asks for 1e-2 rad; the cycle measures 0.013 rad here (0.28 mm) and is held to
 #: what it reaches until the initial transfer's smoothing is made invertible (README, limits)
 CYCLE_ANGLE_BOUND_RAD = 0.015

@@ -98,7 +98,8 @@ def check_counts(n_vertices: int, n_faces: int, source: str, max_vertices: int, 
 def check_mesh_arrays(
     vertices: np.ndarray, faces: np.ndarray, source: str, max_vertices: int, max_faces: int
 ) -> None:
-    """Refuse an empty mesh, counts above the limits, non-finite vertices and faces out of range.
+    """Refuse an empty mesh (no faces, or no face of any area), counts above the limits,
+    non-finite vertices and faces out of range.
 
     Parameters
     ----------
@@ -122,3 +123,7 @@ def check_mesh_arrays(
         raise InputError(f"vertex {bad} has a non-finite coordinate (NaN or inf)", source, "non_finite")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise InputError("a face index is out of range", source, "bad_faces")
+    corners = vertices[faces]
+    if not np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).any():
+        raise InputError(f"empty mesh: every face ({len(faces):,}) has zero area (code empty_mesh)", source,
+                         "empty_mesh")

@@ -52,6 +52,10 @@ def read_obj(
     path = Path(path)
     source = str(path)
     raw = path.read_bytes()
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        raise InputError(f"byte {nul:,} is a NUL byte: a binary file, not OBJ text (code not_text)", source,
+                         "not_text")
     n_v = sum(1 for _ in _OBJ_VERTEX_BYTES.finditer(raw))
     n_f = sum(1 for _ in _OBJ_FACE_BYTES.finditer(raw))
     check_counts(n_v, n_f, source, max_vertices, max_faces)

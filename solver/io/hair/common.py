@@ -18,7 +18,7 @@ from typing import BinaryIO
 import numpy as np
 
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import MIN_PARTICLES_PER_STRAND, Hair
+from hairport.solver.model.hair import MIN_PARTICLES_PER_STRAND, Hair, require_hair
 from hairport.solver.model.units import unit_scale
 
 ERROR_CODES: dict[str, str] = {
@@ -34,6 +34,8 @@ ERROR_CODES: dict[str, str] = {
     "non_finite": "a coordinate, thickness, transparency or color is NaN or infinite",
     "short_strand": "npz strand with fewer than two points (other formats skip them)",
     "units_mismatch": "an npz archive recorded in other units than the ones asked for",
+    "empty_hair": "no strand of two or more points, or every strand of zero length: nothing to retarget",
+    "not_text": "a text format (obj) holds bytes that are not text: a binary or damaged file",
 }
 
 # Largest counts the binary formats' integer fields hold.
@@ -212,7 +214,8 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
     Raises
     ------
     InputError
-        ``non_finite``; ``short_strand`` when ``raw.strict``.
+        ``non_finite``; ``short_strand`` when ``raw.strict``; ``empty_hair`` when no strand of
+        two points is left, or every strand has zero length.
     """
     counts = np.asarray(raw.counts, dtype=np.int64)
     check_finite(raw.points, counts, "coordinate", ctx)
@@ -244,10 +247,9 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
             "without hair this way"
         )
     kept = counts[keep]
-    if len(kept) == 0:
-        notes.append("the file holds no strand of two or more points")
     offsets = np.zeros(len(kept) + 1, dtype=np.int64)
     np.cumsum(kept, out=offsets[1:])
+    require_hair(np.asarray(points).reshape(-1, 3), offsets, ctx.source)
     scale = unit_scale(ctx.units)
     points = np.asarray(points, dtype=np.float64)
     if scale != 1.0:

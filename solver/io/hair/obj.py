@@ -2,9 +2,14 @@
 
 Layout: ``v x y z [r g b]`` lines and ``l i j k ...`` lines (1-based indices, negative ones
 relative to the vertices so far, ``i/t`` forms accepted), one ``l`` line per strand, root
-first. Faces and other records are ignored with a warning (normals, texture and parameter
+first. Faces and other records are ignored with one warning (normals, texture and parameter
 coordinates, object and group names, smoothing groups and materials quietly). The format
 has no thickness; vertex colors are kept.
+
+A file that is not OBJ text is refused with one error, not read as an empty groom: a NUL
+byte or a record that does not start with a word (``not_text``: binary or damaged data);
+no ``v`` or no ``l`` records (``empty_hair``: nothing to retarget, e.g. a mesh OBJ with
+faces only).
 """
 
 from __future__ import annotations
@@ -25,9 +30,19 @@ from hairport.solver.io.hair.common import (
     to_float32,
     write_rows,
 )
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import EMPTY_HAIR, Hair
 
 OBJ_IGNORED_QUIETLY = {b"vn", b"vt", b"vp", b"o", b"g", b"s", b"usemtl", b"mtllib"}
+#: what starts every OBJ record: a word of ASCII letters, digits and underscores
+OBJ_RECORD_TAG = re.compile(rb"[A-Za-z_][A-Za-z0-9_]*")
+#: code of the error for bytes that are not OBJ text
+NOT_TEXT = "not_text"
+#: the UTF-8 byte order mark some editors write before the first record
+UTF8_BOM = b"\xef\xbb\xbf"
+#: record kinds the one "ignored" warning names; the rest are counted together
+MAX_NAMED_IGNORED = 5
+#: bytes of a bad record shown in a message (escaped), enough to recognise it
+SHOWN_BYTES = 16
 
 
 def read_obj(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
@@ -39,11 +54,17 @@ def read_obj(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
         ``points (N, 3) float64`` in polyline order (a vertex used twice appears twice),
         ``counts (S,) int64``, ``color (N, 3) float64`` when the ``v`` lines have six values.
     """
+    data = bytes(buf)
+    nul = data.find(b"\0")
+    if nul >= 0:
+        raise ctx.error(f"byte {nul:,} is a NUL byte: a binary file, not OBJ text (code {NOT_TEXT})", NOT_TEXT)
+    if data.startswith(UTF8_BOM):
+        data = data[len(UTF8_BOM):]
     v_rows: list[bytes] = []
     l_rows: list[bytes] = []
     l_base: list[int] = []
     ignored: dict[str, int] = {}
-    for line in bytes(buf).splitlines():
+    for number, line in enumerate(data.splitlines(), start=1):
         words = line.split(None, 1)
         if not words or words[0].startswith(b"#"):
             continue
@@ -54,15 +75,32 @@ def read_obj(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
         elif tag == b"l":
             l_rows.append(rest)
             l_base.append(len(v_rows))
+        elif OBJ_RECORD_TAG.fullmatch(tag) is None:
+            shown = repr(line[:SHOWN_BYTES])[2:-1]
+            raise ctx.error(f"line {number:,} ('{shown}') is not an OBJ record: a binary or damaged file, "
+                            f"not OBJ text (code {NOT_TEXT})", NOT_TEXT)
         elif tag not in OBJ_IGNORED_QUIETLY:
-            key = tag.decode("ascii", "replace")
+            key = tag.decode("ascii")
             ignored[key] = ignored.get(key, 0) + 1
+    if not l_rows:
+        faces = f", {ignored['f']:,} faces: a mesh, not hair" if ignored.get("f") else ""
+        raise ctx.error(f"no polyline ('l') records ({len(v_rows):,} vertices{faces}): there is no hair to "
+                        f"retarget (code {EMPTY_HAIR})", EMPTY_HAIR)
     ctx.check_limit(len(l_rows), "strands")
     ctx.check_limit(len(v_rows), "particles")
     points, color = vertices(v_rows, ctx)
     index, lengths = polylines(l_rows, np.array(l_base, dtype=np.int64), len(points), ctx)
-    notes = [f"ignored {count:,} '{tag}' record(s)" for tag, count in sorted(ignored.items())]
+    notes = [ignored_note(ignored)] if ignored else []
     return Strands(points[index], lengths, None, None if color is None else color[index], notes)
+
+
+def ignored_note(ignored: dict[str, int]) -> str:
+    """One warning for every ignored record kind: ``ignored 3 'f' record(s), 1 'p' record(s)``."""
+    kinds = sorted(ignored.items())
+    named = ", ".join(f"{count:,} '{tag}' record(s)" for tag, count in kinds[:MAX_NAMED_IGNORED])
+    rest = sum(count for _, count in kinds[MAX_NAMED_IGNORED:])
+    more = f" and {rest:,} record(s) of {len(kinds) - MAX_NAMED_IGNORED} other kind(s)" if rest else ""
+    return f"ignored {named}{more}"
 
 
 def vertices(rows: list[bytes], ctx: ReadContext) -> tuple[np.ndarray, np.ndarray | None]:

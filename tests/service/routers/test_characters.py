@@ -37,3 +37,15 @@ def test_bad_uploads(client, files):
     cut = client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"][:5000])})
     assert cut.status_code == 422 and cut.json()["detail"].startswith("mesh: ")
     assert client.get("/v1/characters/" + "0" * 32, headers=AUTH).status_code == 404
+
+
+@pytest.mark.parametrize("mesh, code, words", [
+    (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", "empty_mesh", "0 faces"),
+    (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "empty_mesh", "every face (1) has zero area"),
+    (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n\0\x01\x02", "not_text", "NUL byte"),
+], ids=["no-faces", "zero-area", "binary"])
+def test_meshes_without_faces_are_422_at_upload(client, mesh, code, words):
+    response = client.post("/v1/characters", headers=AUTH, files={"mesh": ("body.obj", mesh)})
+    body = response.json()
+    assert (response.status_code, body["code"]) == (422, code) and body["detail"].startswith("mesh: ")
+    assert words in body["detail"]

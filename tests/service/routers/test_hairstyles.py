@@ -1,5 +1,8 @@
 """``/v1/hairstyles``: validated uploads, one record per content, preprocessing sent once (no worker here)."""
 
+import struct
+
+import numpy as np
 import pytest
 
 from hairport.worker.app import PREPROCESS_QUEUE
@@ -52,3 +55,25 @@ def test_a_character_without_a_skeleton_cannot_have_hairstyles(client, files):
     response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare},
                            files={"hair": ("g.data", files["groom.data"])})
     assert (response.status_code, response.json()["code"]) == (422, "no_skeleton")
+
+
+#: hair files with nothing to retarget, each refused at upload: (name, bytes, code, words of the detail)
+WITHOUT_HAIR = [
+    ("zero.data", struct.pack("<i", 0), "empty_hair", "no strand of two or more points"),
+    ("dots.data", struct.pack("<ii3fi3f", 2, 1, 0, 1.6, 0, 1, 0.1, 1.6, 0), "empty_hair", "no strand of two"),
+    ("flat.data", struct.pack("<ii6f", 1, 2, *([0.0, 1.6, 0.0] * 2)), "empty_hair", "every strand (1) has zero length"),
+    ("empty.obj", b"", "empty_hair", "no polyline ('l') records"),
+    ("garbage.obj", np.random.default_rng(7).integers(1, 256, 4096, dtype=np.uint8).tobytes(), "not_text",
+     "is not an OBJ record"),
+]
+
+
+@pytest.mark.parametrize("name, data, code, words", WITHOUT_HAIR, ids=[case[0] for case in WITHOUT_HAIR])
+def test_hair_files_without_hair_are_422_at_upload(client, files, name, data, code, words):
+    source = upload_character(client, files, "source")
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source},
+                           files={"hair": (name, data)})
+    body = response.json()
+    assert (response.status_code, body["code"]) == (422, code), body
+    assert body["detail"].startswith("hair: ") and words in body["detail"]
+    assert waiting(client, PREPROCESS_QUEUE) == 0  # nothing for a worker to preprocess

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import Hair, particle_indices, validate_layout
+from hairport.solver.model.hair import Hair, particle_indices, require_hair, validate_layout
 
 
 @pytest.fixture
@@ -56,3 +56,16 @@ def test_layout_check(points, offsets, code):
 def test_an_empty_hairstyle_passes_the_layout_check():
     validate_layout(np.zeros((0, 3)), np.array([0]))
     assert Hair.from_strands([]).n_strands == 0
+
+
+def test_require_hair_refuses_no_strand_and_zero_length_strands_only():
+    with pytest.raises(InputError, match=r"^g\.data: no strand of two or more points") as error:
+        require_hair(np.zeros((0, 3)), np.array([0]), "g.data")
+    assert error.value.code == "empty_hair"
+    with pytest.raises(InputError, match=r"every strand \(2\) has zero length") as error:
+        require_hair(np.ones((5, 3)), np.array([0, 2, 5]))
+    assert error.value.code == "empty_hair"
+    # strand 0 ends where strand 1 starts 1 m away: that jump is no segment, both strands are flat
+    with pytest.raises(InputError, match="zero length"):
+        require_hair(np.array([[0.0, 0, 0], [0, 0, 0], [1, 0, 0], [1, 0, 0]]), np.array([0, 2, 4]))
+    require_hair(np.array([[0.0, 0, 0], [0, 0, 0], [1, 0, 0], [1, 0, 1e-9]]), np.array([0, 2, 4]))

@@ -49,6 +49,8 @@ def test_check_counts():
         (TRIANGLE, np.array([[0, -1, 2]]), "bad_faces", "out of range"),
         (np.zeros((5, 3)), FACES, "too_large", "5 vertices"),
         (TRIANGLE, np.array([[0, 1, 2], [2, 1, 0]]), "too_large", "2 faces"),
+        (TRIANGLE, np.array([[0, 1, 1]]), "empty_mesh", "every face (1) has zero area"),
+        (np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]), FACES, "empty_mesh", "every face (1) has zero area"),
     ],
 )
 def test_check_mesh_arrays(vertices, faces, code, words):

@@ -54,6 +54,7 @@ def test_fan_triangulate():
         ("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "bad_mesh"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "empty_mesh"),
         ("# nothing\n", "empty_mesh"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n\0\0", "not_text"),  # a binary file named .obj
     ],
 )
 def test_obj_bad_input(tmp_path, text, code):

@@ -206,7 +206,7 @@ def npz_bytes(**arrays) -> bytes:
     base = {
         "format": np.array("hairport-hair"),
         "version": np.array(1),
-        "points": np.zeros((4, 3)),
+        "points": np.arange(12.0).reshape(4, 3),  # strands of some length: zero-length ones are empty hair
         "offsets": np.array([0, 2, 4]),
     }
     base.update(arrays)

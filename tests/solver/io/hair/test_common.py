@@ -55,9 +55,17 @@ def test_finish_read_strict_and_empty():
     strict = Strands(np.zeros((3, 3)), np.array([2, 1]), strict=True)
     err = expect_error("short_strand", finish_read, strict, "npz", CONTEXT)
     assert str(err) == "x.test: strand 1 has 1 point(s); every strand needs at least 2"
-    report = finish_read(Strands(np.zeros((1, 3)), np.array([1])), "obj", CONTEXT)
-    assert report.hair.n_strands == 0 and report.hair.offsets.tolist() == [0]
-    assert report.warnings[-1] == "the file holds no strand of two or more points"
+    err = expect_error("empty_hair", finish_read, Strands(np.zeros((1, 3)), np.array([1])), "obj", CONTEXT)
+    assert str(err) == "x.test: no strand of two or more points: there is no hair to retarget (code empty_hair)"
+
+
+def test_finish_read_refuses_hair_whose_every_strand_has_zero_length():
+    flat = Strands(np.ones((5, 3)), np.array([2, 3]))
+    err = expect_error("empty_hair", finish_read, flat, "data", CONTEXT)
+    assert "every strand (2) has zero length" in str(err) and "(code empty_hair)" in str(err)
+    # one strand that moves is hair: the zero-length one is kept as it is
+    moving = Strands(np.array([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 1e-6]]), np.array([2, 2]))
+    assert finish_read(moving, "data", CONTEXT).hair.counts.tolist() == [2, 2]
 
 
 def test_check_finite_names_the_first_bad_point_and_its_strand():

@@ -79,8 +79,8 @@ def test_data_uniform_fast_path_and_walk_agree():
 
 def test_data_uniform_layout_with_a_lying_count_is_not_misread():
     """Sizes that fit ``S`` strands of the first length, but a later count differs."""
-    a = np.zeros((2, 3))
-    data = data_bytes([a, np.zeros((1, 3)), np.zeros((3, 3))])  # 2 + 1 + 3 points = 3 strands of 2
+    a = np.arange(6.0).reshape(2, 3)
+    data = data_bytes([a, np.zeros((1, 3)), a[[0, 1, 0]]])  # 2 + 1 + 3 points = 3 strands of 2
     report = read_hair_bytes_report(data, "data")
     np.testing.assert_array_equal(report.hair.counts, [2, 3])
     assert report.skipped_strands == 1

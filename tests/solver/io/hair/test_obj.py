@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -76,3 +78,48 @@ def test_vertices_with_weight_or_color():
     assert points.tolist() == [[1, 2, 3]] and color.tolist() == [[0.5, 0.25, 1.0]]
     err = expect_error("bad_value", vertices, [b"1 2", b"3 4"], CONTEXT)
     assert "'v' lines have 2 values" in str(err)
+
+
+def _no_warning_read(data: bytes, code: str):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        err = expect_error(code, read_hair_bytes, data, "obj", source="x.obj")
+    assert caught == []
+    return str(err)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_random_bytes_are_one_not_text_error(seed):
+    garbage = np.random.default_rng(seed).integers(1, 256, 20_000, dtype=np.uint8).tobytes()  # no NUL byte
+    message = _no_warning_read(garbage, "not_text")
+    assert message.startswith("x.obj: line ") and message.endswith("is not an OBJ record: a binary or damaged file, "
+                                                                   "not OBJ text (code not_text)")
+    assert len(message) <= 200  # the bad line is shown escaped and cut to 16 bytes, not echoed
+
+
+def test_a_nul_byte_or_an_undecodable_record_is_not_text():
+    message = _no_warning_read(b"v 0 0 0\nv 0 0 1\nl 1 2\n\0\0\0", "not_text")
+    assert message == "x.obj: byte 22 is a NUL byte: a binary file, not OBJ text (code not_text)"
+    message = _no_warning_read(b"v 0 0 0\nv 0 0 1\nl 1 2\n\xff\xfe\xfdabc 1 2\n", "not_text")
+    assert message.startswith("x.obj: line 4 ('\\xff\\xfe\\xfdabc 1 2') is not an OBJ record")
+
+
+def test_an_obj_without_polylines_is_empty_hair():
+    message = _no_warning_read(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "empty_hair")
+    assert message == ("x.obj: no polyline ('l') records (3 vertices, 1 faces: a mesh, not hair): there is no hair "
+                       "to retarget (code empty_hair)")
+    message = _no_warning_read(b"# only a comment\n", "empty_hair")
+    assert "no polyline ('l') records (0 vertices)" in message
+
+
+def test_latin1_comments_and_a_byte_order_mark_are_text():
+    hair = read_hair_bytes(b"\xef\xbb\xbf# cr\xe9\xe9 par l'artiste\nv 0 0 0\nv 0 0 1\nl 1 2\n", "obj")
+    assert hair.counts.tolist() == [2]
+
+
+def test_ignored_records_are_one_warning():
+    tags = ("a", "b", "c", "d", "e", "f", "f", "k", "h", "g")  # "g" (groups) is ignored quietly
+    kinds = b"".join(f"{tag} 1 2 3\n".encode() for tag in tags)
+    report = read_hair_bytes_report(b"v 0 0 0\nv 0 0 1\nl 1 2\n" + kinds, "obj")
+    assert report.warnings == ("ignored 1 'a' record(s), 1 'b' record(s), 1 'c' record(s), 1 'd' record(s), "
+                               "1 'e' record(s) and 4 record(s) of 3 other kind(s)",)

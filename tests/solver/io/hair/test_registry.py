@@ -95,14 +95,13 @@ def test_read_hair_bytes_equals_read_hair(tmp_path, fmt, ascii):
     np.testing.assert_array_equal(a.offsets, b.offsets)
 
 
-def test_empty_hairstyle_round_trips_with_a_warning(tmp_path):
+def test_an_empty_hairstyle_is_written_but_refused_on_reading(tmp_path):
     empty = Hair(np.zeros((0, 3)), np.zeros(1, dtype=np.int64))
     for fmt, ascii in WRITE_VARIANTS:
         path = variant_path(tmp_path, fmt, ascii, "empty")
         write_hair(path, empty, ascii=ascii)
-        report = read_hair_report(path)
-        assert report.hair.n_strands == 0 and report.hair.n_particles == 0
-        assert any("no strand" in w for w in report.warnings)
+        err = expect_error("empty_hair", read_hair_report, path)
+        assert str(err).startswith(f"{path}: no ") and "there is no hair to retarget" in str(err)
 
 
 @pytest.mark.parametrize("fmt, ascii", WRITE_VARIANTS)
@@ -386,3 +385,35 @@ def test_format_for_path_knows_every_registered_extension_and_refuses_others():
     )
     err = expect_error("unknown_format", format_for_path, "groom.data", "usd")
     assert str(err) == "groom.data: unknown hair format 'usd'; supported: data, hair, ply, npz, obj"
+
+
+#: two strands (of 2 and 4 points) with every point at one place
+ZERO_LENGTH = Hair(np.tile([[0.1, 1.6, 0.02]], (6, 1)), np.array([0, 2, 6]))
+
+
+@pytest.mark.parametrize("fmt, ascii", WRITE_VARIANTS)
+def test_a_hairstyle_of_zero_length_strands_is_refused_in_every_format(fmt, ascii):
+    data = hair_to_bytes(ZERO_LENGTH, fmt, ascii=ascii)
+    err = expect_error("empty_hair", read_hair_bytes, data, fmt, source=f"flat.{fmt}")
+    assert str(err) == (f"flat.{fmt}: every strand (2) has zero length (all its points at one place): there is no "
+                        "hair to retarget (code empty_hair)")
+
+
+@pytest.mark.parametrize(
+    "fmt, data",
+    [
+        ("data", data_bytes([])),
+        ("data", data_bytes([np.zeros((1, 3)), np.ones((1, 3)), np.zeros((0, 3))])),
+        ("hair", hair_file_bytes([1, 1], np.arange(6.0).reshape(2, 3))),
+        ("obj", b""),
+        ("obj", b"v 0 0 0\nv 0 0 1\nl 1\nl 2\n"),
+    ],
+    ids=["data-0-strands", "data-one-point-strands", "hair-one-point-strands", "obj-empty", "obj-one-point-lines"],
+)
+def test_files_without_a_strand_of_two_points_are_refused(fmt, data):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        err = expect_error("empty_hair", read_hair_bytes, data, fmt, source=f"empty.{fmt}")
+    assert str(err).startswith(f"empty.{fmt}: no ") and str(err).endswith("there is no hair to retarget (code "
+                                                                          "empty_hair)")
+    assert caught == []  # the error says it all: no warning about skipped strands first

@@ -68,7 +68,7 @@ def test_hair_without_segments_array_uses_default_segments(tmp_path):
 
 
 def test_hair_transparency_is_read_checked_and_dropped(tmp_path):
-    points = np.zeros((4, 3))
+    points = np.arange(12.0).reshape(4, 3)
     data = hair_file_bytes([2, 2], points, transparency=[0.1, 0.2, 0.3, 0.4], color=np.ones((4, 3)))
     report = read_hair_bytes_report(data, "hair")
     assert report.hair.color.shape == (4, 3) and report.hair.thickness is None
