@@ -1,15 +1,25 @@
 """All-or-nothing output files: everything is written to temporary names first and renamed
-into place only when every file succeeded, so a failed run leaves no partial output."""
+into place only when every file succeeded, so a failed run leaves no partial output.
+
+Every output gets one file mode, the solver's ``FILE_MODE`` less the umask (0644 under the
+usual umask 022): the temporary file is created with it, and writers that write into it (the
+report, the preview) keep it, as does the atomic write that replaces it (the hair, the artifact).
+"""
 
 from __future__ import annotations
 
 import json
 import os
-import tempfile
+import secrets
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+from hairport.solver import FILE_MODE
+
+#: random bytes in a temporary output's name (hex-encoded: twice as many characters)
+TEMP_NAME_BYTES = 6
 
 
 class OutputSet:
@@ -22,10 +32,7 @@ class OutputSet:
         """Write ``final`` through ``write(temporary_path)``; the file appears only on commit."""
         final = Path(final)
         final.parent.mkdir(parents=True, exist_ok=True)
-        # the temporary name keeps the extension, so writers that infer the format from it still work
-        fd, name = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".part{final.suffix}", dir=final.parent)
-        os.close(fd)
-        temporary = Path(name)
+        temporary = _create_temporary(final)
         self._pending.append((temporary, final))
         write(temporary)
 
@@ -50,6 +57,18 @@ class OutputSet:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is not None:
             self.abort()
+
+
+def _create_temporary(final: Path) -> Path:
+    """A new empty file beside ``final`` with the mode every output has (not mkstemp's 0600)."""
+    while True:
+        # the temporary name keeps the extension, so writers that infer the format from it still work
+        temporary = final.parent / f".{final.stem}.{secrets.token_hex(TEMP_NAME_BYTES)}.part{final.suffix}"
+        try:
+            os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), FILE_MODE))
+            return temporary
+        except FileExistsError:
+            continue
 
 
 def json_default(value):

@@ -1,11 +1,14 @@
 """All-or-nothing output files."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
 
 from hairport.outputs import OutputSet, json_default
+from hairport.solver import FILE_MODE, atomic_write_bytes
 
 
 def test_files_appear_only_on_commit(tmp_path):
@@ -44,3 +47,26 @@ def test_json_default_refuses_other_objects():
     assert json_default(np.float32(0.5)) == 0.5
     with pytest.raises(TypeError, match="not JSON serialisable: object"):
         json_default(object())
+
+
+@pytest.fixture
+def umask():
+    """Set the process umask for a test (``umask(value)``), restored afterwards."""
+    old = os.umask(0o022)
+    try:
+        yield os.umask
+    finally:
+        os.umask(old)
+
+
+@pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_every_output_has_the_file_mode_less_the_umask(tmp_path, umask, mask, mode):
+    umask(mask)
+    with OutputSet() as outputs:
+        outputs.add(tmp_path / "preview.png", lambda path: path.write_bytes(b"png"))  # writes into the temporary
+        outputs.add_json(tmp_path / "report.json", {"n": 1})
+        outputs.add(tmp_path / "hair.data", lambda path: atomic_write_bytes(path, b"hair"))  # replaces it
+        written = outputs.commit()
+    assert FILE_MODE & ~mask == mode
+    assert {p.name: stat.S_IMODE(p.stat().st_mode) for p in written} == dict.fromkeys(
+        ["preview.png", "report.json", "hair.data"], mode)
