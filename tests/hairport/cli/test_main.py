@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import os
 import shutil
+import struct
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from hairport.cli import EXIT_BAD_INPUT, EXIT_FAILURE, build_parser, main
+from hairport.cli import EXIT_BAD_INPUT, EXIT_FAILURE, build_parser, main, show_warning
+from hairport.solver import read_hair
 from tests.hairport.cli.helpers import assert_input_error, assert_nothing_written, retarget_args
 
 
@@ -56,3 +59,62 @@ def test_the_commands():
     assert "{preprocess,retarget,demo,assets,serve,worker,purge,openapi,hairline}" in build_parser().format_help()
     args = build_parser().parse_args(["purge"])
     assert args.run.__name__ == "cmd_purge"
+
+
+#: hair files with nothing to retarget: (name, bytes, words of the one error line)
+WITHOUT_HAIR = [
+    ("zero.data", struct.pack("<i", 0), "no strand of two or more points"),
+    ("dots.data", struct.pack("<ii3fi3f", 2, 1, 0, 1.6, 0, 1, 0.1, 1.6, 0), "no strand of two or more points"),
+    ("flat.data", struct.pack("<ii6f", 1, 2, *([0.0, 1.6, 0.0] * 2)), "every strand (1) has zero length"),
+    ("empty.obj", b"", "no polyline ('l') records (0 vertices)"),
+    ("garbage.obj", np.random.default_rng(5).integers(1, 256, 120_000, dtype=np.uint8).tobytes(),
+     "is not an OBJ record"),
+]
+
+
+@pytest.mark.parametrize("command", ["retarget", "preprocess"])
+@pytest.mark.parametrize("name, data, words", WITHOUT_HAIR, ids=[case[0] for case in WITHOUT_HAIR])
+def test_hair_without_hair_is_one_line_exit_2_and_no_output(capsys, world, out, tmp_path, command, name, data, words):
+    bad = tmp_path / name
+    bad.write_bytes(data)
+    args = retarget_args(world, out, hair=bad)
+    if command == "preprocess":
+        args = ["preprocess", "--source", str(world["dir"] / "source.obj"), "--hair", str(bad),
+                "--out", str(out / "groom.hpa"), "--quiet"]
+    capsys.readouterr()
+    code = main(args)
+    captured = capsys.readouterr()
+    code_name = "not_text" if name == "garbage.obj" else "empty_hair"
+    line = assert_input_error(code, captured.err, str(bad), words, f"(code {code_name})")
+    assert len(line) < 300 and captured.out == ""
+    assert_nothing_written(out)
+
+
+@pytest.mark.parametrize("which", ["--source", "--target"])
+def test_a_mesh_without_faces_is_one_line_exit_2(capsys, world, out, tmp_path, which):
+    bad = tmp_path / "points.obj"
+    bad.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    args = retarget_args(world, out, **{which[2:]: bad})
+    capsys.readouterr()
+    code = main(args)
+    assert_input_error(code, capsys.readouterr().err, str(bad), "empty mesh", "0 faces")
+    assert_nothing_written(out)
+
+
+def test_warnings_are_one_hairport_line_without_python_source(capsys, world, out, tmp_path):
+    hair = read_hair(world["dir"] / "hair.data")
+    strands = [hair.strand(s) for s in range(hair.n_strands)] + [hair.strand(0)[:1], hair.strand(1)[:1]]
+    dotted = tmp_path / "dotted.data"
+    dotted.write_bytes(struct.pack("<i", len(strands)) + b"".join(
+        struct.pack("<i", len(s)) + s.astype("<f4").tobytes() for s in strands))
+    capsys.readouterr()
+    code = main(retarget_args(world, out, hair=dotted, all_outputs=False))
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert err == (f"hairport: warning: {dotted}: skipped 2 strand(s) with fewer than 2 points (2 point(s)); "
+                   "USC-HairSalon files mark scalp positions without hair this way\n")
+
+
+def test_a_warning_of_several_lines_is_printed_as_one(capsys):
+    show_warning("first line\n  second line", UserWarning, "/somewhere/module.py", 12, line="warnings.warn(...)")
+    assert capsys.readouterr().err == "hairport: warning: first line second line\n"
