@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import stat
 import struct
 import subprocess
 import sys
@@ -118,3 +119,14 @@ def test_warnings_are_one_hairport_line_without_python_source(capsys, world, out
 def test_a_warning_of_several_lines_is_printed_as_one(capsys):
     show_warning("first line\n  second line", UserWarning, "/somewhere/module.py", 12, line="warnings.warn(...)")
     assert capsys.readouterr().err == "hairport: warning: first line second line\n"
+
+
+def test_hair_report_and_preview_share_one_file_mode(capsys, world, out):
+    previous = os.umask(0o022)
+    try:
+        code = main(retarget_args(world, out))
+    finally:
+        os.umask(previous)
+    assert code == 0, capsys.readouterr().err
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in out.iterdir()}
+    assert modes == {"result.data": 0o644, "report.json": 0o644, "preview.png": 0o644}
