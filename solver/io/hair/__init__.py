@@ -30,6 +30,11 @@ them, and says so: :func:`read_hair_report` returns the count in
 :attr:`ReadReport.kept_strands`); :func:`read_hair` emits a :class:`HairIOWarning`. The
 ``npz`` reader is strict (its writer never makes short strands): code ``"short_strand"``.
 
+No hair: a file left without a strand of two points (none in it, or only short ones), or
+whose every strand has zero length (all its points at one place), is refused by every
+reader with code ``"empty_hair"``; there is nothing to retarget, and nothing downstream
+(preprocessing, the artifact, the API) has to cope with an empty hairstyle.
+
 Bad input: every reader checks counts against the bytes present and against
 :class:`ReadLimits` before it allocates anything sized by the file's counts, and raises
 :class:`~hairport.solver.model.errors.InputError` naming the source with one of the codes in
