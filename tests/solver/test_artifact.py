@@ -10,6 +10,7 @@ from hairport.solver import artifact, pipeline
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
+from tests.solver.hair_shapes import outward_strands, sphere_character
 
 
 @pytest.fixture(scope="module")
@@ -118,3 +119,23 @@ def test_artifact_without_a_fine_level_round_trips(case, tmp_path):
     artifact.save_adaptable(adaptable, tmp_path / "all-guides.hpa")
     loaded = artifact.load_adaptable(tmp_path / "all-guides.hpa")
     assert np.array_equal(loaded.multiscale.guides, np.arange(hair.n_strands))
+
+
+def test_rows_with_fewer_than_k_neighbours_round_trip(tmp_path):
+    """A long strand beside two short ones: its particles find 4 of k = 5 neighbours, the
+    file keeps the padding and zero weights, and the retarget from disk equals the one in memory."""
+    source, target = sphere_character(), sphere_character(scale=(1.1, 1.0, 1.05))
+    long = outward_strands(source, n_strands=1, n_points=700, seed=1)
+    short = outward_strands(source, n_strands=2, n_points=2, seed=2)
+    hair = pipeline.Hair.from_strands([long.strand(0), short.strand(0), short.strand(1)])
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=3))
+    weight = adaptable.multiscale.guide_neighbours.weight
+    assert (np.count_nonzero(weight[:700], axis=1) == 4).all()
+    np.testing.assert_allclose(weight.sum(axis=1), 1.0, atol=1e-12)
+    artifact.save_adaptable(adaptable, tmp_path / "long.hpa")
+    loaded = artifact.load_adaptable(tmp_path / "long.hpa")
+    assert np.array_equal(loaded.multiscale.guide_neighbours.index, adaptable.multiscale.guide_neighbours.index)
+    options = pipeline.RetargetOptions(max_iterations=5, workers=1)
+    from_memory, from_disk = pipeline.retarget(adaptable, target, options), pipeline.retarget(loaded, target, options)
+    assert np.array_equal(from_memory.hair.points, from_disk.hair.points)
+    assert from_memory.metrics["penetrating_particles"] == 0
