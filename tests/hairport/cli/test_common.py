@@ -224,3 +224,26 @@ def test_the_preview_of_a_z_up_character_shows_it_upright(rotated_world, tmp_pat
                           "raw")])
     hair_row, body_row, lowest = panel_rows(raw)
     assert not (hair_row < body_row - 40 and lowest >= VIEW_SIZE_PX[1] - 2), (hair_row, body_row, lowest)
+
+
+def test_hairline_curves_are_written_and_read_in_the_grooms_frame(capsys, rotated_world, tmp_path):
+    d, frame = rotated_world["dir"], ROTATED["z-up"]
+    documents = {}
+    for tag in ("y-up", "z-up"):
+        code, _, err = run(capsys, ["hairline", "--source", str(d / f"source-{tag}.obj"), "--hair",
+                                    str(d / f"hair-{tag}.data"), "--target", str(d / f"target-{tag}.obj"),
+                                    "--guides", "20", "--out", str(tmp_path / f"{tag}.json"), "--quiet"])
+        assert code == 0, err
+        documents[tag] = json.loads((tmp_path / f"{tag}.json").read_text())
+    upright, rotated = (np.array(documents[tag]["points"]) for tag in ("y-up", "z-up"))
+    assert documents["z-up"]["units"] == "m" and len(rotated) > 20
+    assert np.abs(rotated - frame.axes_out(upright)).max() < 1e-12
+    # passed back as it is, in the file's frame: the hairline stays where it is
+    out = tmp_path / "out"
+    out.mkdir()
+    code, _, err = run(capsys, ["retarget", "--source", str(d / "source-z-up.obj"), "--hair", str(d / "hair-z-up.data"),
+                                "--target", str(d / "target-z-up.obj"), "--guides", "20", "--out",
+                                str(out / "result.data"), "--report", str(out / "report.json"), "--max-iterations",
+                                "4", "--workers", "1", "--quiet", "--hairline-curve", str(tmp_path / "z-up.json")])
+    assert code == 0, err
+    assert json.loads((out / "report.json").read_text())["metrics"]["hairline"]["max_travel_m"] < 1e-6
