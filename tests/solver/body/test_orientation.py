@@ -86,3 +86,18 @@ def test_a_target_is_fitted_to_the_source_through_its_shared_vertices(toy_a, toy
     for frame in (InputFrame(up="z", front="-y"), InputFrame(up="-x", front="y"), InputFrame()):
         up, front, confidence = relative_axes(toy_a.vertices, character_in(frame, toy_b).vertices * 7.0)
         assert (up, front) == (frame.up, frame.front) and confidence > 0.99
+
+
+def test_a_mirrored_character_keeps_its_up_and_front_in_every_frame(toy_a, toy_groom):
+    """x -> -x with the faces turned over (still counter-clockwise from outside): a left-handed export.
+    Its up and front are still up and front; hairport's frame keeps it mirrored (a rotation cannot undo
+    a mirror, and nothing downstream needs it undone)."""
+    mirror = np.array([-1.0, 1.0, 1.0])
+    skeleton = toy_a.skeleton
+    mirrored = Character(toy_a.vertices * mirror, toy_a.faces[:, ::-1],
+                         type(skeleton)(skeleton.names, skeleton.parents, skeleton.heads * mirror,
+                                        skeleton.tails * mirror), toy_a.weights, "mirrored")
+    hair = toy_groom.with_points(toy_groom.points * mirror)
+    for rigged in (True, False):
+        wrong, confidence = misread(mirrored, hair, rigged)
+        assert wrong == [] and confidence.min() > 0.9, (rigged, wrong, confidence)
