@@ -247,3 +247,28 @@ def test_hairline_curves_are_written_and_read_in_the_grooms_frame(capsys, rotate
                                 "4", "--workers", "1", "--quiet", "--hairline-curve", str(tmp_path / "z-up.json")])
     assert code == 0, err
     assert json.loads((out / "report.json").read_text())["metrics"]["hairline"]["max_travel_m"] < 1e-6
+
+
+def test_a_groom_off_its_scalp_is_preprocessed_with_one_warning_line(capsys, mm_world, tmp_path):
+    from hairport.solver.mesh.query import MeshQuery
+
+    d = mm_world["dir"]
+    source = load_character(d / "source.obj")
+    hair = read_hair(d / "hair.npz")
+    normals = MeshQuery(source.vertices, source.faces).signed_distance(hair.points[hair.roots]).normal
+    write_hair(tmp_path / "lifted.npz", hair.with_points(hair.points + 0.004 * np.repeat(normals, hair.counts, axis=0)))
+    code, stdout, err = run(capsys, ["preprocess", "--source", str(d / "source.obj"), "--hair",
+                                     str(tmp_path / "lifted.npz"), "--out", str(tmp_path / "lifted.hpa"), "--quiet"])
+    assert code == 0, err
+    assert err.splitlines() == [f"hairport: warning: {hair.n_strands} of {hair.n_strands} roots sit more than 1 mm "
+                                "off the source body (mean 4.00 mm, largest 4.00 mm); each is anchored at its "
+                                "closest point on the body"]
+    assert "50 strands" in stdout
+    # the artifact keeps the input section: a retarget from it reports it
+    code, _, err = run(capsys, ["retarget", "--adaptable", str(tmp_path / "lifted.hpa"), "--target",
+                                str(d / "target.obj"), "--out", str(tmp_path / "out.npz"), "--report",
+                                str(tmp_path / "report.json"), "--method", "root-translate", "--quiet"])
+    assert code == 0 and err == "", err
+    section = json.loads((tmp_path / "report.json").read_text())["metrics"]["input"]
+    assert section["root_distance_m"]["off_surface"] == hair.n_strands and len(section["warnings"]) == 1
+    assert abs(section["root_distance_m"]["mean"] - 0.004) < 1e-4
