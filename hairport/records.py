@@ -89,6 +89,8 @@ class CharacterRecord(Record):
     mesh: BlobRef
     skeleton: BlobRef | None = None
     units: str | None = None
+    up_axis: str | None = None
+    front_axis: str | None = None
     vertices: int
     faces: int
     bones: list[str]
@@ -179,8 +181,9 @@ class PurgeClock(Record):
 
 def artifact_key(character: CharacterRecord, hair_sha256: str, units: str, options: PreprocessSettings,
                  format_version: int) -> str:
-    """Content hash of everything preprocessing depends on."""
+    """Content hash of everything preprocessing depends on (the character's axes when given)."""
+    axes = [character.up_axis, character.front_axis] if character.up_axis or character.front_axis else []
     return digest(
         "artifact", character.mesh.sha256, character.skeleton.sha256 if character.skeleton else None,
-        character.units, hair_sha256, units, options.model_dump(), format_version,
+        character.units, hair_sha256, units, options.model_dump(), format_version, *axes,
     )

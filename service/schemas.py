@@ -55,7 +55,9 @@ class CharacterOut(BaseModel):
     faces: int
     bones: list[str]
     has_skeleton: bool
-    units: str
+    units: str = Field(description="the mesh's units: given, stated by its files, or auto (inferred when used)")
+    up_axis: str = Field(solver.AUTO, description="the mesh's up axis, or auto (inferred when used)")
+    front_axis: str = Field(solver.AUTO, description="the axis the face looks along, or auto")
     sha256: str = Field(description="SHA-256 of the mesh file.")
     skeleton_sha256: str | None = None
     created_at: float
@@ -64,7 +66,8 @@ class CharacterOut(BaseModel):
     def of(cls, record: CharacterRecord) -> CharacterOut:
         return cls(
             id=record.id, vertices=record.vertices, faces=record.faces, bones=record.bones,
-            has_skeleton=bool(record.bones), units=record.units or "m", sha256=record.mesh.sha256,
+            has_skeleton=bool(record.bones), units=record.units or solver.AUTO, up_axis=record.up_axis or solver.AUTO,
+            front_axis=record.front_axis or solver.AUTO, sha256=record.mesh.sha256,
             skeleton_sha256=record.skeleton.sha256 if record.skeleton else None, created_at=record.created_at,
         )
 
@@ -81,7 +84,7 @@ class HairstyleOut(BaseModel):
     particles: int
     sha256: str = Field(description="SHA-256 of the hair file.")
     format: HairFormat
-    units: str
+    units: str = Field(description="the hair file's units: given, recorded by a .npz, or auto (inferred)")
     options: dict
     preprocessing: PreprocessingOut
     created_at: float

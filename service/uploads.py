@@ -49,6 +49,18 @@ async def validated(call, field: str, *args, **kwargs):
 
 
 def check_units(units: str | None) -> None:
-    """422 ``bad_units`` for units the readers do not know (``None``: the file's or meters)."""
-    if units is not None and units not in solver.UNITS:
-        raise Problem(422, "bad_units", f"units must be one of {', '.join(solver.UNITS)}")
+    """422 ``bad_units`` for units the readers do not know (``None`` or ``auto``: the file's, else inferred)."""
+    if units is not None and units not in (solver.AUTO, *solver.UNITS):
+        raise Problem(422, "bad_units", f"units must be one of {', '.join((solver.AUTO, *solver.UNITS))}")
+
+
+def check_axis(axis: str | None, field: str) -> str | None:
+    """422 ``bad_axis`` for an axis that is not one of ``auto``, ``x``, ``-z``, ...; the normalised axis
+    (``None`` for ``auto``)."""
+    if axis is None or axis == solver.AUTO:
+        return None
+    try:
+        return solver.parse_axis(axis)
+    except solver.InputError:
+        raise Problem(422, "bad_axis",
+                      f"{field} must be one of {', '.join((solver.AUTO, *solver.AXIS_CHOICES))}") from None

@@ -11,6 +11,7 @@ from hairport.solver.adaptation.energies import ShapeModel
 from hairport.solver.adaptation.multiscale import FineSource, MultiscaleModel, coarse_shape_model, fine_source
 from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
 from hairport.solver.model.character import Character
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
 from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import Anchors
@@ -28,6 +29,10 @@ class AdaptableHairstyle:
     options: PreprocessOptions
     bone_names: tuple[str, ...]
     timings: dict = field(default_factory=dict)
+    #: the groom file's frame (units, axes): results are written back in it
+    frame: InputFrame = field(default_factory=InputFrame)
+    #: the report's ``input`` section, measured when the inputs were brought into hairport's frame
+    input_report: dict = field(default_factory=dict)
 
     # derived from the source only: built once, reused by every retarget of this hairstyle
     # (cached_property writes the instance __dict__ directly, which a frozen dataclass allows)

@@ -31,6 +31,7 @@ from hairport.solver.adaptation.neighbours import Neighbours
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
 from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import Anchors
@@ -106,6 +107,8 @@ def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
         "bone_names": list(adaptable.source.skeleton.names),
         "source_name": adaptable.source.name,
         "timings": adaptable.timings,
+        "input_frame": adaptable.frame.to_dict(),
+        "input_report": adaptable.input_report,
         "digest": _digest(arrays),
     }
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
@@ -170,9 +173,11 @@ def load_adaptable(path: str | os.PathLike):
             Neighbours(arrays["fine_neighbour_index"], arrays["fine_neighbour_weight"]),
         )
         options = PreprocessOptions(**meta["options"])
+        frame = InputFrame.from_dict(meta.get("input_frame"))
     except KeyError as error:
         raise InputError(f"adaptable hairstyle lacks {error}", str(path), "bad_artifact") from None
     n = hair.n_particles
     if any(len(a) != n for a in (anchors.bone, anchors.face, anchors.barycentric, anchors.eta, anchors.fallback)):
         raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")
-    return AdaptableHairstyle(source, hair, anchors, multiscale, options, skeleton.names, dict(meta.get("timings", {})))
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, skeleton.names, dict(meta.get("timings", {})),
+                              frame, dict(meta.get("input_report") or {}))

@@ -36,6 +36,7 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import SOLVER_METHODS, PreprocessOptions, RetargetOptions
@@ -80,15 +81,21 @@ def preprocess(
     hair: Hair,
     options: PreprocessOptions = PreprocessOptions(),
     progress: ProgressFn | None = None,
+    *,
+    frame: InputFrame | None = None,
+    input_report: dict | None = None,
 ) -> AdaptableHairstyle:
     """Compute the adaptable hairstyle: anchors (Eq. 2) and kNN sets/weights (Eq. 8-9).
 
     Parameters
     ----------
     source : Character
-        Rigged source character (skeleton and skin weights required).
+        Rigged source character (skeleton and skin weights required), in hairport's frame.
     hair : Hair
         The hairstyle made for ``source``.
+    frame, input_report : optional
+        The groom file's frame and the report's ``input`` section, from
+        :func:`~hairport.solver.inputs.canonical_source`; kept with the result.
     """
     progress = progress or no_progress
     options.validate()
@@ -104,7 +111,8 @@ def preprocess(
         progress("guides", 0.5, "selecting guides and inter-strand neighbours")
         multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
     progress("preprocess", 1.0, "done")
-    return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings)
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings,
+                              frame or InputFrame(), dict(input_report or {}))
 
 
 def initial_transfer(
@@ -133,6 +141,7 @@ def retarget(
     options: RetargetOptions = RetargetOptions(),
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    target_input: dict | None = None,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -146,6 +155,9 @@ def retarget(
     progress : callable(stage, fraction, message), optional
     should_stop : callable() -> bool, optional
         Polled between solver iterations (cancellation).
+    target_input : dict, optional
+        What :func:`~hairport.solver.inputs.canonical_target` found; with the hairstyle's own
+        it makes the metrics' ``input`` section.
     """
     options.validate()
     progress = progress or no_progress
@@ -189,6 +201,8 @@ def retarget(
             metrics["hairline"] = relocation.report
         metrics["smoothed_particles"] = int(unsmooth.sum())
         metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
+        if adaptable.input_report or target_input:
+            metrics["input"] = {**adaptable.input_report, **({"target": target_input} if target_input else {})}
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation

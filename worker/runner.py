@@ -69,15 +69,31 @@ def blob_path(repository: Repository, ref: BlobRef | None) -> Path | None:
     return blob.path
 
 
-def load_character(repository: Repository, settings: Settings, character_id: str) -> solver.Character:
-    """The character of a record, loaded from its stored files."""
+def load_character(repository: Repository, settings: Settings,
+                   character_id: str) -> tuple[solver.Character, str | None, CharacterRecord]:
+    """The character of a record, loaded from its stored files: in meters when its units are
+    given or stated by its files (the units are returned), else in the file's own (None)."""
     record = repository.get(CharacterRecord, character_id)
     if record is None:
         raise solver.InputError(f"character {character_id} does not exist", code="not_found")
-    return solver.load_character(
-        blob_path(repository, record.mesh), skeleton_path=blob_path(repository, record.skeleton), units=record.units,
-        **limits(settings),
+    character, units = solver.read_character(
+        blob_path(repository, record.mesh), skeleton_path=blob_path(repository, record.skeleton),
+        units=None if record.units == solver.AUTO else record.units, **limits(settings),
     )
+    return character, units, record
+
+
+def read_source(repository: Repository, settings: Settings, hairstyle: HairstyleRecord) -> solver.SourceInputs:
+    """A hairstyle's source character and hair, in hairport's frame (see :func:`hairport.solver.canonical_source`)."""
+    source, source_units, character = load_character(repository, settings, hairstyle.source_character_id)
+    path = blob_path(repository, hairstyle.hair)
+    units = hairstyle.units if hairstyle.units not in (None, solver.AUTO) else (
+        solver.recorded_hair_units(path) if hairstyle.format == "npz" else None)
+    hair = solver.read_hair(path, units=units or "m", format=hairstyle.format,
+                            limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
+                                                     settings.max_file_bytes))
+    return solver.canonical_source(source, hair, source_units=source_units, hair_units=units,
+                                   up=character.up_axis, front=character.front_axis)
 
 
 @lru_cache(maxsize=2)
@@ -116,12 +132,9 @@ def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str
     repository.set_preprocessing(key, RUNNING)
     began = time.perf_counter()
     try:
-        source = load_character(repository, settings, hairstyle.source_character_id)
-        hair = solver.read_hair(
-            blob_path(repository, hairstyle.hair), units=hairstyle.units,
-            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes),
-        )
-        adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(**variant.model_dump()))
+        inputs = read_source(repository, settings, hairstyle)
+        adaptable = solver.preprocess(inputs.source, inputs.hair, solver.PreprocessOptions(**variant.model_dump()),
+                                      frame=inputs.frame, input_report=inputs.report)
         with repository.storage.work_dir() as work:
             path = work / f"adaptable{solver.ARTIFACT_EXTENSION}"
             solver.save_adaptable(adaptable, path)
@@ -219,19 +232,25 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
                         progress: JobProgress) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
     adaptable = _adaptable(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
-    target = load_character(repository, settings, job.target_character_id)
+    target, units, character = load_character(repository, settings, job.target_character_id)
+    target, target_input = solver.canonical_target(adaptable.source, target, units=units, up=character.up_axis,
+                                                   front=character.front_axis)
+    frame = adaptable.frame  # results are written in the groom's units and axes, a drawn hairline read in them
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
-    options = solver.RetargetOptions(**job.options, workers=settings.solver_workers, hairline=edit)
-    result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop)
+    options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
+                                     hairline=solver.edit_in_canonical(frame, edit))
+    result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop,
+                             target_input=target_input)
     progress("storing", 0.99, "writing outputs")
     outputs = {}
     report = {**result.report(), "job": {"id": job.id, "hairstyle_id": job.hairstyle_id,
                                           "target_character_id": job.target_character_id}}
     storage = repository.storage
     with storage.work_dir() as work:
+        hair = solver.hair_in_frame(frame, result.hair)
         for fmt in sorted({"npz", job.output_format}):
             path = work / f"result.{fmt}"
-            solver.write_hair(path, result.hair, format=fmt)
+            solver.write_hair(path, hair, units=frame.units, format=fmt)
             outputs[fmt] = stored(storage.save_file(path, f".{fmt}"), f".{fmt}")
         path = work / "report.json"
         path.write_text(json.dumps(report, indent=2, default=json_default) + "\n")

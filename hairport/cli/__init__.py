@@ -15,7 +15,7 @@ import warnings
 from hairport.solver import InputError
 
 from . import demo, ops, solve
-from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress
+from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress, print_warning
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "StageProgress", "build_parser", "main"]
 
@@ -38,8 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
 def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """``warnings.showwarning`` of the command line: one ``hairport: warning:`` line on stderr,
     without the Python file, line number and source line a user cannot act on."""
-    text = " ".join(str(message).split())  # a message of several lines stays one line
-    print(f"hairport: warning: {text}", file=sys.stderr, flush=True)
+    print_warning(message)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,6 +13,11 @@ EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
 
 
+def print_warning(text: str) -> None:
+    """One ``hairport: warning:`` line on stderr (a message of several lines stays one line)."""
+    print(f"hairport: warning: {' '.join(str(text).split())}", file=sys.stderr, flush=True)
+
+
 class StageProgress:
     """Prints one line per pipeline stage (and solver iterations) to stderr (a :data:`hairport.solver.ProgressFn`)."""
 
@@ -40,8 +45,17 @@ def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
 
 
 def add_units(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--units", default=None, choices=solver.UNITS,
-                   help="units of the hair and of meshes without a skeleton sidecar (default m); output uses them too")
+    """The frame options: units and axes of the inputs (every output is written back in the hair's)."""
+    p.add_argument("--units", default=solver.AUTO, choices=(solver.AUTO, *solver.UNITS),
+                   help="units of the hair and of meshes without a skeleton sidecar (default auto: a sidecar's, "
+                        "glTF's or a .npz hair's own units, else inferred from sizes); outputs use the hair's")
+    p.add_argument("--hair-units", default=None, choices=(solver.AUTO, *solver.UNITS),
+                   help="units of the hair file when they differ from --units")
+    p.add_argument("--up-axis", default=solver.AUTO, choices=(solver.AUTO, *solver.AXIS_CHOICES),
+                   help="the axis of the input files that points up (default auto: inferred from the head bone, "
+                        "the roots and the hang of the hair)")
+    p.add_argument("--front-axis", default=solver.AUTO, choices=(solver.AUTO, *solver.AXIS_CHOICES),
+                   help="the axis the face looks along (default auto: inferred from the face side)")
 
 
 def preprocess_options(args: argparse.Namespace) -> solver.PreprocessOptions:
@@ -56,22 +70,53 @@ def mesh_limits(settings) -> dict:
 
 def mesh_units(args: argparse.Namespace, mesh: str, skeleton: str | None) -> str | None:
     # a skeleton sidecar states its own units; --units is for meshes without one
-    return None if (skeleton is not None or solver.resolve_skeleton_path(mesh) is not None) else args.units
+    if skeleton is not None or solver.resolve_skeleton_path(mesh) is not None:
+        return None
+    return None if args.units == solver.AUTO else args.units
 
 
-def load_target(args: argparse.Namespace, settings) -> solver.Character:
-    return solver.load_character(args.target, skeleton_path=args.target_skeleton,
-                                 units=mesh_units(args, args.target, args.target_skeleton), **mesh_limits(settings))
+def hair_units(args: argparse.Namespace) -> str | None:
+    """The hair's units: --hair-units, else --units, else those a .npz records, else None (inferred)."""
+    given = args.hair_units if args.hair_units not in (None, solver.AUTO) else args.units
+    if given not in (None, solver.AUTO):
+        return given
+    return solver.recorded_hair_units(args.hair) if str(args.hair).lower().endswith(".npz") else None
 
 
-def load_source(args: argparse.Namespace, settings, progress) -> tuple[solver.Character, solver.Hair]:
-    """Source character and hair from --source/--hair, with the configured limits."""
+def axes(args: argparse.Namespace) -> dict:
+    return {"up": args.up_axis, "front": args.front_axis}
+
+
+def load_target(args: argparse.Namespace, settings, adaptable: solver.AdaptableHairstyle,
+                progress=None) -> tuple[solver.Character, dict]:
+    """The target of --target in hairport's frame (next to the adaptable hairstyle's source), and what was found."""
+    target, units = solver.read_character(args.target, skeleton_path=args.target_skeleton,
+                                          units=mesh_units(args, args.target, args.target_skeleton),
+                                          **mesh_limits(settings))
+    target, found = solver.canonical_target(adaptable.source, target, units=units, **axes(args))
+    if progress is not None and (found["units_how"] != "given or stated by the file" or found["up"] != "+y"
+                                 or found["front"] != "+z"):
+        progress("input", 0.0, f"target: units {found['units']} ({found['units_how']}); up {found['up']}, "
+                               f"front {found['front']} ({found['axes_how']})")
+    return target, found
+
+
+def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceInputs:
+    """Source character and hair from --source/--hair, with the configured limits, in hairport's frame.
+
+    Prints what was inferred (a progress line) and the warnings about the inputs (one line each)."""
     limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
     progress("load", 0.0, "reading the source")
-    source = solver.load_character(args.source, skeleton_path=args.source_skeleton,
-                                   units=mesh_units(args, args.source, args.source_skeleton), **mesh_limits(settings))
-    hair = solver.read_hair(args.hair, units=args.units or "m", limits=limits)
-    return source, hair
+    source, source_units = solver.read_character(args.source, skeleton_path=args.source_skeleton,
+                                                 units=mesh_units(args, args.source, args.source_skeleton),
+                                                 **mesh_limits(settings))
+    units = hair_units(args)
+    hair = solver.read_hair(args.hair, units=units or "m", limits=limits)
+    inputs = solver.canonical_source(source, hair, source_units=source_units, hair_units=units, **axes(args))
+    progress("input", 0.0, inputs.summary())
+    for note in inputs.warnings:
+        print_warning(note)
+    return inputs
 
 
 def check_source_arguments(args: argparse.Namespace) -> None:
@@ -90,7 +135,8 @@ def adaptable_from_args(args: argparse.Namespace, settings, progress) -> tuple[s
         progress("load", 0.0, "reading the adaptable hairstyle")
         return solver.load_adaptable(args.adaptable), 0.0
     options = preprocess_options(args)
-    source, hair = load_source(args, settings, progress)
+    inputs = load_source(args, settings, progress)
     began = time.perf_counter()
-    adaptable = solver.preprocess(source, hair, options, progress=progress)
+    adaptable = solver.preprocess(inputs.source, inputs.hair, options, progress=progress, frame=inputs.frame,
+                                  input_report=inputs.report)
     return adaptable, time.perf_counter() - began

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from hairport import solver
 from hairport.outputs import OutputSet
@@ -99,8 +100,10 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
         raise InputError(f"the artifact file must end in {solver.ARTIFACT_EXTENSION}", args.out, "unknown_format")
     solver.format_for_path(args.hair)
     options = preprocess_options(args)
-    source, hair = load_source(args, settings, progress)
-    adaptable = solver.preprocess(source, hair, options, progress=progress)
+    inputs = load_source(args, settings, progress)
+    hair = inputs.hair
+    adaptable = solver.preprocess(inputs.source, hair, options, progress=progress, frame=inputs.frame,
+                                  input_report=inputs.report)
     with OutputSet() as outputs:
         outputs.add(args.out, lambda path: solver.save_adaptable(adaptable, path))
         outputs.commit()
@@ -114,7 +117,6 @@ def cmd_retarget(args: argparse.Namespace) -> int:
 
     settings = get_settings()
     progress = StageProgress(args.quiet)
-    units = args.units or "m"
     check_source_arguments(args)
     out_format = solver.format_for_path(args.out)  # refuse unknown formats and options before any work
     if args.hair:
@@ -125,15 +127,20 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     options.validate()
     adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)
     inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
-    target = load_target(args, settings)
-    result = solver.retarget(adaptable, target, options, progress=progress)
+    target, target_input = load_target(args, settings, adaptable, progress)
+    # a drawn hairline is in the groom's axes, like every output
+    options = replace(options, hairline=solver.edit_in_canonical(adaptable.frame, options.hairline))
+    result = solver.retarget(adaptable, target, options, progress=progress, target_input=target_input)
     hair = adaptable.hair
+    frame = adaptable.frame
+    units = frame.units
     report = result.report()
     report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
     report["inputs"] = {**inputs, "target": args.target, "strands": hair.n_strands, "particles": hair.n_particles,
                         "guides": len(adaptable.multiscale.guides), "units": units}
     with OutputSet() as outputs:
-        outputs.add(args.out, lambda path: solver.write_hair(path, result.hair, units=units, format=out_format))
+        outputs.add(args.out, lambda path: solver.write_hair(path, solver.hair_in_frame(frame, result.hair),
+                                                             units=units, format=out_format))
         if args.report:
             outputs.add_json(args.report, report)
         if args.preview:
@@ -156,8 +163,10 @@ def cmd_hairline(args: argparse.Namespace) -> int:
     settings = get_settings()
     progress = StageProgress(args.quiet)
     adaptable, _ = adaptable_from_args(args, settings, progress)
-    target = load_target(args, settings)
-    document = solver.hairline_document(adaptable, target, args.preset)
+    target, _ = load_target(args, settings, adaptable, progress)
+    # written in the groom's axes and units, as the result of a retarget (and read back so)
+    document = solver.curve_document_in_frame(adaptable.frame, solver.hairline_document(adaptable, target,
+                                                                                          args.preset))
     with OutputSet() as outputs:
         outputs.add_json(args.out, document)
         outputs.commit()

@@ -21,9 +21,14 @@ async def create_character(
     repository: RepositoryDep,
     mesh: Annotated[UploadFile, File(description=MESH_FILE_DESCRIPTION)],
     skeleton: Annotated[UploadFile | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
-    units: Annotated[str | None, Form(description="units of a mesh without a skeleton JSON (default m)")] = None,
+    units: Annotated[str | None, Form(description="units of a mesh without a skeleton JSON (default auto: glTF's "
+                                                  "meters, else inferred from sizes)")] = None,
+    up_axis: Annotated[str | None, Form(description="the mesh's up axis: x, y, z, -x, -y, -z "
+                                                    "(default auto: inferred)")] = None,
+    front_axis: Annotated[str | None, Form(description="the axis the face looks along (default auto: inferred)")] = None,
 ) -> CharacterOut:
-    return CharacterOut.of(await characters.create_character(repository, settings, owner, mesh, skeleton, units))
+    return CharacterOut.of(await characters.create_character(repository, settings, owner, mesh, skeleton, units,
+                                                             up_axis, front_axis))
 
 
 @router.get("/{character_id}", response_model=CharacterOut, summary="A character")

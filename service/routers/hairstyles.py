@@ -25,7 +25,8 @@ async def create_hairstyle(
     queue: QueueDep,
     hair: Annotated[UploadFile, File(description=HAIR_FILE_DESCRIPTION)],
     source_character_id: Annotated[str, Form(description="the character the hairstyle was made for")],
-    units: Annotated[str, Form(description="units of the hair file")] = "m",
+    units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
+                                           "inferred from where its roots sit on the source character)")] = "auto",
     guides: Annotated[int | None, Form(description="guide strands of the multi-scale solve (default 300)")] = None,
     k: Annotated[int, Form(description="inter-strand neighbours per particle (Eq. 8)")] = _DEFAULTS.k,
 ) -> HairstyleOut:

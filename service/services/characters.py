@@ -9,15 +9,25 @@ from hairport.records import BlobRef, CharacterRecord, digest, now, owned_id
 from hairport.repository import Repository
 from hairport.settings import Settings
 
-from ..uploads import check_units, extension_of, store_upload, validated
+from ..errors import Problem
+from ..uploads import check_axis, check_units, extension_of, store_upload, validated
 
 SKELETON_SUFFIX = ".json"
 
 
 async def create_character(repository: Repository, settings: Settings, owner: str, mesh: UploadFile,
-                           skeleton: UploadFile | None, units: str | None) -> CharacterRecord:
-    """Store and validate an uploaded character; the same upload twice gives the same record."""
+                           skeleton: UploadFile | None, units: str | None, up_axis: str | None = None,
+                           front_axis: str | None = None) -> CharacterRecord:
+    """Store and validate an uploaded character; the same upload twice gives the same record.
+
+    ``units`` None or ``auto``: the units its files state, else inferred when it is used; the
+    axes likewise (``None``: inferred)."""
     check_units(units)
+    units = None if units == solver.AUTO else units
+    up_axis, front_axis = check_axis(up_axis, "up_axis"), check_axis(front_axis, "front_axis")
+    if up_axis and front_axis and up_axis[1] == front_axis[1]:
+        raise Problem(422, "bad_axis", "up_axis and front_axis must be perpendicular")
+    axes = [up_axis, front_axis] if up_axis or front_axis else []
     suffix = extension_of(mesh, solver.MESH_EXTENSIONS, "mesh")
     if skeleton is not None:
         extension_of(skeleton, (SKELETON_SUFFIX,), "skeleton")
@@ -25,12 +35,12 @@ async def create_character(repository: Repository, settings: Settings, owner: st
     mesh_blob = await store_upload(storage, mesh, settings, suffix, "mesh")
     skeleton_blob = await store_upload(storage, skeleton, settings, SKELETON_SUFFIX, "skeleton") if skeleton else None
     character_id = owned_id(owner, digest(
-        "character", mesh_blob.sha256, suffix, skeleton_blob.sha256 if skeleton_blob else None, units))
+        "character", mesh_blob.sha256, suffix, skeleton_blob.sha256 if skeleton_blob else None, units, *axes))
     existing = repository.get(CharacterRecord, character_id)
     if existing is not None:
         return existing
-    character = await validated(
-        solver.load_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
+    character, stated = await validated(
+        solver.read_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
         units=units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
         max_bytes=settings.max_upload_bytes,
     )
@@ -38,7 +48,8 @@ async def create_character(repository: Repository, settings: Settings, owner: st
         id=character_id, owner=owner, created_at=now(),
         mesh=BlobRef(sha256=mesh_blob.sha256, suffix=suffix, size=mesh_blob.size),
         skeleton=BlobRef(sha256=skeleton_blob.sha256, suffix=SKELETON_SUFFIX) if skeleton_blob else None,
-        units=units, vertices=int(character.n_vertices), faces=int(character.n_faces),
+        units=stated, up_axis=up_axis, front_axis=front_axis,
+        vertices=int(character.n_vertices), faces=int(character.n_faces),
         bones=list(character.skeleton.names) if character.skeleton is not None else [],
     )
     repository.put(record, character_id)

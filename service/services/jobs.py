@@ -66,7 +66,9 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
     folder = work.__enter__()
     path = folder / f"result.{fmt}"
     try:
-        solver.write_hair(path, solver.read_hair(source.path, limits=UNLIMITED), format=fmt)
+        # the lossless copy is in the groom's units (it records them): convert in the same units
+        units = solver.recorded_hair_units(source.path) or "m"
+        solver.write_hair(path, solver.read_hair(source.path, units=units, limits=UNLIMITED), units=units, format=fmt)
     except BaseException:
         work.__exit__(None, None, None)
         raise

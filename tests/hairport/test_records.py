@@ -68,3 +68,13 @@ def test_job_record_round_trips_and_ignores_unknown_fields():
     assert JobRecord.model_validate({**document, "from_a_newer_version": 1}) == job
     with pytest.raises(ValueError):
         JobRecord.model_validate({**document, "state": "paused"})
+
+
+def test_artifact_key_changes_with_a_characters_given_axes():
+    options = PreprocessSettings(k=5, guides=300)
+    base = artifact_key(character(), "h" * 64, "auto", options, 1)
+    turned = artifact_key(character(up_axis="+z", front_axis="-y"), "h" * 64, "auto", options, 1)
+    other = artifact_key(character(up_axis="+z"), "h" * 64, "auto", options, 1)
+    assert len({base, turned, other}) == 3
+    # axes left to inference keep the key of a record that never had them
+    assert artifact_key(character(up_axis=None), "h" * 64, "auto", options, 1) == base

@@ -28,4 +28,6 @@ def test_character_out_flattens_the_record():
     record = CharacterRecord(id="c" * 32, owner="k", created_at=5.0, mesh=BlobRef(sha256="a" * 64, suffix=".obj"),
                              units=None, vertices=4, faces=2, bones=[])
     out = schemas.CharacterOut.of(record)
-    assert (out.units, out.has_skeleton, out.sha256, out.skeleton_sha256) == ("m", False, "a" * 64, None)
+    # no units given or stated by its files: inferred when the character is used (issue 11; was "m")
+    assert (out.units, out.has_skeleton, out.sha256, out.skeleton_sha256) == ("auto", False, "a" * 64, None)
+    assert (out.up_axis, out.front_axis) == ("auto", "auto")

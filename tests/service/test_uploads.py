@@ -41,3 +41,14 @@ def test_input_errors_name_the_field_not_the_file():
     with pytest.raises(Problem) as refused:
         asyncio.run(validated(refuse, "skeleton"))
     assert (refused.value.status, refused.value.code, refused.value.detail) == (422, "bad_input", "skeleton: no")
+
+
+def test_axes_are_checked_and_normalised():
+    from hairport.service.uploads import check_axis
+
+    assert [check_axis(axis, "up_axis") for axis in (None, "auto", "z", "-X", "+y")] == [None, None, "+z", "-x", "+y"]
+    with pytest.raises(Problem) as refused:
+        check_axis("up", "up_axis")
+    assert (refused.value.status, refused.value.code) == (422, "bad_axis") and "up_axis must be one of" in str(
+        refused.value.detail)
+    check_units("auto")

@@ -139,3 +139,22 @@ def test_rows_with_fewer_than_k_neighbours_round_trip(tmp_path):
     from_memory, from_disk = pipeline.retarget(adaptable, target, options), pipeline.retarget(loaded, target, options)
     assert np.array_equal(from_memory.hair.points, from_disk.hair.points)
     assert from_memory.metrics["penetrating_particles"] == 0
+
+
+def test_the_grooms_frame_and_input_report_travel_with_the_artifact(case, tmp_path):
+    source, _, hair, _ = case
+    from hairport.solver.model.frame import InputFrame
+
+    frame = InputFrame("mm", "z", "-y")
+    report = {"units": {"hair": "mm"}, "warnings": ["3 of 40 roots sit more than 1 mm off the source body"]}
+    adaptable = pipeline.preprocess(source, hair, pipeline.PreprocessOptions(guides=12), frame=frame,
+                                    input_report=report)
+    assert (adaptable.frame, adaptable.input_report) == (frame, report)
+    path = tmp_path / "framed.hpa"
+    artifact.save_adaptable(adaptable, path)
+    loaded = artifact.load_adaptable(path)
+    assert loaded.frame == frame and loaded.input_report == report
+    # an artifact written before frames were recorded reads as hairport's own frame
+    older = tmp_path / "older.hpa"
+    rewrite_meta(path, older, lambda meta, arrays: [meta.pop("input_frame"), meta.pop("input_report")])
+    assert (artifact.load_adaptable(older).frame, artifact.load_adaptable(older).input_report) == (InputFrame(), {})

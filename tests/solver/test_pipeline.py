@@ -84,3 +84,15 @@ def test_cycle_a_to_b_to_a(female):
     assert distance <= 3e-3
     assert angle <= CYCLE_ANGLE_BOUND_RAD
     assert back.metrics["penetrating_particles"] == 0
+
+
+def test_the_metrics_carry_the_input_section_of_the_groom_and_the_target():
+    toy = toy_character()
+    hair = generate_groom(toy, "short", 30, 6, seed=1)
+    plain = pipeline.retarget(pipeline.preprocess(toy, hair), toy, pipeline.RetargetOptions(method="root-translate"))
+    assert "input" not in plain.metrics  # nothing was brought into hairport's frame: nothing to say
+    adaptable = pipeline.preprocess(toy, hair, input_report={"units": {"hair": "cm"}, "warnings": []})
+    result = pipeline.retarget(adaptable, toy, pipeline.RetargetOptions(method="root-translate"),
+                               target_input={"units": "cm", "up": "+z"})
+    assert result.metrics["input"] == {"units": {"hair": "cm"}, "warnings": [], "target": {"units": "cm", "up": "+z"}}
+    assert result.report()["metrics"]["input"]["target"]["up"] == "+z"

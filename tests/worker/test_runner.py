@@ -198,3 +198,58 @@ def test_progress_is_written_at_most_every_interval(world, monkeypatch):
     repository.storage.update_record("jobs", job.id, lambda record: {**record, "cancel_requested": True})
     progress.last_check = -1e9
     assert progress.should_stop() is True
+
+
+def test_inputs_in_centimetres_and_z_up_give_the_result_in_their_frame(world, tmp_path):
+    """The same characters and groom as the world's, written Z up in cm and stating no units: the job's
+    result is the world's result in that frame, and its metrics say what was inferred."""
+    from hairport.solver.model.frame import InputFrame
+    from tests.solver.frames import character_in
+
+    repository, settings, root = world["repository"], world["settings"], world["root"]
+    frame = InputFrame("cm", "z", "-y")
+    records = {}
+    for name, letter in (("source", "c"), ("target", "d")):
+        character = solver.load_character(root / f"{name}.obj")  # the numbers the world's files hold
+        mesh, skeleton = tmp_path / f"{name}.obj", tmp_path / f"{name}.skeleton.json"
+        write_character(character_in(frame, character), mesh, skeleton)
+        document = json.loads(skeleton.read_text())
+        del document["units"]
+        skeleton.write_text(json.dumps(document))
+        record = CharacterRecord(
+            id=letter * 32, owner=OWNER, created_at=now(), vertices=character.n_vertices, faces=character.n_faces,
+            bones=list(character.skeleton.names),
+            mesh=BlobRef(sha256=repository.storage.save_file(mesh, ".obj").sha256, suffix=".obj"),
+            skeleton=BlobRef(sha256=repository.storage.save_file(skeleton, ".json").sha256, suffix=".json"))
+        repository.put(record, record.id)
+        records[name] = record
+    hair = solver.read_hair(root / "groom.data")
+    path = tmp_path / "groom.npz"
+    np.savez(path, format=np.array("hairport-hair"), version=np.array(1), points=frame.axes_out(hair.points) * 100,
+             offsets=hair.offsets)
+    blob = repository.storage.save_file(path, ".npz")
+    options = PreprocessSettings(k=5, guides=10)
+    style = HairstyleRecord(
+        id="e" * 32, owner=OWNER, created_at=now(), source_character_id=records["source"].id,
+        hair=BlobRef(sha256=blob.sha256, suffix=".npz"), format="npz", units="auto", options=options,
+        artifact_key=artifact_key(records["source"], blob.sha256, "auto", options, solver.ARTIFACT_FORMAT_VERSION),
+        strands=hair.n_strands, particles=hair.n_particles)
+    repository.put(style, style.id)
+    runner.run_preprocess(repository, settings, style.id)
+    assert repository.preprocessing_status(style).state == "ready", repository.preprocessing_status(style).error
+    world["ids"]["cm"], world["ids"]["cm-target"] = style, records["target"]
+    framed, reference = add_job(world, target="cm-target", hairstyle="cm"), add_job(world)
+    for job in (framed, reference):
+        runner.run_retarget(repository, settings, job.id, "w1")
+    framed, reference = repository.job(framed.id), repository.job(reference.id)
+    assert framed.state == reference.state == "succeeded", framed.error
+    stored = repository.storage.blob(framed.outputs["npz"].sha256, ".npz").path
+    assert solver.recorded_hair_units(stored) == "cm"
+    result = solver.read_hair(stored, units="cm")
+    expected = solver.read_hair(repository.storage.blob(reference.outputs["npz"].sha256, ".npz").path)
+    # the inputs agree to 1e-16 m (cm to m); five unconverged iterations carry that to ~1e-12 m
+    assert np.abs(frame.axes_in(result.points) - expected.points).max() < 1e-9
+    section = framed.metrics["input"]
+    assert (section["units"]["hair"], section["axes"]["up"], section["axes"]["front"]) == ("cm", "+z", "-y")
+    assert (section["target"]["units"], section["target"]["up"]) == ("cm", "+z") and section["warnings"] == []
+    assert "input" not in reference.metrics or reference.metrics["input"]["units"]["hair"] == "m"

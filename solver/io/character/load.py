@@ -1,4 +1,5 @@
-"""Loading a character: the registry of mesh formats, and :func:`load_character`.
+"""Loading a character: the registry of mesh formats, :func:`read_character` (with the units
+the files state) and :func:`load_character` (in meters).
 
 Each format module exports ``READERS = {extension: reader}``, a reader being
 ``reader(path, *, max_vertices, max_faces, mesh_name) -> MeshFile`` (in the style of
@@ -34,6 +35,8 @@ from hairport.solver.model.units import unit_scale
 MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS}
 #: the mesh formats :func:`load_character` reads
 MESH_EXTENSIONS = tuple(MESH_READERS)
+#: glTF's length unit, by its specification
+GLTF_UNITS = "m"
 
 
 def load_character(
@@ -47,7 +50,36 @@ def load_character(
     mesh_name: str | None = None,
     weight_smoothing: int = DEFAULT_WEIGHT_SMOOTHING,
 ) -> Character:
-    """Read a character: mesh, and skeleton with skin weights where available.
+    """Read a character in meters: :func:`read_character` with a mesh of unstated units read as meters.
+
+    Parameters are those of :func:`read_character`.
+
+    Returns
+    -------
+    character : Character
+    """
+    character, stated = read_character(mesh_path, skeleton_path=skeleton_path, units=units, max_vertices=max_vertices,
+                                       max_faces=max_faces, max_bytes=max_bytes, mesh_name=mesh_name,
+                                       weight_smoothing=weight_smoothing)
+    if stated is None and character.skeleton is not None and character.weights is None:
+        weights = derive_skin_weights(character.vertices, character.faces, character.skeleton,
+                                      smoothing=weight_smoothing)
+        character = Character(character.vertices, character.faces, character.skeleton, weights, character.name)
+    return character
+
+
+def read_character(
+    mesh_path: str | os.PathLike,
+    *,
+    skeleton_path: str | os.PathLike | None = None,
+    units: str | None = None,
+    max_vertices: int = DEFAULT_MAX_VERTICES,
+    max_faces: int = DEFAULT_MAX_FACES,
+    max_bytes: int = DEFAULT_MAX_FILE_BYTES,
+    mesh_name: str | None = None,
+    weight_smoothing: int = DEFAULT_WEIGHT_SMOOTHING,
+) -> tuple[Character, str | None]:
+    """Read a character: mesh, and skeleton with skin weights where available, and its units.
 
     Parameters
     ----------
@@ -58,8 +90,8 @@ def load_character(
         exists, else the glTF skin, else no skeleton.
     units : {"m", "dm", "cm", "mm"}, optional
         Units of the mesh file. Default: the sidecar's ``units`` when a sidecar is used,
-        else meters (glTF is meters by specification). The sidecar's own coordinates
-        always use its ``units`` key.
+        else meters for glTF (by specification), else unknown. The sidecar's own
+        coordinates always use its ``units`` key.
     max_vertices, max_faces : int
         Limits checked before the arrays are built; ``max_faces`` counts triangles.
     max_bytes : int
@@ -73,7 +105,13 @@ def load_character(
     Returns
     -------
     character : Character
-        In meters, named after the file.
+        In meters when ``units`` is known, else in the file's own coordinates; named after
+        the file.
+    units : str or None
+        The mesh's units: ``units`` when given, else the sidecar's ``units``, else ``m`` for
+        glTF (meters by specification), else None (nothing states them: the character is in
+        the file's coordinates, for :func:`hairport.solver.inputs.canonical_source` to infer,
+        and skin weights a sidecar lacks are derived there, in meters).
 
     Raises
     ------
@@ -83,6 +121,7 @@ def load_character(
         skeleton (see
         :func:`~hairport.solver.io.character.skeleton_json.load_skeleton_json`).
     """
+    units = None if units == "auto" else units
     path = Path(mesh_path)
     source = str(path)
     check_file(path, max_bytes)
@@ -103,13 +142,14 @@ def load_character(
         skeleton, weights, sidecar_units = read_skeleton_json(sidecar, len(vertices), max_bytes)
         mesh_units = units if units is not None else sidecar_units
     else:
-        mesh_units = units if units is not None else "m"
-    scale = unit_scale(mesh_units)
+        mesh_units = units if units is not None else GLTF_UNITS if path.suffix.lower() in GLTF_READERS else None
+    scale = unit_scale(mesh_units or "m")
     vertices = vertices * scale
     if sidecar is None and skin is not None:
         skeleton = skin.skeleton.scaled(scale)
         weights = skin.weights
-    if skeleton is not None and weights is None:
+    if skeleton is not None and weights is None and mesh_units is not None:
+        # derived in meters: with unknown units the weights wait for the units (canonical_source)
         weights = derive_skin_weights(vertices, faces, skeleton, smoothing=weight_smoothing)
-    return Character(vertices, faces, skeleton, weights, name=path.name)
+    return Character(vertices, faces, skeleton, weights, name=path.name), mesh_units
 

@@ -2,7 +2,7 @@
 
 Schema::
 
-    {"units": "m",                               # m | dm | cm | mm; optional, default "m"
+    {"units": "m",                               # m | dm | cm | mm; optional (see below)
      "bones": [{"name": str, "parent": str | null, "head": [x, y, z], "tail": [x, y, z]}, ...],
      "weights": {bone_name: [[vertex_index, weight], ...], ...}}   # optional
 
@@ -14,6 +14,11 @@ bone's valid region). When ``weights`` is absent the reader returns none, and
 (:func:`hairport.solver.body.skinning.derive_skin_weights`). Vertex indices are 0-based.
 :func:`write_skeleton_json` writes this schema (:func:`skeleton_document`), and is the one
 writer of it.
+
+``units`` states the units of the joints and of the mesh beside the file. Without it the
+joints are read as they are (meters, unless the mesh turns out to be in other units) and the
+mesh's units are unknown: :func:`hairport.solver.inputs.canonical_source` infers them and
+scales the joints with the mesh.
 """
 
 from __future__ import annotations
@@ -87,7 +92,8 @@ def load_skeleton_json(
 def read_skeleton_json(
     path: Path, n_vertices: int, max_bytes: int
 ) -> tuple[Skeleton, sp.csr_matrix | None, str]:
-    """:func:`load_skeleton_json`, also returning the file's ``units`` (for the mesh beside it)."""
+    """:func:`load_skeleton_json`, also returning the file's ``units`` (for the mesh beside it; None when
+    the file has no ``units`` key: its joints are then read as meters, and the mesh's units are unknown)."""
     try:
         return _parse_skeleton_json(path, n_vertices, max_bytes)
     except InputError:
@@ -179,11 +185,11 @@ def _parse_skeleton_json(
         raise InputError(f"skeleton file is not valid JSON: {error}", source, "bad_skeleton") from None
     if not isinstance(document, dict):
         raise InputError("skeleton JSON must be an object with 'bones'", source, "bad_skeleton")
-    units = document.get("units", "m")
-    if not isinstance(units, str):
+    units = document.get("units")  # absent: meters for the joints, unknown for the mesh beside it
+    if "units" in document and not isinstance(units, str):
         raise InputError(f"'units' must be a string, got {units!r}", source, "unknown_units")
     try:
-        scale = unit_scale(units)
+        scale = unit_scale(units or "m")
     except InputError as error:
         raise InputError(error.problem, source, error.code) from None
     bones = document.get("bones")

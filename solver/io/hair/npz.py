@@ -200,6 +200,23 @@ def _member_array(
         raise ctx.error(f"array {key!r} cannot be read ({exc})", "truncated") from None
 
 
+def recorded_units(path) -> str | None:
+    """The units a hairport archive records, without reading its arrays.
+
+    Returns None for a file that is not a readable archive or records none (the reader then
+    says what is wrong, or reads it in the units asked for).
+    """
+    try:
+        with zipfile.ZipFile(path) as archive, archive.open("units.npy") as f:
+            value = np.lib.format.read_array(f, allow_pickle=False, max_header_size=NPZ_MAX_HEADER_BYTES)
+    except (*_ZIP_ERRORS, KeyError):
+        return None
+    if value.shape != () or value.dtype.kind not in "US":
+        return None
+    units = _member_text(value)
+    return units if units in METERS_PER_UNIT else None
+
+
 def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
     """Write the archive: marker, version, units and the hairstyle's arrays in file units."""
     scale = options.scale

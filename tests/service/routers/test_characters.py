@@ -49,3 +49,21 @@ def test_meshes_without_faces_are_422_at_upload(client, mesh, code, words):
     body = response.json()
     assert (response.status_code, body["code"]) == (422, code) and body["detail"].startswith("mesh: ")
     assert words in body["detail"]
+
+
+def test_units_and_axes_are_stated_given_or_left_to_inference(client, files):
+    upload = {"mesh": ("toy.obj", files["mesh"]), "skeleton": ("toy.skeleton.json", files["skeleton"])}
+    rigged = client.post("/v1/characters", headers=AUTH, files=upload).json()
+    assert (rigged["units"], rigged["up_axis"], rigged["front_axis"]) == ("m", "auto", "auto")  # the sidecar's
+    bare = client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"])}).json()
+    assert (bare["units"], bare["up_axis"]) == ("auto", "auto")  # an OBJ alone states nothing
+    turned = client.post("/v1/characters", headers=AUTH, files=upload, data={"up_axis": "z", "front_axis": "-Y"})
+    assert turned.status_code == 201, turned.text
+    assert (turned.json()["up_axis"], turned.json()["front_axis"]) == ("+z", "-y")
+    assert turned.json()["id"] != rigged["id"]  # another frame, another character
+    auto = client.post("/v1/characters", headers=AUTH, files=upload, data={"units": "auto", "up_axis": "auto"})
+    assert auto.json()["id"] == rigged["id"]
+    for form, words in (({"up_axis": "up"}, "up_axis must be one of auto"),
+                        ({"up_axis": "z", "front_axis": "-z"}, "perpendicular")):
+        refused = client.post("/v1/characters", headers=AUTH, files=upload, data=form)
+        assert (refused.status_code, refused.json()["code"]) == (422, "bad_axis") and words in refused.json()["detail"]

@@ -77,3 +77,28 @@ def test_hair_files_without_hair_are_422_at_upload(client, files, name, data, co
     assert (response.status_code, body["code"]) == (422, code), body
     assert body["detail"].startswith("hair: ") and words in body["detail"]
     assert waiting(client, PREPROCESS_QUEUE) == 0  # nothing for a worker to preprocess
+
+
+def test_units_are_inferred_and_a_groom_in_other_units_is_refused_at_upload(client, files, tmp_path):
+    import numpy as np
+
+    from hairport.solver import read_hair
+
+    source = upload_character(client, files, "source")
+    (tmp_path / "g.data").write_bytes(files["groom.data"])
+    hair = read_hair(tmp_path / "g.data")
+    inferred = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source},
+                           files={"hair": ("g.data", files["groom.data"])})
+    assert inferred.status_code == 201 and inferred.json()["units"] == "auto"
+    in_mm = tmp_path / "mm.npz"
+    np.savez(in_mm, format=np.array("hairport-hair"), version=np.array(1), points=hair.points * 1000,
+             offsets=hair.offsets)
+    # the body states meters (its sidecar): a groom in millimetres is read as such
+    fitted = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source},
+                         files={"hair": ("mm.npz", in_mm.read_bytes())})
+    assert fitted.status_code == 201, fitted.text
+    refused = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source, "units": "m"},
+                          files={"hair": ("mm.npz", in_mm.read_bytes())})
+    assert (refused.status_code, refused.json()["code"]) == (422, "units_mismatch")
+    assert refused.json()["detail"].startswith("hair: ") and "units=mm" in refused.json()["detail"]
+    assert waiting(client, PREPROCESS_QUEUE) == 2  # the refused one sent nothing

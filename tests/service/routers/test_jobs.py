@@ -77,3 +77,17 @@ def test_results_in_any_format_and_gone_outputs(client, tmp_path):
 def write(path, content: bytes):
     path.write_bytes(content)
     return path
+
+
+def test_a_result_in_millimetres_converts_in_millimetres(client, tmp_path):
+    """Results are stored in the groom's units (the .npz records them); a conversion keeps them."""
+    repository = client.app.state.repository
+    job_id = add_jobs(client, 1)[0]
+    hair = solver.Hair.from_strands([np.array([[0.0, 1.6, 0.0], [0.0, 1.61, 0.01], [0.0, 1.62, 0.03]])])
+    solver.write_hair(tmp_path / "r.npz", hair, units="mm")
+    blob = repository.storage.save_file(tmp_path / "r.npz", ".npz")
+    repository.set_job(job_id, state="succeeded", outputs={"npz": BlobRef(sha256=blob.sha256, suffix=".npz")})
+    converted = client.get(f"/v1/jobs/{job_id}/result", headers=AUTH, params={"format": "obj"})
+    assert converted.status_code == 200, converted.text
+    in_file = solver.read_hair(write(tmp_path / "c.obj", converted.content)).points  # the file's own numbers
+    np.testing.assert_allclose(in_file, hair.points * 1000.0, atol=1e-4)

@@ -100,3 +100,26 @@ def test_extension_is_matched_case_insensitively(tmp_path):
     np.testing.assert_array_equal(character.vertices, vertices)
     np.testing.assert_array_equal(character.faces, faces)
     assert character.name == "BODY.OBJ"
+
+
+def test_read_character_says_which_units_the_files_state(tmp_path):
+    """Given units win; then a sidecar's ``units``; glTF is meters; an OBJ alone or a sidecar without
+    ``units`` states none (its coordinates come as they are, weights wait for the units)."""
+    from hairport.solver.io.character.load import read_character
+
+    path, vertices, _ = body_obj(tmp_path)
+    character, units = read_character(path)
+    assert units is None and np.array_equal(character.vertices, vertices)
+    assert read_character(path, units="cm")[1] == "cm" and read_character(path, units="auto")[1] is None
+    sidecar = tmp_path / "body.skeleton.json"
+    sidecar.write_text(json.dumps({"bones": BONES}))
+    character, units = read_character(path)
+    assert units is None and character.skeleton is not None and character.weights is None
+    assert load_character(path).weights is not None  # read as meters, weights derived at once
+    sidecar.write_text(json.dumps({"units": "dm", "bones": BONES}))
+    character, units = read_character(path)
+    assert units == "dm" and np.allclose(character.vertices, vertices * 0.1) and character.weights is not None
+    builder, _, _, _ = skinned_body_gltf()
+    glb = tmp_path / "skinned.glb"
+    glb.write_bytes(builder.glb())
+    assert read_character(glb)[1] == "m"

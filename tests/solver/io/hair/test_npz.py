@@ -111,3 +111,17 @@ def test_archive_in_cm_read_in_cm():
     back = read_hair_bytes(hair_to_bytes(hair, "npz", units="cm"), "npz", units="cm")
     np.testing.assert_array_equal(back.points, hair.points / 0.01 * 0.01)
     np.testing.assert_array_equal(back.color, hair.color)
+
+
+def test_recorded_units_are_read_without_the_arrays(tmp_path, groom):
+    from hairport.solver.io.hair.npz import recorded_units
+
+    write_hair(tmp_path / "cm.npz", groom, units="cm")
+    assert recorded_units(tmp_path / "cm.npz") == "cm"
+    np.savez(tmp_path / "none.npz", format=np.array("hairport-hair"), version=np.array(1), points=groom.points,
+             offsets=groom.offsets)
+    assert recorded_units(tmp_path / "none.npz") is None
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    assert recorded_units(tmp_path / "junk.npz") is None and recorded_units(tmp_path / "missing.npz") is None
+    np.savez(tmp_path / "odd.npz", units=np.array("furlong"))
+    assert recorded_units(tmp_path / "odd.npz") is None
