@@ -1,0 +1,85 @@
+"""Grooms sunk into their bodies, open busts, and a body that traps hair: the cases of the
+"penetration-free at any depth" tests (pipeline, command line, worker, quality)."""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import trimesh
+
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.character import Character
+from hairport.solver.model.hair import Hair
+
+#: the toy bust's cut (m along Y): across the chest, 13 cm under the shoulders' top
+TOY_CHEST_Y_M = 1.35
+#: the trap's crack between its two blocks (m): wider than the inside test's side probe, far
+#: narrower than the last push-out round's clearance (eps_c / 32 = 15.6 um)
+CRACK_M = 1e-5
+#: the trap's blocks: half-width (m) around the crown, and their floors and tops above it
+BLOCK_HALF_WIDTH_M = 0.03
+BLOCK_LEVELS_M = (0.02, 0.04, 0.06)
+#: straight strands through the trap: particles, length (m), root offsets (m) from the crown in x, z
+TRAP_PARTICLES = 31
+TRAP_LENGTH_M = 0.075
+TRAP_ROOTS_XZ = ((0.0, 0.0), (0.01, 0.0), (-0.01, 0.005), (0.0, -0.01))
+
+
+def sunk(hair: Hair, depth: float) -> Hair:
+    """The groom moved down (-Y) by ``depth`` (m): into its head and shoulders."""
+    return hair.with_points(hair.points - np.array([0.0, depth, 0.0]))
+
+
+def keep_faces(character: Character, keep: np.ndarray, name: str) -> Character:
+    """``character`` with the faces ``keep (F,) bool`` only and the vertices they use, rig kept."""
+    used = np.zeros(character.n_vertices, dtype=bool)
+    used[character.faces[keep].ravel()] = True
+    new_id = np.cumsum(used) - 1
+    weights = None if character.weights is None else character.weights[used]
+    return Character(character.vertices[used], new_id[character.faces[keep]], character.skeleton, weights, name)
+
+
+def chest_cut(reference: Character, height: float) -> np.ndarray:
+    """(F,) bool: the faces of ``reference`` with no vertex below ``height`` (m along Y); the
+    same faces cut from every body of its topology make busts of one topology."""
+    return ~(reference.vertices[reference.faces, 1] < height).any(axis=1)
+
+
+def with_blocks(character: Character, blocks: list[tuple[np.ndarray, np.ndarray]], bone: str = "head") -> Character:
+    """``character`` with closed boxes ``(lower corner, upper corner)`` (m) appended as extra
+    shells, their vertices skinned to ``bone``."""
+    vertices, faces, n = [character.vertices], [character.faces], character.n_vertices
+    for lower, upper in blocks:
+        box = trimesh.creation.box(bounds=[lower, upper])
+        vertices.append(np.asarray(box.vertices, dtype=np.float64))
+        faces.append(np.asarray(box.faces, dtype=np.int64) + n)
+        n += len(box.vertices)
+    extra = n - character.n_vertices
+    index = character.skeleton.index(bone)
+    weights = sp.vstack([character.weights, sp.csr_matrix(
+        (np.ones(extra), (np.arange(extra), np.full(extra, index))), shape=(extra, character.skeleton.n_bones))])
+    return Character(np.vstack(vertices), np.vstack(faces), character.skeleton, weights.tocsr(),
+                     f"{character.name}-trap")
+
+
+def trap(character: Character) -> tuple[Character, Hair]:
+    """A body that traps hair, and hair it traps.
+
+    Two blocks over the crown, one on the other with a :data:`CRACK_M` crack between them, and
+    straight strands rooted at the crown standing up through both. A particle inside a block
+    nearer the crack than the block's other faces can only leave it into the crack, narrower
+    than any push's clearance: the solvers' constraints and every push-out round put it into
+    the other block, and back.
+    """
+    crown = character.vertices[np.argmax(character.vertices[:, 1])]
+    half = np.array([BLOCK_HALF_WIDTH_M, 0.0, BLOCK_HALF_WIDTH_M])
+    low, middle, high = (crown + np.array([0.0, level, 0.0]) for level in BLOCK_LEVELS_M)
+    body = with_blocks(character, [(low - half, middle + half), (middle + [0.0, CRACK_M, 0.0] - half, high + half)])
+    query = MeshQuery(character.vertices, character.faces)
+    rise = np.linspace(0.0, TRAP_LENGTH_M, TRAP_PARTICLES)
+    strands = []
+    for dx, dz in TRAP_ROOTS_XZ:
+        root = query.signed_distance((crown + [dx, BLOCK_LEVELS_M[2], dz])[None]).closest[0]
+        strands.append(root + np.outer(rise, [0.0, 1.0, 0.0]))
+    offsets = np.arange(0, TRAP_PARTICLES * len(strands) + 1, TRAP_PARTICLES)
+    return body, Hair(np.vstack(strands), offsets)
