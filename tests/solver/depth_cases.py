@@ -13,12 +13,15 @@ from hairport.solver.model.hair import Hair
 
 #: the toy bust's cut (m along Y): across the chest, 13 cm under the shoulders' top
 TOY_CHEST_Y_M = 1.35
-#: the trap's crack between its two blocks (m): wider than the inside test's side probe, far
+#: the trap: a stack of thin plates over the crown, this far above it (m), this many, this thick
+#: (m), with cracks this wide between them (m): wider than the inside test's side probe, far
 #: narrower than the last push-out round's clearance (eps_c / 32 = 15.6 um)
-CRACK_M = 1e-5
-#: the trap's blocks: half-width (m) around the crown, and their floors and tops above it
-BLOCK_HALF_WIDTH_M = 0.03
-BLOCK_LEVELS_M = (0.02, 0.04, 0.06)
+TRAP_FLOOR_M = 0.02
+TRAP_PLATES = 30
+TRAP_PLATE_M = 1e-3
+TRAP_CRACK_M = 1e-5
+#: the plates' half-width (m) around the crown
+TRAP_HALF_WIDTH_M = 0.03
 #: straight strands through the trap: particles, length (m), root offsets (m) from the crown in x, z
 TRAP_PARTICLES = 31
 TRAP_LENGTH_M = 0.075
@@ -65,21 +68,22 @@ def with_blocks(character: Character, blocks: list[tuple[np.ndarray, np.ndarray]
 def trap(character: Character) -> tuple[Character, Hair]:
     """A body that traps hair, and hair it traps.
 
-    Two blocks over the crown, one on the other with a :data:`CRACK_M` crack between them, and
-    straight strands rooted at the crown standing up through both. A particle inside a block
-    nearer the crack than the block's other faces can only leave it into the crack, narrower
-    than any push's clearance: the solvers' constraints and every push-out round put it into
-    the other block, and back.
+    A stack of :data:`TRAP_PLATES` plates over the crown, 1 mm thick and :data:`TRAP_CRACK_M`
+    apart (a layered prop, shells exported on top of one another), and straight strands rooted
+    at the crown standing up through it. A particle inside a plate can leave it only into a
+    crack, narrower than any push's clearance: the solvers' constraints and every push-out
+    round put it into the next plate, and back.
     """
     crown = character.vertices[np.argmax(character.vertices[:, 1])]
-    half = np.array([BLOCK_HALF_WIDTH_M, 0.0, BLOCK_HALF_WIDTH_M])
-    low, middle, high = (crown + np.array([0.0, level, 0.0]) for level in BLOCK_LEVELS_M)
-    body = with_blocks(character, [(low - half, middle + half), (middle + [0.0, CRACK_M, 0.0] - half, high + half)])
+    half = np.array([TRAP_HALF_WIDTH_M, 0.0, TRAP_HALF_WIDTH_M])
+    floors = TRAP_FLOOR_M + np.arange(TRAP_PLATES) * (TRAP_PLATE_M + TRAP_CRACK_M)
+    body = with_blocks(character, [(crown + [0.0, y, 0.0] - half, crown + [0.0, y + TRAP_PLATE_M, 0.0] + half)
+                                   for y in floors])
     query = MeshQuery(character.vertices, character.faces)
     rise = np.linspace(0.0, TRAP_LENGTH_M, TRAP_PARTICLES)
     strands = []
     for dx, dz in TRAP_ROOTS_XZ:
-        root = query.signed_distance((crown + [dx, BLOCK_LEVELS_M[2], dz])[None]).closest[0]
+        root = query.signed_distance((crown + [dx, TRAP_LENGTH_M, dz])[None]).closest[0]
         strands.append(root + np.outer(rise, [0.0, 1.0, 0.0]))
     offsets = np.arange(0, TRAP_PARTICLES * len(strands) + 1, TRAP_PARTICLES)
     return body, Hair(np.vstack(strands), offsets)

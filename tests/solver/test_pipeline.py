@@ -107,8 +107,11 @@ def toy_bodies():
     """The toy pair, closed and as busts cut across the chest (the same faces on both)."""
     source, target = toy_character(), toy_character(**PRESET_B, name="toy-b")
     keep = chest_cut(source, TOY_CHEST_Y_M)
-    return {"closed": (source, target),
-            "bust": (keep_faces(source, keep, "toy-bust"), keep_faces(target, keep, "toy-b-bust"))}
+    busts = keep_faces(source, keep, "toy-bust"), keep_faces(target, keep, "toy-b-bust")
+    for bust, whole in zip(busts, (source, target)):  # open, from the chest to the crown
+        assert not collision_query(bust.vertices, bust.faces).closed
+        assert 1.3 < bust.vertices[:, 1].min() < 1.45 and bust.vertices[:, 1].max() == whole.vertices[:, 1].max()
+    return {"closed": (source, target), "bust": busts}
 
 
 @pytest.fixture(scope="module")
@@ -154,8 +157,8 @@ def test_particles_a_method_leaves_inside_are_pushed_out_and_reported(toy_bodies
 
 @pytest.mark.parametrize("method", ["multiscale", "global", "root-translate+pushout"])
 def test_a_body_that_traps_hair_fails_with_its_code(method):
-    """Hair through two blocks 10 um apart over the crown (tests/solver/depth_cases.py): neither
-    the solve nor the push-out gets it out, and the result is refused."""
+    """Hair through a stack of plates 10 um apart over the crown (tests/solver/depth_cases.py):
+    neither the solve nor the push-out gets it out, and the result is refused."""
     body, hair = trap(toy_character())
     adaptable = pipeline.preprocess(body, hair)
     with pytest.raises(PenetrationRemaining, match=r"^toy-trap: \d+ of the \d+ hair particles .* still inside") as error:

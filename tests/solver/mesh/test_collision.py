@@ -1,5 +1,7 @@
 """The surface hair collides with (solver/mesh/collision.py): closed, open, nested and inverted bodies."""
 
+import threading
+
 import igl
 import numpy as np
 import pytest
@@ -97,3 +99,15 @@ def test_the_makehuman_body_leaves_out_only_the_faces_where_its_lips_cross():
     exact = igl.winding_number(male.vertices, male.faces, points) > 0.5
     assert 2000 < exact.sum() < 18000
     np.testing.assert_array_equal(body.signed_distance(points).distance < 0, exact)
+
+
+def test_a_body_is_analysed_once_per_thread():
+    vertices, faces = icosphere()
+    first = collision_query(vertices, faces)
+    assert collision_query(vertices.copy(), faces.copy()) is first
+    assert collision_query(vertices + [0.0, 0.0, 1e-9], faces) is not first
+    other = []
+    thread = threading.Thread(target=lambda: other.append(collision_query(vertices, faces)))
+    thread.start()
+    thread.join()
+    assert other[0] is not first and np.array_equal(other[0].faces, first.faces)
