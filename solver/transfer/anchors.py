@@ -44,6 +44,7 @@ from hairport.solver.mesh.query import MeshQuery, SignedDistance
 from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.transfer.root_shell import snap_roots_to_skin
 
 #: bones hair can rest on, in the MakeHuman game-engine rig's names
 HAIR_BONES = ("head", "neck_01", "spine_03", "spine_02", "clavicle_l", "clavicle_r", "upperarm_l", "upperarm_r")
@@ -264,6 +265,8 @@ def compute_anchors(
         best["barycentric"][take] = hits.barycentric[better]
         best["eta"][take] = eta[better]
 
+    # roots closer to an eye, a lash or a stray face than to the skin are anchored on the skin
+    surface, _ = snap_roots_to_skin(query, points, surface, is_root)
     fallback = ~is_root & ~np.isfinite(best_score)
     closest_needed = is_root | fallback
     frame_offset = np.zeros((n, 3))
