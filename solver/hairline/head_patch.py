@@ -26,6 +26,9 @@ DEFAULT_MARGIN_RINGS = 6
 #: a face joins the margin when each corner is at most this many times as far from the scalp
 #: as from the mesh's border (1: the half-way line between them)
 GAP_CLEARANCE_FACTOR = 2.0
+#: a hairline edit that leaves the head patch is blamed on a gap in the mesh this close (m)
+#: to the current front hairline
+GAP_HINT_M = 0.03
 
 
 def clear_of_gaps(character: Character, scalp: Scalp, shell: np.ndarray) -> np.ndarray:
@@ -43,6 +46,23 @@ def clear_of_gaps(character: Character, scalp: Scalp, shell: np.ndarray) -> np.n
     to_border = edge_distance(character.vertices, skin, border)
     clear = to_scalp <= GAP_CLEARANCE_FACTOR * to_border
     return shell & clear[faces].all(axis=1)
+
+
+def gap_hint(character: Character, patch_faces: np.ndarray, hairline: np.ndarray) -> str:
+    """Words for an edit that leaves the head patch when a gap in the mesh limits the patch:
+    the border of the patch's shell within :data:`GAP_HINT_M` of ``hairline (f, 3)``, or ""."""
+    seed = np.zeros(character.n_faces, dtype=bool)
+    seed[patch_faces] = True
+    border = np.flatnonzero(border_vertices(character.faces[shell_of(character.faces, seed)], character.n_vertices))
+    if len(border) == 0:
+        return ""
+    distance = np.linalg.norm(character.vertices[border][:, None] - hairline[None], axis=2).min(axis=1)
+    near = border[distance <= GAP_HINT_M]
+    if len(near) == 0:
+        return ""
+    return (f"; a gap in the mesh {100 * distance.min():.1f} cm from the hairline, near "
+            f"{np.round(character.vertices[near].mean(axis=0), 3).tolist()}, ends the head region there "
+            "(close the gap in the mesh for this edit)")
 
 
 def head_patch(

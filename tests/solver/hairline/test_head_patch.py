@@ -3,9 +3,12 @@
 import numpy as np
 import pytest
 
-from hairport.solver.hairline.head_patch import DEFAULT_MARGIN_RINGS, head_patch
+from hairport.solver.hairline import head_patch as head_patch_module
+from hairport.solver.hairline.head_patch import DEFAULT_MARGIN_RINGS, GAP_CLEARANCE_FACTOR, head_patch
+from hairport.solver.hairline.scalp import extract_scalp
 from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize
+from hairport.solver.mesh.shells import border_vertices, edge_distance
 from hairport.solver.mesh.topology import boundary_loops, euler_characteristic
 from hairport.solver.model.errors import InputError
 
@@ -61,3 +64,30 @@ def test_each_margin_ring_adds_the_head_faces_touching_the_patch(character, fram
         np.testing.assert_array_equal(patch_faces, np.flatnonzero(region))
         np.testing.assert_array_equal(vertices, np.unique(faces[patch_faces]))
         np.testing.assert_array_equal(vertices[triangles], faces[patch_faces])
+
+
+def test_the_head_patch_on_a_bust_is_the_one_on_the_body(character, patch, bust, bust_roots):
+    on_bust = head_patch(bust, extract_scalp(bust, bust_roots))
+    assert (len(on_bust[0]), len(on_bust[1])) == (721, 1310)
+    np.testing.assert_array_equal(bust.vertices[on_bust[0]], character.vertices[patch[0]])
+    np.testing.assert_array_equal(on_bust[1], patch[1])
+
+
+def test_the_head_patch_keeps_clear_of_a_gap_in_the_mesh(gapped, monkeypatch):
+    holed, gap, root_faces, _ = gapped
+    scalp = extract_scalp(holed, root_faces)
+    vertices, triangles, faces = head_patch(holed, scalp)
+    assert euler_characteristic(triangles) == 1 and len(boundary_loops(triangles)) == 1
+    border = border_vertices(holed.faces, holed.n_vertices)
+    assert border.sum() == 6 and not border[vertices].any()
+    # a face joins when its corners are at most twice as far from the scalp as from the gap
+    assert len(faces) == 1260
+    at_scalp = np.zeros(holed.n_vertices, dtype=bool)
+    at_scalp[scalp.vertices] = True
+    to_scalp = edge_distance(holed.vertices, holed.faces, at_scalp)[vertices]
+    to_gap = edge_distance(holed.vertices, holed.faces, border)[vertices]
+    assert (to_scalp <= GAP_CLEARANCE_FACTOR * to_gap).all()
+    assert np.linalg.norm(holed.vertices[vertices] - gap, axis=1).min() > 0.008
+    # without it six rings reach around the gap, and the margin loses rings everywhere
+    monkeypatch.setattr(head_patch_module, "GAP_CLEARANCE_FACTOR", 1e9)
+    assert len(head_patch(holed, scalp)[2]) == 1094
