@@ -1,5 +1,8 @@
 """The head patch a hairline edit moves in: the scalp plus rings of head faces around it, as one disk.
 
+The margin is about 10 cm (:data:`MARGIN_CROWN_SHARE` of the crown height) whatever the
+mesh's density: its rings follow from the scalp's edge lengths.
+
 On real character meshes the patch stays on the skin shell that carries the scalp (eyes,
 teeth and lashes are other shells; :mod:`~hairport.solver.mesh.shells`) and keeps clear of
 gaps in the mesh: a face joins only when each corner is at most
@@ -16,13 +19,14 @@ import numpy as np
 from hairport.solver.body.head_frame import HeadFrame, head_frame
 from hairport.solver.hairline.scalp import Scalp, check_region_disk
 from hairport.solver.mesh.shells import border_vertices, edge_distance, shell_of
-from hairport.solver.mesh.topology import face_adjacency, is_disk, repair_disk, submesh
+from hairport.solver.mesh.topology import face_adjacency, half_edges, is_disk, repair_disk, submesh
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 
-#: rings of head faces (vertex-neighbour rings) added around the scalp; 1-3 cm each on
-#: the MakeHuman head
-DEFAULT_MARGIN_RINGS = 6
+#: the margin around the scalp, as a share of the crown height: about 10 cm, i.e. six rings of
+#: head faces on every MakeHuman preset (crown / mean scalp edge 8.3-9.3), twelve on a mesh
+#: twice as fine; the rings follow from the mesh's density (:func:`default_margin_rings`)
+MARGIN_CROWN_SHARE = 0.68
 #: a face joins the margin when each corner is at most this many times as far from the scalp
 #: as from the mesh's border (1: the half-way line between them)
 GAP_CLEARANCE_FACTOR = 2.0
@@ -48,6 +52,15 @@ def clear_of_gaps(character: Character, scalp: Scalp, shell: np.ndarray) -> np.n
     return shell & clear[faces].all(axis=1)
 
 
+def default_margin_rings(character: Character, scalp: Scalp, frame: HeadFrame) -> int:
+    """Rings of head faces that make a margin of :data:`MARGIN_CROWN_SHARE` of the crown height
+    around the scalp: that length over the scalp's mean edge length, rounded (at least 1)."""
+    points = character.vertices[scalp.vertices]
+    edges = half_edges(scalp.triangles)
+    mean_edge = float(np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1).mean())
+    return max(1, int(round(MARGIN_CROWN_SHARE * frame.crown / mean_edge)))
+
+
 def gap_hint(character: Character, patch_faces: np.ndarray, hairline: np.ndarray) -> str:
     """Words for an edit that leaves the head patch when a gap in the mesh limits the patch:
     the border of the patch's shell within :data:`GAP_HINT_M` of ``hairline (f, 3)``, or ""."""
@@ -68,7 +81,7 @@ def gap_hint(character: Character, patch_faces: np.ndarray, hairline: np.ndarray
 def head_patch(
     character: Character,
     scalp: Scalp,
-    margin_rings: int = DEFAULT_MARGIN_RINGS,
+    margin_rings: int | None = None,
     frame: HeadFrame | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A disk-shaped patch of the head around the scalp.
@@ -84,8 +97,8 @@ def head_patch(
     character : Character
     scalp : Scalp
         From :func:`.scalp.extract_scalp` on this character.
-    margin_rings : int
-        >= 0; 0 gives the scalp itself.
+    margin_rings : int, optional
+        >= 0; 0 gives the scalp itself. Default :func:`default_margin_rings` (6 on MakeHuman).
     frame : HeadFrame, optional
         Reuse a frame from :func:`~hairport.solver.body.head_frame.head_frame`.
 
@@ -104,9 +117,11 @@ def head_patch(
         Negative ``margin_rings``, or a patch that cannot be made a disk even with no margin
         (``mesh_hole``, ``not_manifold``, ``not_a_disk``).
     """
+    frame = frame or head_frame(character)
+    if margin_rings is None:
+        margin_rings = default_margin_rings(character, scalp, frame)
     if margin_rings < 0:
         raise InputError("margin_rings must be >= 0", code="bad_option")
-    frame = frame or head_frame(character)
     faces = character.faces
     shell = np.zeros(len(faces), dtype=bool)
     shell[scalp.faces] = True
