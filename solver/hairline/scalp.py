@@ -18,12 +18,20 @@ are in the closed set. ``r`` is the smallest of ``0 .. MAX_CLOSING_RINGS`` for w
 edge-connected piece holds every root (``r = 0`` is the paper's set as it is), or, when
 none does, the smallest for which the piece holding the most roots holds most.
 
+All of this happens on the *skin shell* that carries the roots
+(:func:`~hairport.solver.mesh.shells.root_shell`): real character meshes also carry eyes,
+teeth and lashes as separate pieces, fins on non-manifold edges and open borders; those
+pieces take no part, and roots on them are strays. Roots spread over several pieces (less
+than 90 % on one) are refused (``roots_on_several_pieces``).
+
 The piece holding the most roots is kept (roots outside it are *strays*: kept in
 :attr:`Scalp.strays` and reported with a :class:`ScalpWarning`); its holes, the pieces of
-the rest of the mesh that do not hold the rest of the body, are filled. On a closed genus-0
+the rest of the skin that do not hold the rest of the body, are filled. On a closed genus-0
 body (MakeHuman) an edge-connected region whose complement is edge-connected is a disk;
 elsewhere the faces around pinch vertices are added, and a region that is still not a disk
-is refused (:class:`InputError`).
+is refused (:class:`InputError`) saying why (:func:`check_region_disk`): a gap in the mesh
+inside it (``mesh_hole``), non-manifold edges inside it (``not_manifold``), or else
+``not_a_disk``.
 
 Hairline
 --------
@@ -296,8 +304,9 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     Raises
     ------
     InputError
-        Fewer than ``MIN_SCALP_FACES`` distinct root faces, face ids out of range, a region
-        that cannot be made a disk, or a hairline that does not reach both ears.
+        Fewer than ``MIN_SCALP_FACES`` distinct root faces, face ids out of range, roots on
+        several pieces of the mesh, a region that cannot be made a disk, or a hairline that
+        does not reach both ears.
     """
     faces = character.faces
     root_faces = np.asarray(root_faces).ravel()
