@@ -69,6 +69,7 @@ from hairport.solver.mesh.topology import (
     boundary_edges,
     boundary_loops,
     check_disk,
+    euler_characteristic,
     face_adjacency,
     largest_piece,
     repair_disk,
@@ -274,14 +275,29 @@ def check_region_disk(character: Character, region: np.ndarray, shell: np.ndarra
     """Refuse a region ``(F,) bool`` of the character's ``shell (F,) bool`` that is not a disk,
     saying why in the user's terms (:func:`~hairport.solver.mesh.shells.explain_not_disk`:
     ``mesh_hole``, ``not_manifold``; else ``not_a_disk``)."""
+    triangles = submesh(character.faces, np.flatnonzero(region))[1]
     try:
-        check_disk(submesh(character.faces, np.flatnonzero(region))[1], what)
+        check_disk(triangles, what)
     except InputError as error:
         explained = explain_not_disk(character.faces, region, shell, what, character.vertices, character.name)
         if explained is not None:
             raise explained from error
-        raise InputError(f"the roots do not make one disk-shaped {what} ({error.problem})", character.name,
-                         error.code) from error
+        raise InputError(f"the roots do not make one disk-shaped {what}: {_disk_defect(triangles, what)}",
+                         character.name, "not_a_disk") from error
+
+
+def _disk_defect(triangles: np.ndarray, what: str) -> str:
+    """What keeps a region ``(k, 3)`` from being a disk, in words."""
+    try:
+        loops = len(boundary_loops(triangles))
+    except InputError:
+        return "its border touches itself at a vertex"
+    handles = (2 - euler_characteristic(triangles) - loops) // 2
+    if loops == 0:
+        return f"the {what} would cover a whole closed piece of the mesh, leaving no hairline"
+    if handles > 0:
+        return f"the {what} wraps around {handles} tunnel(s) through the mesh"
+    return f"its border has {loops} loops (the roots surround {loops - 1} piece(s) of the mesh they leave bare)"
 
 
 def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame | None = None) -> Scalp:

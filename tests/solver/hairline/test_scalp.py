@@ -5,12 +5,14 @@ import re
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import trimesh
 
 from hairport.solver.body.head_frame import head_frame
 from hairport.solver.hairline.scalp import (
     DEFAULT_MIN_TRIANGLES,
     Scalp,
     ScalpWarning,
+    _disk_defect,
     extract_scalp,
     refine_scalp,
     split_boundary_ears,
@@ -287,3 +289,24 @@ def test_roots_on_an_eye(bust, bust_roots):
                                          r"faces, 40 on a piece of 140 faces\)") as e:
         extract_scalp(bust, np.concatenate([bust_roots, eye[:40]]))
     assert e.value.code == "roots_on_several_pieces"
+
+
+def test_roots_everywhere_leave_no_hairline(character, frame):
+    with pytest.raises(InputError, match="the roots do not make one disk-shaped scalp: the scalp would cover a whole "
+                                         "closed piece of the mesh, leaving no hairline") as e:
+        extract_scalp(character, np.arange(character.n_faces), frame)
+    assert e.value.code == "not_a_disk"
+
+
+def test_what_keeps_a_region_from_being_a_disk_in_words():
+    from tests.solver.triangle_grids import grid
+
+    _, square = grid(4, 4, 0.0, 1.0, 0.0, 1.0)
+    ring = np.delete(square, [5, 21], axis=0)  # the two triangles of cell (1, 1)
+    assert _disk_defect(ring, "scalp") == ("its border has 2 loops (the roots surround 1 piece(s) of the mesh "
+                                           "they leave bare)")
+    torus = np.asarray(trimesh.creation.torus(major_radius=1.0, minor_radius=0.3).faces)
+    assert _disk_defect(torus, "head patch") == ("the head patch would cover a whole closed piece of the mesh, "
+                                                 "leaving no hairline")
+    # the torus but one face: one border loop round a surface with a handle
+    assert _disk_defect(torus[1:], "scalp") == "the scalp wraps around 1 tunnel(s) through the mesh"
