@@ -102,10 +102,14 @@ def head_frame(character: Character) -> HeadFrame:
     Raises
     ------
     InputError
-        No skeleton, no ``head`` bone, or no head vertices.
+        ``no_skeleton`` without a skeleton; ``bad_skeleton`` without a ``head`` bone or head vertices.
     """
     if character.skeleton is None:
-        raise InputError("the character has no skeleton; the groom needs a 'head' bone", character.name, "bad_skeleton")
+        raise InputError(
+            "the character has no skeleton: hairline edits and presets take the head's frame from a 'head' bone "
+            "(give a skeleton JSON or a glTF skin, or retarget without a hairline edit)",
+            character.name, "no_skeleton",
+        )
     try:
         head = character.skeleton.index("head")
     except KeyError:

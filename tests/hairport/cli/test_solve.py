@@ -16,8 +16,11 @@ from hairport import cli, solver
 from hairport.settings import get_settings
 from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
+from hairport.solver.io.character.obj import write_obj
 from hairport.solver.io.hair import read_hair, write_hair
+from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
@@ -32,6 +35,8 @@ from tests.hairport.cli.helpers import (
     retarget_args,
     run,
 )
+from tests.solver.frames import character_in, faces_only, hair_in, head_faces
+from tests.solver.synthetic.toy_fixtures import PRESET_B
 
 # float32 coordinates (.data, .hair, .ply) near 1.7 m round to within ~6e-8 m
 FLOAT32_TOLERANCE_M = 1e-6
@@ -349,6 +354,29 @@ def test_target_without_skeleton_gets_the_source_skeleton(capsys, world, out):
     report = json.loads((out / "report.json").read_text())
     assert report["metrics"]["root_to_target_max"] < 1e-9
     assert report["inputs"]["target"] == str(d / "bare.obj")
+
+
+def test_heads_without_a_rig_in_millimetres_and_z_up_retarget_by_their_surface(capsys, world, out):
+    """No skeleton, no units, Z up: everything inferred, the hair anchored by the source's surface."""
+    d, frame = world["dir"], InputFrame("mm", "z", "-y")
+    keep = head_faces(world["source"], 0.10)
+    for name, character in (("source", world["source"]), ("target", toy.toy_character(**PRESET_B))):
+        head = character_in(frame, faces_only(character, keep, name))
+        write_obj(d / f"{name}-head-mm.obj", head.vertices, head.faces, "a head in mm, Z up, no rig")
+    write_hair(d / "hair-mm.data", hair_in(frame, world["hair"]))
+    args = retarget_args(world, out, source=d / "source-head-mm.obj", target=d / "target-head-mm.obj",
+                         hair=d / "hair-mm.data", method="multiscale")
+    code, _, err = run(capsys, args + ["--workers", "1"])
+    assert code == 0, err
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["anchoring"] == "surface" and metrics["penetrating_particles"] == 0
+    assert (metrics["input"]["units"]["hair"], metrics["input"]["axes"]["up"]) == ("mm", "+z")
+    result = read_hair(out / "result.data")  # in the groom's millimetres, Z up
+    target = load_character(d / "target-head-mm.obj")
+    roots = MeshQuery(target.vertices, target.faces).signed_distance(result.points[result.is_root]).distance
+    assert np.abs(roots).max() < 1e-3  # mm: float32 coordinates near 1,700 mm
+    code, _, err = run(capsys, args + ["--anchoring", "bones"])
+    assert_input_error(code, err, "anchoring by bones needs", "skeleton")
 
 
 def test_preprocess_then_retarget_from_the_artifact_equals_the_one_shot_run(capsys, world, out):

@@ -121,8 +121,10 @@ def test_refusals(toy):
     skull = toy.vertices[:, 1] > toy.skeleton.heads[head][1]
     skull_only = sp.csr_matrix((np.ones(toy.n_vertices), (np.arange(toy.n_vertices), np.where(skull, head, 0))),
                                shape=toy.weights.shape)
+    with pytest.raises(InputError, match="hairline edits and presets take the head's frame") as error:
+        head_frame(Character(toy.vertices, toy.faces))
+    assert error.value.code == "no_skeleton"
     cases = [
-        (Character(toy.vertices, toy.faces), "no skeleton"),
         (rigged(toy, names=tuple("skull" if n == "head" else n for n in toy.skeleton.names)), "no bone named 'head'"),
         (rigged(toy, tails=zero_length), "zero length"),
         (rigged(toy, tails=along_z), "points along Z"),
