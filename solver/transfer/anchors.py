@@ -51,6 +51,7 @@ from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames,
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import AUTO
+from hairport.solver.transfer.root_shell import snap_roots_to_skin
 
 #: bones hair can rest on, in the MakeHuman game-engine rig's names
 HAIR_BONES = ("head", "neck_01", "spine_03", "spine_02", "clavicle_l", "clavicle_r", "upperarm_l", "upperarm_r")
@@ -286,6 +287,8 @@ def compute_anchors(
         raise InputError(f"unknown anchoring {anchoring!r}; expected {ANCHOR_BY_BONES} or {ANCHOR_BY_SURFACE}",
                          code="bad_option")
 
+    # roots closer to an eye, a lash or a stray face than to the skin are anchored on the skin
+    surface, _ = snap_roots_to_skin(query, points, surface, is_root)
     fallback = ~is_root & ~reached
     closest_needed = is_root | fallback
     frame_offset = np.zeros((n, 3))

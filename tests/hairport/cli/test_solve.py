@@ -505,3 +505,48 @@ def test_bad_hairline_presets_are_refused_before_any_work(capsys, human_world, o
     code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round", "--method", "global-translate"))
     assert_input_error(code, err, "baseline")
     assert calls == [] and not any(out.iterdir())
+
+
+@pytest.fixture(scope="module")
+def bust_world(tmp_path_factory) -> dict:
+    """MakeHuman busts as game characters come (eyes and teeth as separate shells, open at the
+    chest and at the eye sockets, three non-manifold edges), a groom 2-5 mm off the skin; and
+    the same pair with a gap in the mesh at the crown."""
+    from hairport.solver.synthetic.makehuman import build_preset
+    from hairport.solver.synthetic.makehuman.bust import build_bust, keep_faces
+    from tests.solver.hairline.real_meshes import lifted_groom
+
+    d = tmp_path_factory.mktemp("cli-bust")
+    busts = [build_bust(name, open_eyes=True, fins=3) for name in ("average-female", "heavy-male")]
+    crown = int(np.argmax(busts[0].vertices[:, 1]))
+    keep = ~(busts[0].faces == crown).any(axis=1)
+    for tag, pair in (("", busts), ("holed-", [keep_faces(bust, keep) for bust in busts])):
+        for name, bust in zip(("female", "male"), pair):
+            write_character(bust, d / f"{tag}{name}.obj", d / f"{tag}{name}.skeleton.json")
+    write_hair(d / "short.data", lifted_groom(build_preset("average-female"), 80, 6))
+    for tag in ("", "holed-"):
+        code = cli.main(["preprocess", "--source", str(d / f"{tag}female.obj"), "--hair", str(d / "short.data"),
+                         "--guides", "20", "--out", str(d / f"{tag}short.hpa"), "--quiet"])
+        assert code == 0
+    return {"dir": d, "adaptable": d / "short.hpa", "target": d / "male.obj"}
+
+
+def test_hairline_edits_on_busts_with_eyes_teeth_and_open_borders(capsys, bust_world, out, tmp_path):
+    curve = tmp_path / "peak.json"
+    code, stdout, err = run(capsys, ["hairline", "--adaptable", str(bust_world["adaptable"]), "--target",
+                                     str(bust_world["target"]), "--preset", "widows-peak", "--out", str(curve),
+                                     "--quiet"])
+    assert code == 0, err
+    assert len(json.loads(curve.read_text())["points"]) > 20
+    code, stdout, err = run(capsys, hairline_args(bust_world, out, "--hairline", "widows-peak:0.6"))
+    assert code == 0, err
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["penetrating_particles"] == 0 and metrics["hairline"]["roots_moved"] > 0
+
+
+def test_a_gap_in_the_scalp_is_a_one_line_error(capsys, bust_world, tmp_path):
+    d = bust_world["dir"]
+    code, _, err = run(capsys, ["hairline", "--adaptable", str(d / "holed-short.hpa"), "--target",
+                                str(d / "holed-male.obj"), "--out", str(tmp_path / "curve.json"), "--quiet"])
+    assert_input_error(code, err, "the scalp under the roots has a hole", "gap in the mesh")
+    assert not (tmp_path / "curve.json").exists()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import trimesh
 
 from hairport.solver.body.head_frame import (
     BROW_HEIGHT,
@@ -61,6 +62,32 @@ def test_head_vertices_are_the_head_dominant_ones(toy):
     # without skin weights every vertex above the head joint counts
     bare = head_frame(Character(toy.vertices, toy.faces, toy.skeleton))
     np.testing.assert_array_equal(bare.head_vertices, (toy.vertices - frame.origin) @ frame.up > 0)
+
+
+def with_shell(toy, centre, radius, weights=True):
+    """The toy with a separate closed shell (an icosphere skinned to the head alone) in its mesh."""
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=radius)
+    vertices = np.vstack([toy.vertices, np.asarray(sphere.vertices) + centre])
+    faces = np.vstack([toy.faces, np.asarray(sphere.faces) + toy.n_vertices])
+    if not weights:
+        return Character(vertices, faces, toy.skeleton)
+    n = len(sphere.vertices)
+    head = sp.csr_matrix((np.ones(n), (np.arange(n), np.full(n, toy.skeleton.index("head")))),
+                         shape=(n, toy.skeleton.n_bones))
+    return Character(vertices, faces, toy.skeleton, sp.vstack([toy.weights, head]))
+
+
+@pytest.mark.parametrize("weights", [True, False])
+def test_a_separate_shell_does_not_shape_the_frame(toy, weights):
+    """A hat floating 3 cm over the crown and 3 cm before the brow, in the same mesh, skinned
+    to the head: the frame is the one of the head alone."""
+    plain = head_frame(toy if weights else Character(toy.vertices, toy.faces, toy.skeleton))
+    hat = plain.world(plain.crown + 0.05, plain.front + 0.03)
+    frame = head_frame(with_shell(toy, hat, 0.02, weights))
+    for name in ("crown", "front", "back", "half_width"):
+        assert getattr(frame, name) == getattr(plain, name), name
+    np.testing.assert_array_equal(frame.head_vertices[: toy.n_vertices], plain.head_vertices)
+    assert not frame.head_vertices[toy.n_vertices:].any()
 
 
 def test_coordinates(toy):
