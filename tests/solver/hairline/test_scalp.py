@@ -20,6 +20,8 @@ from hairport.solver.hairline.scalp import (
 )
 from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.shells import shell_labels
 from hairport.solver.mesh.topology import (
     boundary_edges,
     boundary_loops,
@@ -27,8 +29,6 @@ from hairport.solver.mesh.topology import (
     face_adjacency,
     fill_holes,
 )
-from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.shells import shell_labels
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.makehuman.bust import keep_faces

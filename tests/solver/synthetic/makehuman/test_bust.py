@@ -15,13 +15,7 @@ from hairport.solver.mesh.topology import boundary_loops
 from hairport.solver.model.character import check_same_topology
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.makehuman import build_preset
-from hairport.solver.synthetic.makehuman.bust import (
-    FIN_DEPTH_M,
-    build_bust,
-    cut_height,
-    helper_quads,
-    shell_geometry,
-)
+from hairport.solver.synthetic.makehuman.bust import FIN_DEPTH_M, build_bust, cut_height, helper_quads, shell_geometry
 from hairport.solver.synthetic.makehuman.store import asset_store
 
 #: vertices and faces of the extra shells: eyes 72 / 140 each, teeth 68 + 1 centre / 96 + 38 fan each
