@@ -75,10 +75,11 @@ class ErrorInfo(BaseModel):
 
 
 class PreprocessSettings(BaseModel):
-    """The preprocessing options a hairstyle's artifact depends on (Eq. 8 ``k``, guide count)."""
+    """The preprocessing options a hairstyle's artifact depends on (Eq. 8 ``k``, guide count, anchoring)."""
 
     k: int
     guides: int
+    anchoring: str = "auto"
 
 
 class CharacterRecord(Record):

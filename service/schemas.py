@@ -24,6 +24,7 @@ from hairport.records import (
 HairFormat = Literal[solver.HAIR_FORMATS]
 Units = Literal[solver.UNITS]
 HairlinePresetName = Literal[solver.HAIRLINE_PRESETS]
+Anchoring = Literal[solver.ANCHORINGS]
 #: the hair format of a result unless the request names one
 DEFAULT_OUTPUT_FORMAT = "data"
 #: most points of a drawn hairline accepted in a request

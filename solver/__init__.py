@@ -22,7 +22,9 @@ import importlib
 _EXPORTS = {
     "ARTIFACT_EXTENSION": ("hairport.solver.artifact", "EXTENSION"),
     "ARTIFACT_FORMAT_VERSION": ("hairport.solver.artifact", "FORMAT_VERSION"),
-    "AUTO": ("hairport.solver.inputs", "AUTO"),
+    "ANCHOR_BY_BONES": ("hairport.solver.transfer.anchors", "ANCHOR_BY_BONES"),
+    "ANCHORINGS": ("hairport.solver.transfer.anchors", "ANCHORINGS"),
+    "AUTO": ("hairport.solver.model.frame", "AUTO"),
     "AXIS_CHOICES": ("hairport.solver.model.frame", "AXIS_CHOICES"),
     "AdaptableHairstyle": ("hairport.solver.adaptable", "AdaptableHairstyle"),
     "BASELINE_METHODS": ("hairport.solver.baselines", "BASELINE_METHODS"),

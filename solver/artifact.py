@@ -34,7 +34,7 @@ from hairport.solver.model.files import atomic_write
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
 from hairport.solver.options import PreprocessOptions
-from hairport.solver.transfer.anchors import Anchors
+from hairport.solver.transfer.anchors import ANCHOR_BY_BONES, Anchors
 
 FORMAT_NAME = "hairport-adaptable-hairstyle"
 #: bump when the arrays or their meaning change; older artifacts are then refused
@@ -44,13 +44,15 @@ EXTENSION = ".hpa"
 
 def _arrays(adaptable) -> dict[str, np.ndarray]:
     source, hair, anchors, ms = adaptable.source, adaptable.hair, adaptable.anchors, adaptable.multiscale
-    weights = sp.csr_matrix(source.weights)
+    skeleton = source.skeleton
+    weights = sp.csr_matrix(source.weights if source.weights is not None else (len(source.vertices), 0))
     arrays = {
         "source_vertices": source.vertices,
         "source_faces": source.faces,
-        "skeleton_parents": source.skeleton.parents,
-        "skeleton_heads": source.skeleton.heads,
-        "skeleton_tails": source.skeleton.tails,
+        # a source anchored by its surface may have no skeleton: empty arrays, no bone names
+        "skeleton_parents": skeleton.parents if skeleton is not None else np.zeros(0, np.int64),
+        "skeleton_heads": skeleton.heads if skeleton is not None else np.zeros((0, 3)),
+        "skeleton_tails": skeleton.tails if skeleton is not None else np.zeros((0, 3)),
         "weights_data": weights.data,
         "weights_indices": weights.indices.astype(np.int64),
         "weights_indptr": weights.indptr.astype(np.int64),
@@ -103,8 +105,9 @@ def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
             "sigma": adaptable.options.sigma,
             "guides": adaptable.options.guides,
             "guide_seed": adaptable.options.guide_seed,
+            "anchoring": adaptable.options.anchoring,
         },
-        "bone_names": list(adaptable.source.skeleton.names),
+        "bone_names": list(adaptable.bone_names),
         "source_name": adaptable.source.name,
         "timings": adaptable.timings,
         "input_frame": adaptable.frame.to_dict(),
@@ -149,14 +152,14 @@ def load_adaptable(path: str | os.PathLike):
     if _digest(arrays) != meta.get("digest"):
         raise InputError("adaptable hairstyle is corrupted (digest mismatch)", str(path), "bad_artifact")
     try:
-        skeleton = Skeleton(
-            tuple(meta["bone_names"]), arrays["skeleton_parents"], arrays["skeleton_heads"], arrays["skeleton_tails"]
-        )
-        n_vertices = len(arrays["source_vertices"])
-        weights = sp.csr_matrix(
-            (arrays["weights_data"], arrays["weights_indices"], arrays["weights_indptr"]),
-            shape=(n_vertices, skeleton.n_bones),
-        )
+        bone_names = tuple(meta["bone_names"])
+        skeleton = weights = None
+        if bone_names:
+            skeleton = Skeleton(bone_names, arrays["skeleton_parents"], arrays["skeleton_heads"], arrays["skeleton_tails"])
+            weights = sp.csr_matrix(
+                (arrays["weights_data"], arrays["weights_indices"], arrays["weights_indptr"]),
+                shape=(len(arrays["source_vertices"]), skeleton.n_bones),
+            )
         source = Character(
             arrays["source_vertices"], arrays["source_faces"], skeleton, weights, meta.get("source_name", "source")
         )
@@ -172,12 +175,13 @@ def load_adaptable(path: str | os.PathLike):
             Neighbours(arrays["guide_neighbour_index"], arrays["guide_neighbour_weight"]),
             Neighbours(arrays["fine_neighbour_index"], arrays["fine_neighbour_weight"]),
         )
-        options = PreprocessOptions(**meta["options"])
+        # version-1 artifacts written before surface anchoring were all anchored by bones
+        options = PreprocessOptions(**{"anchoring": ANCHOR_BY_BONES, **meta["options"]})
         frame = InputFrame.from_dict(meta.get("input_frame"))
     except KeyError as error:
         raise InputError(f"adaptable hairstyle lacks {error}", str(path), "bad_artifact") from None
     n = hair.n_particles
     if any(len(a) != n for a in (anchors.bone, anchors.face, anchors.barycentric, anchors.eta, anchors.fallback)):
         raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")
-    return AdaptableHairstyle(source, hair, anchors, multiscale, options, skeleton.names, dict(meta.get("timings", {})),
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, bone_names, dict(meta.get("timings", {})),
                               frame, dict(meta.get("input_report") or {}))

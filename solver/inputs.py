@@ -49,7 +49,7 @@ from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, check_same_topology
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.frame import InputFrame, character_axes_in, hair_axes_in, hair_axes_out, parse_axis
+from hairport.solver.model.frame import AUTO, InputFrame, character_axes_in, hair_axes_in, hair_axes_out, parse_axis
 from hairport.solver.model.hair import Hair
 from hairport.solver.model.units import METERS_PER_UNIT
 
@@ -61,8 +61,6 @@ ROOT_OFF_SURFACE_MM = 1.0
 #: source's by more than this factor, in the units it states, is refused: characters of one
 #: topology differ by less (MakeHuman child -> heavy male: 1.4)
 PLAUSIBLE_SIZE_FACTOR = 3.0
-#: the value of the API's and the command line's units and axis options that asks for inference
-AUTO = "auto"
 
 
 @dataclass(frozen=True)

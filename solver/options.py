@@ -12,7 +12,7 @@ from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES
 from hairport.solver.baselines import BASELINE_METHODS, parse_method
 from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.model.errors import InputError
-from hairport.solver.transfer.anchors import ANCHOR_SIGMA
+from hairport.solver.transfer.anchors import ANCHOR_AUTO, ANCHOR_SIGMA, ANCHORINGS
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS
 
 #: the shape-adaptation solvers: guides then independent strands (Sec. 5), or all strands coupled
@@ -27,14 +27,23 @@ ENERGY_TOLERANCE = 1e-3
 
 @dataclass(frozen=True)
 class PreprocessOptions:
-    """Source-side parameters (Table 1, meters)."""
+    """Source-side parameters (Table 1, meters).
+
+    ``anchoring`` (:data:`~hairport.solver.transfer.anchors.ANCHORINGS`) anchors particles
+    by the bones (Eq. 2), by the body surface, or ``auto``: by the bones when the source has a
+    skeleton with skin weights, else by the surface. An adaptable hairstyle records the one used.
+    """
 
     k: int = 5
     sigma: float = ANCHOR_SIGMA
     guides: int = DEFAULT_GUIDES
     guide_seed: int = 0
+    anchoring: str = ANCHOR_AUTO
 
     def validate(self) -> None:
+        if self.anchoring not in ANCHORINGS:
+            raise InputError(f"unknown anchoring {self.anchoring!r}; expected one of {', '.join(ANCHORINGS)}",
+                             code="bad_option")
         if self.k < 1:
             raise InputError(f"option k must be >= 1, got {self.k}", code="bad_option")
         if self.guides < 1:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -42,12 +42,11 @@ from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
-from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import SOLVER_METHODS, PreprocessOptions, RetargetOptions
-from hairport.solver.transfer.anchors import compute_anchors, place_anchors, root_targets
+from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
@@ -97,7 +96,8 @@ def preprocess(
     Parameters
     ----------
     source : Character
-        Rigged source character (skeleton and skin weights required), in hairport's frame.
+        The source character in hairport's frame; rigged (skeleton and skin weights) for
+        ``options.anchoring="bones"``, anchored by its surface when it has no rig.
     hair : Hair
         The hairstyle made for ``source``.
     frame, input_report : optional
@@ -107,18 +107,18 @@ def preprocess(
     progress = progress or no_progress
     options.validate()
     require_hair(hair.points, hair.offsets, "hair")  # never an artifact without hair
-    if source.skeleton is None or source.weights is None:
-        raise InputError("the source character needs a skeleton with skin weights", source.name, "no_skeleton")
+    options = replace(options, anchoring=resolve_anchoring(options.anchoring, source))
     timings: dict[str, float] = {}
     with timed(timings, "anchors"):
-        progress("anchors", 0.0, "anchoring particles to bones")
+        progress("anchors", 0.0, f"anchoring particles by the {options.anchoring}")
         query = MeshQuery(source.vertices, source.faces)
-        anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma)
+        anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma, options.anchoring)
     with timed(timings, "guides"):
         progress("guides", 0.5, "selecting guides and inter-strand neighbours")
         multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
     progress("preprocess", 1.0, "done")
-    return AdaptableHairstyle(source, hair, anchors, multiscale, options, source.skeleton.names, timings,
+    bone_names = source.skeleton.names if source.skeleton is not None else ()
+    return AdaptableHairstyle(source, hair, anchors, multiscale, options, bone_names, timings,
                               frame or InputFrame(), dict(input_report or {}))
 
 
@@ -217,6 +217,7 @@ def retarget(
         if relocation is not None:
             metrics["hairline"] = relocation.report
         metrics["smoothed_particles"] = int(unsmooth.sum())
+        metrics["anchoring"] = adaptable.options.anchoring
         metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
         if adaptable.input_report or target_input:
             metrics["input"] = {**adaptable.input_report, **({"target": target_input} if target_input else {})}

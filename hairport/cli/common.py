@@ -42,6 +42,9 @@ def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
                    help="guide strands of the multi-scale solve (default 300, or every strand if fewer)")
     p.add_argument("--k", type=int, default=solver.PreprocessOptions.k,
                    help="inter-strand neighbours per particle (Eq. 8)")
+    p.add_argument("--anchoring", default=solver.PreprocessOptions.anchoring, choices=solver.ANCHORINGS,
+                   help="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
+                        "when the source has a skeleton with skin weights, else the surface)")
 
 
 def add_units(p: argparse.ArgumentParser) -> None:
@@ -59,7 +62,8 @@ def add_units(p: argparse.ArgumentParser) -> None:
 
 
 def preprocess_options(args: argparse.Namespace) -> solver.PreprocessOptions:
-    options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides)
+    options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides,
+                                       anchoring=args.anchoring)
     options.validate()
     return options
 

@@ -10,7 +10,7 @@ from hairport import solver
 
 from ..auth import Owner
 from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
-from ..schemas import HAIR_FILE_DESCRIPTION, HairstyleOut
+from ..schemas import HAIR_FILE_DESCRIPTION, Anchoring, HairstyleOut
 from ..services import hairstyles
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
@@ -29,8 +29,12 @@ async def create_hairstyle(
                                            "inferred from where its roots sit on the source character)")] = "auto",
     guides: Annotated[int | None, Form(description="guide strands of the multi-scale solve (default 300)")] = None,
     k: Annotated[int, Form(description="inter-strand neighbours per particle (Eq. 8)")] = _DEFAULTS.k,
+    anchoring: Annotated[Anchoring, Form(
+        description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
+                    "when the source character has a skeleton, else the surface)")] = _DEFAULTS.anchoring,
 ) -> HairstyleOut:
-    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, hair, units, k, guides)
+    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, hair, units, k,
+                                               guides, anchoring)
     return hairstyles.hairstyle_out(repository, record)
 
 

@@ -26,26 +26,28 @@ from ..schemas import HairstyleOut, PreprocessingOut
 from ..uploads import check_units, extension_of, input_problem, store_upload, validated
 
 
-def preprocessing_settings(k: int, guides: int | None) -> PreprocessSettings:
+def preprocessing_settings(k: int, guides: int | None, anchoring: str) -> PreprocessSettings:
     """Validated preprocessing options (``guides=None``: the solver's default)."""
-    options = solver.PreprocessOptions(k=k, guides=solver.DEFAULT_GUIDES if guides is None else guides)
+    options = solver.PreprocessOptions(k=k, guides=solver.DEFAULT_GUIDES if guides is None else guides,
+                                       anchoring=anchoring)
     try:
         options.validate()
     except solver.InputError as error:
         raise input_problem(error, "options") from None
-    return PreprocessSettings(k=options.k, guides=options.guides)
+    return PreprocessSettings(k=options.k, guides=options.guides, anchoring=options.anchoring)
 
 
 async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: Settings, owner: str,
                            source_character_id: str, hair: UploadFile, units: str, k: int,
-                           guides: int | None) -> HairstyleRecord:
+                           guides: int | None, anchoring: str) -> HairstyleRecord:
     """Store and validate an uploaded hair file for the owner's character, and start its
     preprocessing unless an identical hairstyle was preprocessed already."""
     check_units(units)
     character: CharacterRecord = owned(repository, CharacterRecord, owner, source_character_id, "character")
-    if not character.bones:
-        raise Problem(422, "no_skeleton", "the source character needs a skeleton (skeleton JSON or glTF skin)")
-    options = preprocessing_settings(k, guides)
+    options = preprocessing_settings(k, guides, anchoring)
+    if options.anchoring == solver.ANCHOR_BY_BONES and not character.bones:
+        raise Problem(422, "no_skeleton", "anchoring by bones needs a source character with a skeleton "
+                                          "(skeleton JSON or glTF skin); anchor by the surface (anchoring surface or auto)")
     suffix = extension_of(hair, tuple(f".{name}" for name in solver.HAIR_FORMATS), "hair")
     blob = await store_upload(repository.storage, hair, settings, suffix, "hair")
     key = artifact_key(character, blob.sha256, units, options, solver.ARTIFACT_FORMAT_VERSION)

@@ -50,7 +50,8 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
                for target_id in request.target_character_ids]
     options = request.options.model_dump()
     variant = PreprocessSettings(k=options.pop("k") or hairstyle.options.k,
-                                 guides=options.pop("guides") or hairstyle.options.guides)
+                                 guides=options.pop("guides") or hairstyle.options.guides,
+                                 anchoring=hairstyle.options.anchoring)
     check_options(options, variant, body["hairline"])
     key = (hairstyle.artifact_key if variant == hairstyle.options
            else repository.variant_key(hairstyle, variant, solver.ARTIFACT_FORMAT_VERSION))

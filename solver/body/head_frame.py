@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hairport.solver.mesh.shells import vertex_components
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 
@@ -41,7 +42,7 @@ class HeadFrame:
     half_width : float
         Largest ``|s|`` of the skull (m).
     head_vertices : (V,) bool
-        Head-dominant vertices.
+        Head-dominant vertices of the connected piece of the mesh that holds most of them.
     """
 
     origin: np.ndarray
@@ -90,7 +91,9 @@ def head_frame(character: Character) -> HeadFrame:
     ----------
     character : Character
         Needs a skeleton with a ``head`` bone; skin weights are used when present (without
-        them every vertex above the head joint counts as head).
+        them every vertex above the head joint counts as head). Only the connected piece of
+        the mesh (edge graph) holding most head vertices counts: separate eyes, teeth or
+        lashes do not.
 
     Returns
     -------
@@ -99,10 +102,14 @@ def head_frame(character: Character) -> HeadFrame:
     Raises
     ------
     InputError
-        No skeleton, no ``head`` bone, or no head vertices.
+        ``no_skeleton`` without a skeleton; ``bad_skeleton`` without a ``head`` bone or head vertices.
     """
     if character.skeleton is None:
-        raise InputError("the character has no skeleton; the groom needs a 'head' bone", character.name, "bad_skeleton")
+        raise InputError(
+            "the character has no skeleton: hairline edits and presets take the head's frame from a 'head' bone "
+            "(give a skeleton JSON or a glTF skin, or retarget without a hairline edit)",
+            character.name, "no_skeleton",
+        )
     try:
         head = character.skeleton.index("head")
     except KeyError:
@@ -128,6 +135,10 @@ def head_frame(character: Character) -> HeadFrame:
         is_head = a > 0
     if not is_head.any():
         raise InputError("no vertex is dominated by the 'head' bone", character.name, "bad_skeleton")
+    # the head is the connected piece of the mesh holding most head vertices: eyes, teeth,
+    # lashes or a hat carried in the same mesh as separate pieces do not shape the frame
+    piece = vertex_components(character.faces, character.n_vertices)
+    is_head &= piece == np.argmax(np.bincount(piece[is_head]))
     crown = float(a[is_head].max())
     if crown <= 0:
         raise InputError("the head vertices lie below the head joint", character.name, "bad_skeleton")

@@ -1,4 +1,4 @@
-"""A target character made ready for a hairstyle: same topology, a skeleton, bones in the source's order."""
+"""A target character made ready for a hairstyle: same topology; the source's skeleton, in its order, if it has one."""
 
 from __future__ import annotations
 
@@ -31,7 +31,8 @@ def prepare_target(adaptable: RiggedSource, target: Character) -> Character:
     Returns
     -------
     target : Character
-        ``target`` itself when its bones are already those of the source, in that order;
+        ``target`` itself when its bones are already those of the source, in that order, or
+        when the source has no skeleton (its hairstyle is anchored by the surface);
         else the same mesh with the source's skeleton transferred (no skeleton) or with
         its bones, parents and skin-weight columns permuted into ``adaptable.bone_names``.
 
@@ -43,6 +44,8 @@ def prepare_target(adaptable: RiggedSource, target: Character) -> Character:
         neither character has a skeleton.
     """
     check_same_topology(adaptable.source, target)
+    if adaptable.source.skeleton is None:
+        return target  # anchored by the surface: the target's skeleton, if any, plays no part
     target = ensure_skeleton(adaptable.source, target)
     if target.skeleton.names != adaptable.bone_names:
         missing = sorted(set(adaptable.bone_names) - set(target.skeleton.names))

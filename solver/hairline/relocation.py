@@ -52,7 +52,7 @@ from hairport.solver.hairline.curve import HairlineCurve, check_curve_on_head, s
 from hairport.solver.hairline.density import DensityChange, density_change
 from hairport.solver.hairline.edit import HairlineEdit, unknown_method
 from hairport.solver.hairline.head_chart import HeadChart
-from hairport.solver.hairline.head_patch import head_patch
+from hairport.solver.hairline.head_patch import gap_hint, head_patch
 from hairport.solver.hairline.membrane import Membrane
 from hairport.solver.hairline.newton import relocate
 from hairport.solver.hairline.presets import preset_curve
@@ -73,6 +73,8 @@ from hairport.solver.model.errors import InputError
 #: a drawn curve's ends must lie this close (m) to the ends of the current front hairline,
 #: where it joins the fixed back part; they are then moved onto them
 CURVE_END_TOLERANCE_M = 0.025
+#: refusals of an edit that leaves the head patch (then a gap in the mesh nearby is named)
+OFF_HEAD = ("hairline_off_head", "off_head")
 
 
 @dataclass(frozen=True, eq=False)
@@ -394,12 +396,18 @@ def relocate_roots(
     root_barycentric = np.asarray(root_barycentric, dtype=np.float64)
     setup = scalp_chart(character, root_faces, edit.parameterization, edit.min_triangles, frame)
     prepared = time.perf_counter()
-    curve = edit_curve(setup, edit)
-    if edit.curve is not None:
-        targets = hairline_targets(setup, curve)
-    else:  # a preset moves each hairline vertex to its own point
-        targets = hairline_targets(setup, curve, f"preset {edit.preset}", pointwise=True)
-    u, method_report = deform_scalp(setup, targets, edit.method)
+    try:
+        curve = edit_curve(setup, edit)
+        if edit.curve is not None:
+            targets = hairline_targets(setup, curve)
+        else:  # a preset moves each hairline vertex to its own point
+            targets = hairline_targets(setup, curve, f"preset {edit.preset}", pointwise=True)
+        u, method_report = deform_scalp(setup, targets, edit.method)
+    except InputError as error:
+        hint = gap_hint(character, setup.patch_faces, setup.rest[setup.front]) if error.code in OFF_HEAD else ""
+        if not hint:
+            raise
+        raise InputError(error.problem + hint, error.source, error.code) from error
     deformed_at = time.perf_counter()
 
     roots_uv, in_patch = setup.face_parameters(root_faces, root_barycentric)

@@ -18,12 +18,20 @@ are in the closed set. ``r`` is the smallest of ``0 .. MAX_CLOSING_RINGS`` for w
 edge-connected piece holds every root (``r = 0`` is the paper's set as it is), or, when
 none does, the smallest for which the piece holding the most roots holds most.
 
+All of this happens on the *skin shell* that carries the roots
+(:func:`~hairport.solver.mesh.shells.root_shell`): real character meshes also carry eyes,
+teeth and lashes as separate pieces, fins on non-manifold edges and open borders; those
+pieces take no part, and roots on them are strays. Roots spread over several pieces (less
+than 90 % on one) are refused (``roots_on_several_pieces``).
+
 The piece holding the most roots is kept (roots outside it are *strays*: kept in
 :attr:`Scalp.strays` and reported with a :class:`ScalpWarning`); its holes, the pieces of
-the rest of the mesh that do not hold the rest of the body, are filled. On a closed genus-0
+the rest of the skin that do not hold the rest of the body, are filled. On a closed genus-0
 body (MakeHuman) an edge-connected region whose complement is edge-connected is a disk;
 elsewhere the faces around pinch vertices are added, and a region that is still not a disk
-is refused (:class:`InputError`).
+is refused (:class:`InputError`) saying why (:func:`check_region_disk`): a gap in the mesh
+inside it (``mesh_hole``), non-manifold edges inside it (``not_manifold``), or else
+``not_a_disk``.
 
 Hairline
 --------
@@ -56,12 +64,15 @@ import scipy.sparse as sp
 
 from hairport.solver.body.head_frame import REFERENCE_CROWN_M, HeadFrame, head_frame
 from hairport.solver.mesh.polyline import polyline_arc_length
+from hairport.solver.mesh.shells import explain_not_disk, root_shell
 from hairport.solver.mesh.topology import (
     boundary_edges,
+    boundary_loops,
     check_disk,
+    euler_characteristic,
     face_adjacency,
     largest_piece,
-    make_disk,
+    repair_disk,
     subdivide,
     submesh,
     vertex_adjacency,
@@ -260,6 +271,35 @@ def turning_points(points: np.ndarray, frame: HeadFrame) -> np.ndarray:
     return np.unique(np.concatenate([ends, corners])).astype(np.int64)
 
 
+def check_region_disk(character: Character, region: np.ndarray, shell: np.ndarray, what: str) -> None:
+    """Refuse a region ``(F,) bool`` of the character's ``shell (F,) bool`` that is not a disk,
+    saying why in the user's terms (:func:`~hairport.solver.mesh.shells.explain_not_disk`:
+    ``mesh_hole``, ``not_manifold``; else ``not_a_disk``)."""
+    triangles = submesh(character.faces, np.flatnonzero(region))[1]
+    try:
+        check_disk(triangles, what)
+    except InputError as error:
+        explained = explain_not_disk(character.faces, region, shell, what, character.vertices, character.name)
+        if explained is not None:
+            raise explained from error
+        raise InputError(f"the roots do not make one disk-shaped {what}: {_disk_defect(triangles, what)}",
+                         character.name, "not_a_disk") from error
+
+
+def _disk_defect(triangles: np.ndarray, what: str) -> str:
+    """What keeps a region ``(k, 3)`` from being a disk, in words."""
+    try:
+        loops = len(boundary_loops(triangles))
+    except InputError:
+        return "its border touches itself at a vertex"
+    handles = (2 - euler_characteristic(triangles) - loops) // 2
+    if loops == 0:
+        return f"the {what} would cover a whole closed piece of the mesh, leaving no hairline"
+    if handles > 0:
+        return f"the {what} wraps around {handles} tunnel(s) through the mesh"
+    return f"its border has {loops} loops (the roots surround {loops - 1} piece(s) of the mesh they leave bare)"
+
+
 def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame | None = None) -> Scalp:
     """The scalp of a hairstyle: the faces holding its roots, made a disk, and its hairline.
 
@@ -280,8 +320,9 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     Raises
     ------
     InputError
-        Fewer than ``MIN_SCALP_FACES`` distinct root faces, face ids out of range, a region
-        that cannot be made a disk, or a hairline that does not reach both ears.
+        Fewer than ``MIN_SCALP_FACES`` distinct root faces, face ids out of range, roots on
+        several pieces of the mesh, a region that cannot be made a disk, or a hairline that
+        does not reach both ears.
     """
     faces = character.faces
     root_faces = np.asarray(root_faces).ravel()
@@ -298,34 +339,44 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
             "bad_scalp",
         )
     frame = frame or head_frame(character)
-    adjacency = face_adjacency(faces)
-    vadj = vertex_adjacency(faces, character.n_vertices)
-    roots_per_face = np.bincount(root_faces, minlength=len(faces)).astype(np.float64)
+    # the skin shell carrying the roots; other shells (eyes, teeth, lashes, fins on
+    # non-manifold edges) take no part, and roots on them are strays
+    shell = root_shell(faces, root_faces, character.name)
+    shell_faces = np.flatnonzero(shell)
+    skin = faces[shell_faces]
+    local = np.full(len(faces), -1, dtype=np.int64)
+    local[shell_faces] = np.arange(len(shell_faces))
+    adjacency = face_adjacency(skin)
+    vadj = vertex_adjacency(skin, character.n_vertices)
+    on_skin = local[root_faces] >= 0
+    roots_per_face = np.bincount(local[root_faces[on_skin]], minlength=len(skin)).astype(np.float64)
     seed_faces = roots_per_face > 0
     seed_vertices = np.zeros(character.n_vertices, dtype=bool)
-    seed_vertices[faces[seed_faces].ravel()] = True
+    seed_vertices[skin[seed_faces].ravel()] = True
     best = (-1.0, 0, None)  # roots held, rings, piece
     for rings in range(MAX_CLOSING_RINGS + 1):
-        region = seed_faces if rings == 0 else _closed_faces(faces, seed_vertices, rings, vadj)
+        region = seed_faces if rings == 0 else _closed_faces(skin, seed_vertices, rings, vadj)
         piece = largest_piece(region, adjacency, roots_per_face)
         held = float(roots_per_face[piece].sum())
         if held > best[0]:
             best = (held, rings, piece)
-        if held == len(root_faces):
+        if held == on_skin.sum():
             break
     _, rings, piece = best
-    disk = make_disk(faces, piece, adjacency, roots_per_face, "scalp")
+    disk = np.zeros(len(faces), dtype=bool)
+    disk[shell_faces[repair_disk(skin, piece, adjacency, roots_per_face, "scalp")]] = True
+    check_region_disk(character, disk, shell, "scalp")
     strays = unique_roots[~disk[unique_roots]]
     if len(strays):
         warnings.warn(
-            f"{character.name}: {int(roots_per_face[strays].sum())} roots on {len(strays)} faces lie "
+            f"{character.name}: {int(np.isin(root_faces, strays).sum())} roots on {len(strays)} faces lie "
             "outside the scalp and were left out",
             ScalpWarning,
             stacklevel=2,
         )
     face_ids = np.flatnonzero(disk).astype(np.int64)
     vertices, triangles = submesh(faces, face_ids)
-    loop = check_disk(triangles, "scalp")
+    loop = boundary_loops(triangles)[0]
     start, count = split_hairline(character.vertices[vertices[loop]], frame)
     loop = _rotate_to(loop, start)
     front, back = loop[:count], loop[count:]

@@ -262,6 +262,15 @@ def check_disk(triangles: np.ndarray, what: str = "region") -> np.ndarray:
     return loops[0]
 
 
+def is_disk(triangles: np.ndarray) -> bool:
+    """Whether a triangle mesh ``(k, 3)`` is a topological disk (what :func:`check_disk` accepts)."""
+    try:
+        check_disk(triangles)
+    except InputError:
+        return False
+    return True
+
+
 def fill_holes(region: np.ndarray, adjacency: sp.csr_matrix) -> np.ndarray:
     """A face region with its holes filled.
 
@@ -309,12 +318,50 @@ def _pinch_vertices(faces: np.ndarray, region: np.ndarray) -> np.ndarray:
     return np.flatnonzero(count > 1)
 
 
-def make_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndarray,
-              what: str = "region") -> np.ndarray:
-    """A face region made a topological disk.
+def repair_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndarray,
+                what: str = "region") -> np.ndarray:
+    """A face region repaired toward a topological disk, unchecked (:func:`make_disk` checks).
 
     Keeps the edge-connected piece with the most ``weight``, fills its holes, and adds the
     faces around pinch vertices (repeated up to ``MAX_DISK_REPAIRS`` times).
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+    region : (F,) bool
+    adjacency : (F, F) csr_matrix
+        From :func:`face_adjacency`.
+    weight : (F,) float64
+        What the kept piece should hold most of (e.g. roots per face).
+    what : str
+        Name used in messages.
+
+    Returns
+    -------
+    repaired : (F,) bool
+
+    Raises
+    ------
+    InputError
+        Empty region.
+    """
+    if not region.any():
+        raise InputError(f"the {what} is empty", code="not_a_disk")
+    disk = region
+    for _ in range(MAX_DISK_REPAIRS + 1):
+        disk = fill_holes(largest_piece(disk, adjacency, weight), adjacency)
+        pinch = _pinch_vertices(faces, disk)
+        if len(pinch) == 0:
+            break
+        around = np.zeros(int(faces.max()) + 1, dtype=bool)
+        around[pinch] = True
+        disk = disk | around[faces].any(axis=1)
+    return disk
+
+
+def make_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, weight: np.ndarray,
+              what: str = "region") -> np.ndarray:
+    """A face region made a topological disk (:func:`repair_disk`, then :func:`check_disk`).
 
     Parameters
     ----------
@@ -336,17 +383,7 @@ def make_disk(faces: np.ndarray, region: np.ndarray, adjacency: sp.csr_matrix, w
     InputError
         Empty region, or no disk after the repairs.
     """
-    if not region.any():
-        raise InputError(f"the {what} is empty", code="not_a_disk")
-    disk = region
-    for _ in range(MAX_DISK_REPAIRS + 1):
-        disk = fill_holes(largest_piece(disk, adjacency, weight), adjacency)
-        pinch = _pinch_vertices(faces, disk)
-        if len(pinch) == 0:
-            break
-        around = np.zeros(int(faces.max()) + 1, dtype=bool)
-        around[pinch] = True
-        disk = disk | around[faces].any(axis=1)
+    disk = repair_disk(faces, region, adjacency, weight, what)
     check_disk(submesh(faces, np.flatnonzero(disk))[1], what)
     return disk
 

@@ -28,6 +28,8 @@ from hairport.solver.model.units import unit_scale
 AXES: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
 #: what the command line and the API accept for an axis (a missing sign means +)
 AXIS_CHOICES: tuple[str, ...] = ("x", "y", "z", *AXES)
+#: the value of an option (units, axes, anchoring) that asks hairport to infer it from the inputs
+AUTO = "auto"
 #: the unit vector of each axis name
 AXIS_VECTORS: dict[str, np.ndarray] = {
     name: np.eye(3)[i // 2] * (1.0 if name[0] == "+" else -1.0) for i, name in enumerate(AXES)

@@ -31,6 +31,12 @@ Deviations from the paper's text, on purpose:
 * A bone's ray must leave the body at its hit (the hit face looks along the ray): a ray
   from a joint lying outside the body (MakeHuman's head tail sits on the scalp) enters
   the body first, which is no anchor.
+* Sources without a rig (most real head meshes) are anchored by the body surface instead
+  (``anchoring="surface"``, the closest-triangle anchoring the paper's Sec. 7.3.2 discusses):
+  every particle keeps its offset to its closest surface point in that face's tangent frame,
+  the bones' fallback for every particle; about as good as the bones on the MakeHuman pairs
+  (README, method notes). ``auto`` takes the bones when the source has a skeleton with skin
+  weights, else the surface.
 """
 
 from __future__ import annotations
@@ -44,9 +50,17 @@ from hairport.solver.mesh.query import MeshQuery, SignedDistance
 from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import AUTO
+from hairport.solver.transfer.root_shell import snap_roots_to_skin
 
 #: bones hair can rest on, in the MakeHuman game-engine rig's names
 HAIR_BONES = ("head", "neck_01", "spine_03", "spine_02", "clavicle_l", "clavicle_r", "upperarm_l", "upperarm_r")
+#: how particles are anchored: by the bones' rays (Eq. 2), by their closest surface point, or
+#: by the bones when the source has a rig and by the surface when it has none
+ANCHOR_BY_BONES = "bones"
+ANCHOR_BY_SURFACE = "surface"
+ANCHOR_AUTO = AUTO
+ANCHORINGS = (ANCHOR_AUTO, ANCHOR_BY_BONES, ANCHOR_BY_SURFACE)
 #: Eq. 2's sigma: penalty on rays running along their bone (unitless)
 ANCHOR_SIGMA = 100.0
 #: a face belongs to the valid region of a bone where its mean skin weight exceeds this
@@ -121,6 +135,37 @@ def valid_face_mask(character: Character, bones: np.ndarray) -> np.ndarray:
     weights = character.weights[:, bones].toarray()
     face_weight = weights[character.faces].mean(axis=1)
     return face_weight > VALID_REGION_WEIGHT
+
+
+def resolve_anchoring(anchoring: str, character: Character) -> str:
+    """The anchoring a source gets: :data:`ANCHOR_BY_BONES` or :data:`ANCHOR_BY_SURFACE`.
+
+    Parameters
+    ----------
+    anchoring : str
+        One of :data:`ANCHORINGS`; ``auto`` takes the bones when ``character`` has a
+        skeleton with skin weights, else the surface.
+    character : Character
+        The source.
+
+    Raises
+    ------
+    InputError
+        ``bad_option`` for an unknown name; ``no_skeleton`` for ``bones`` on a character
+        without a skeleton with skin weights.
+    """
+    if anchoring not in ANCHORINGS:
+        raise InputError(f"unknown anchoring {anchoring!r}; expected one of {', '.join(ANCHORINGS)}", code="bad_option")
+    rigged = character.skeleton is not None and character.weights is not None
+    if anchoring == ANCHOR_AUTO:
+        return ANCHOR_BY_BONES if rigged else ANCHOR_BY_SURFACE
+    if anchoring == ANCHOR_BY_BONES and not rigged:
+        raise InputError(
+            "anchoring by bones needs a source character with a skeleton and skin weights; "
+            "give one (a skeleton JSON or a glTF skin) or anchor by the surface (anchoring surface or auto)",
+            character.name, "no_skeleton",
+        )
+    return anchoring
 
 
 def inner_bone_segments(heads: np.ndarray, tails: np.ndarray, query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
@@ -199,13 +244,14 @@ def compute_anchors(
     is_root: np.ndarray,
     query: MeshQuery | None = None,
     sigma: float = ANCHOR_SIGMA,
+    anchoring: str = ANCHOR_BY_BONES,
 ) -> Anchors:
     """Choose an anchor bone per particle and record its local coordinates (Eq. 2).
 
     Parameters
     ----------
     source : Character
-        Rigged source character.
+        The source character; rigged (skeleton and skin weights) for ``anchoring="bones"``.
     points : (N, 3) float64
         Source hair particles.
     is_root : (N,) bool
@@ -213,30 +259,63 @@ def compute_anchors(
         Prebuilt query structure of the source mesh.
     sigma : float
         Eq. 2's sigma.
+    anchoring : str
+        :data:`ANCHOR_BY_BONES` (Eq. 2, closest surface point where no bone reaches) or
+        :data:`ANCHOR_BY_SURFACE` (every particle by its closest surface point: ``fallback``
+        everywhere but the roots).
 
     Returns
     -------
     anchors : Anchors
     """
     query = query or MeshQuery(source.vertices, source.faces)
-    skeleton = source.skeleton
-    bones = hair_bone_indices(source)
-    valid = valid_face_mask(source, bones)
-    corners = source.vertices[source.faces]
-    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     n = len(points)
-
-    best_score = np.full(n, np.inf)
     best = {
         "bone": np.full(n, -1, np.int64),
         "face": np.full(n, -1, np.int64),
         "barycentric": np.zeros((n, 3)),
         "eta": np.zeros(n),
     }
-    free = np.flatnonzero(~is_root)
     # one closest-point query serves the reach test of every particle and the anchors of
     # roots and fallback particles
     surface = query.signed_distance(points)
+    if anchoring == ANCHOR_BY_SURFACE:
+        reached = np.zeros(n, dtype=bool)
+    elif anchoring == ANCHOR_BY_BONES:
+        reached = _anchor_by_bones(source, points, is_root, query, sigma, surface, best)
+    else:
+        raise InputError(f"unknown anchoring {anchoring!r}; expected {ANCHOR_BY_BONES} or {ANCHOR_BY_SURFACE}",
+                         code="bad_option")
+
+    # roots closer to an eye, a lash or a stray face than to the skin are anchored on the skin
+    surface, _ = snap_roots_to_skin(query, points, surface, is_root)
+    fallback = ~is_root & ~reached
+    closest_needed = is_root | fallback
+    frame_offset = np.zeros((n, 3))
+    if closest_needed.any():
+        idx = np.flatnonzero(closest_needed)
+        faces, barycentric = surface_anchors(query, surface.take(idx))
+        best["face"][idx] = faces
+        best["barycentric"][idx] = barycentric
+        best["bone"][idx] = -1
+        frames, _ = face_frames(source.vertices, source.faces, faces)
+        offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
+        frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
+        frame_offset[np.flatnonzero(is_root)] = 0.0
+    return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
+
+
+def _anchor_by_bones(source: Character, points: np.ndarray, is_root: np.ndarray, query: MeshQuery, sigma: float,
+                     surface: SignedDistance, best: dict[str, np.ndarray]) -> np.ndarray:
+    """Eq. 2 over the hair bones: writes the best bone, face, barycentric and ``eta`` into
+    ``best`` and returns ``(N,) bool``, the particles some bone reaches."""
+    skeleton = source.skeleton
+    bones = hair_bone_indices(source)
+    valid = valid_face_mask(source, bones)
+    corners = source.vertices[source.faces]
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    best_score = np.full(len(points), np.inf)
+    free = np.flatnonzero(~is_root)
     reach_of = ANCHOR_REACH_FACTOR * np.abs(surface.distance) + ANCHOR_REACH_SLACK
     inner_heads, inner_tails = inner_bone_segments(skeleton.heads[bones], skeleton.tails[bones], query)
     _, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
@@ -263,21 +342,9 @@ def compute_anchors(
         best["face"][take] = hits.faces[better]
         best["barycentric"][take] = hits.barycentric[better]
         best["eta"][take] = eta[better]
+    return np.isfinite(best_score)
 
-    fallback = ~is_root & ~np.isfinite(best_score)
-    closest_needed = is_root | fallback
-    frame_offset = np.zeros((n, 3))
-    if closest_needed.any():
-        idx = np.flatnonzero(closest_needed)
-        faces, barycentric = surface_anchors(query, surface.take(idx))
-        best["face"][idx] = faces
-        best["barycentric"][idx] = barycentric
-        best["bone"][idx] = -1
-        frames, _ = face_frames(source.vertices, source.faces, faces)
-        offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
-        frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
-        frame_offset[np.flatnonzero(is_root)] = 0.0
-    return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
+
 
 
 def _closest_on_bones(points: np.ndarray, heads: np.ndarray, tails: np.ndarray) -> np.ndarray:
@@ -294,7 +361,8 @@ def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None =
     ----------
     anchors : Anchors
     target : Character
-        Same topology and skeleton layout as the source.
+        Same topology as the source; its skeleton in the source's bone order where any
+        particle is anchored by a bone.
     query : MeshQuery, optional
         Prebuilt query structure of the target mesh.
 
@@ -303,20 +371,24 @@ def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None =
     points : (N, 3) float64
         The anchored particles ``p~``.
     """
-    skeleton = target.skeleton
     q = interpolate_barycentric(target.vertices, target.faces, anchors.face, anchors.barycentric)
     points = q.copy()
     ray_based = anchors.bone >= 0
-    bone = anchors.bone[ray_based]
-    query = query or MeshQuery(target.vertices, target.faces)
-    used = np.unique(bone)
-    inner_heads = np.zeros((skeleton.n_bones, 3))
-    inner_tails = np.zeros((skeleton.n_bones, 3))
-    inner_heads[used], inner_tails[used] = inner_bone_segments(skeleton.heads[used], skeleton.tails[used], query)
-    origin = _closest_on_bones(q[ray_based], inner_heads[bone], inner_tails[bone])
-    direction = q[ray_based] - origin
-    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
-    points[ray_based] += anchors.eta[ray_based, None] * direction
+    if ray_based.any():
+        skeleton = target.skeleton
+        if skeleton is None:
+            raise InputError("the hairstyle is anchored by bones, and the target has no skeleton",
+                             target.name, "no_skeleton")
+        bone = anchors.bone[ray_based]
+        query = query or MeshQuery(target.vertices, target.faces)
+        used = np.unique(bone)
+        inner_heads = np.zeros((skeleton.n_bones, 3))
+        inner_tails = np.zeros((skeleton.n_bones, 3))
+        inner_heads[used], inner_tails[used] = inner_bone_segments(skeleton.heads[used], skeleton.tails[used], query)
+        origin = _closest_on_bones(q[ray_based], inner_heads[bone], inner_tails[bone])
+        direction = q[ray_based] - origin
+        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
+        points[ray_based] += anchors.eta[ray_based, None] * direction
     if anchors.fallback.any():
         frames, _ = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
         points[anchors.fallback] += np.einsum("nij,nj->ni", frames, anchors.frame_offset[anchors.fallback])

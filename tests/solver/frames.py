@@ -28,12 +28,21 @@ def hair_in(frame: InputFrame, hair: Hair) -> Hair:
     return Hair(frame.axes_out(hair.points) / frame.scale, hair.offsets, thickness, hair.color)
 
 
-def head_only(character: Character, below_head_joint: float = 0.04) -> Character:
-    """The faces of a rigged character above its head joint less ``below_head_joint`` (m), no rig:
-    a head cut at the neck, open at the cut."""
+def head_faces(character: Character, below_head_joint: float = 0.04) -> np.ndarray:
+    """(F,) bool: the faces of a rigged character above its head joint less ``below_head_joint`` (m)."""
     joint = character.skeleton.heads[character.skeleton.index("head")]
-    keep = character.vertices[character.faces][:, :, 1].min(axis=1) > joint[1] - below_head_joint
+    return character.vertices[character.faces][:, :, 1].min(axis=1) > joint[1] - below_head_joint
+
+
+def faces_only(character: Character, keep: np.ndarray, name: str) -> Character:
+    """The mesh of ``keep`` (F,) bool faces with their vertices only, no rig: the same ``keep``
+    cuts characters of one topology into characters of one (smaller) topology."""
     used = np.unique(character.faces[keep])
     index = np.full(character.n_vertices, -1)
     index[used] = np.arange(len(used))
-    return Character(character.vertices[used], index[character.faces[keep]], name=f"{character.name}-head")
+    return Character(character.vertices[used], index[character.faces[keep]], name=name)
+
+
+def head_only(character: Character, below_head_joint: float = 0.04) -> Character:
+    """A rigged character's head cut at the neck (:func:`head_faces`), open at the cut, without a rig."""
+    return faces_only(character, head_faces(character, below_head_joint), f"{character.name}-head")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hairport.solver import artifact, pipeline
+from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
@@ -158,3 +159,27 @@ def test_the_grooms_frame_and_input_report_travel_with_the_artifact(case, tmp_pa
     older = tmp_path / "older.hpa"
     rewrite_meta(path, older, lambda meta, arrays: [meta.pop("input_frame"), meta.pop("input_report")])
     assert (artifact.load_adaptable(older).frame, artifact.load_adaptable(older).input_report) == (InputFrame(), {})
+
+
+def test_a_hairstyle_anchored_by_the_surface_of_a_source_without_a_rig_round_trips(case, tmp_path):
+    source, target, hair, _ = case
+    bare = Character(source.vertices, source.faces, name="bare")
+    adaptable = pipeline.preprocess(bare, hair, pipeline.PreprocessOptions(guides=12))
+    loaded = artifact.load_adaptable(artifact.save_adaptable(adaptable, tmp_path / "bare.hpa"))
+    assert loaded.source.skeleton is None and loaded.source.weights is None and loaded.bone_names == ()
+    assert loaded.options.anchoring == "surface" and (loaded.anchors.bone == -1).all()
+    options = pipeline.RetargetOptions(max_iterations=8, workers=1)
+    target = Character(target.vertices, target.faces, name="bare target")
+    assert np.array_equal(pipeline.retarget(adaptable, target, options).hair.points,
+                          pipeline.retarget(loaded, target, options).hair.points)
+
+
+def test_artifacts_written_before_surface_anchoring_read_as_anchored_by_bones(saved, tmp_path):
+    with np.load(saved) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    meta = json.loads(arrays["meta"].tobytes())
+    del meta["options"]["anchoring"]
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    with open(tmp_path / "old.hpa", "wb") as handle:
+        np.savez(handle, **arrays)
+    assert artifact.load_adaptable(tmp_path / "old.hpa").options.anchoring == "bones"

@@ -42,7 +42,7 @@ def test_unknown_method_lists_the_valid_ones():
     RetargetOptions(method="rbf-warp+pushout").validate()
 
 
-@pytest.mark.parametrize("change", [{"k": 0}, {"guides": 0}, {"sigma": -1.0}, {"sigma": math.nan}])
+@pytest.mark.parametrize("change", [{"k": 0}, {"guides": 0}, {"sigma": -1.0}, {"sigma": math.nan}, {"anchoring": "ribs"}])
 def test_preprocess_refusals(change):
     with pytest.raises(InputError) as refused:
         PreprocessOptions(**change).validate()

@@ -8,6 +8,7 @@ from hairport.solver import pipeline
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import mean_particle_distance, mean_segment_angle
+from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError, PenetrationRemaining, TopologyMismatch
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
@@ -48,6 +49,22 @@ def test_initial_transfer_to_another_body_keeps_roots_on_it_and_hair_outside(fem
     inside = query.signed_distance(initial[~fringe.is_root]).distance < 0
     # anchoring keeps nearly everything outside; the constrained solve handles the rest
     assert inside.mean() < 0.01, inside.sum()
+
+
+def test_a_source_without_a_rig_is_anchored_by_its_surface_and_reflexive_retarget_stays_exact(female, fringe):
+    bare = Character(female.vertices, female.faces, name="bare")
+    adaptable = pipeline.preprocess(bare, fringe)
+    assert adaptable.options.anchoring == "surface" and adaptable.bone_names == ()
+    result = pipeline.retarget(adaptable, bare)
+    assert mean_particle_distance(result.hair.points, fringe.points) <= 1e-7
+    assert result.metrics["fallback_anchors"] == int((~fringe.is_root).sum())
+    with pytest.raises(InputError, match="anchor by the surface") as error:
+        pipeline.preprocess(bare, fringe, pipeline.PreprocessOptions(anchoring="bones"))
+    assert error.value.code == "no_skeleton"
+    edit = pipeline.RetargetOptions(hairline=pipeline.HairlineEdit(preset="straight", amount=0.5))
+    with pytest.raises(InputError, match="hairline edits and presets take the head's frame") as error:
+        pipeline.retarget(adaptable, bare, edit)
+    assert error.value.code == "no_skeleton"
 
 
 def test_wrong_topology_is_refused_by_name(female, fringe):

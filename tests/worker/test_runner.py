@@ -18,6 +18,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver.io.character.obj import write_obj
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
@@ -277,3 +278,31 @@ def test_inputs_in_centimetres_and_z_up_give_the_result_in_their_frame(world, tm
     assert (section["units"]["hair"], section["axes"]["up"], section["axes"]["front"]) == ("cm", "+z", "-y")
     assert (section["target"]["units"], section["target"]["up"]) == ("cm", "+z") and section["warnings"] == []
     assert "input" not in reference.metrics or reference.metrics["input"]["units"]["hair"] == "m"
+
+
+def test_characters_without_a_rig_are_anchored_by_their_surface(world, tmp_path):
+    """Meshes without a skeleton (the common case of real heads): the hairstyle is preprocessed with
+    anchoring auto, which takes the surface, and its job succeeds with every particle outside."""
+    from tests.solver.synthetic.toy_fixtures import PRESET_B
+
+    repository, settings = world["repository"], world["settings"]
+    records = {}
+    for name, letter, character in (("source", "f", toy.toy_character()), ("target", "g", toy.toy_character(**PRESET_B))):
+        mesh = tmp_path / f"{name}.obj"
+        write_obj(mesh, character.vertices, character.faces, "no rig")
+        record = CharacterRecord(
+            id=letter * 32, owner=OWNER, created_at=now(), vertices=character.n_vertices, faces=character.n_faces,
+            bones=[], mesh=BlobRef(sha256=repository.storage.save_file(mesh, ".obj").sha256, suffix=".obj"))
+        repository.put(record, record.id)
+        records[name] = record
+    style = add_hairstyle(repository, records["source"], world["hair"], tmp_path / "groom.data", "h")
+    assert style.options.anchoring == "auto"
+    runner.run_preprocess(repository, settings, style.id)
+    assert repository.preprocessing_status(style).state == "ready", repository.preprocessing_status(style).error
+    world["ids"]["bare"], world["ids"]["bare-target"] = style, records["target"]
+    job = add_job(world, target="bare-target", hairstyle="bare")
+    runner.run_retarget(repository, settings, job.id, "w1")
+    job = repository.job(job.id)
+    assert job.state == "succeeded", job.error
+    assert job.metrics["anchoring"] == "surface" and job.metrics["penetrating_particles"] == 0
+    assert job.metrics["fallback_anchors"] == int((~world["hair"].is_root).sum())

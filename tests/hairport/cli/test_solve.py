@@ -17,9 +17,12 @@ from hairport import cli, solver
 from hairport.settings import get_settings
 from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
+from hairport.solver.io.character.obj import write_obj
 from hairport.solver.io.hair import read_hair, write_hair
 from hairport.solver.mesh.collision import collision_query
+from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
@@ -36,6 +39,8 @@ from tests.hairport.cli.helpers import (
     retarget_args,
     run,
 )
+from tests.solver.frames import character_in, faces_only, hair_in, head_faces
+from tests.solver.synthetic.toy_fixtures import PRESET_B
 
 # float32 coordinates (.data, .hair, .ply) near 1.7 m round to within ~6e-8 m
 FLOAT32_TOLERANCE_M = 1e-6
@@ -355,6 +360,29 @@ def test_target_without_skeleton_gets_the_source_skeleton(capsys, world, out):
     assert report["inputs"]["target"] == str(d / "bare.obj")
 
 
+def test_heads_without_a_rig_in_millimetres_and_z_up_retarget_by_their_surface(capsys, world, out):
+    """No skeleton, no units, Z up: everything inferred, the hair anchored by the source's surface."""
+    d, frame = world["dir"], InputFrame("mm", "z", "-y")
+    keep = head_faces(world["source"], 0.10)
+    for name, character in (("source", world["source"]), ("target", toy.toy_character(**PRESET_B))):
+        head = character_in(frame, faces_only(character, keep, name))
+        write_obj(d / f"{name}-head-mm.obj", head.vertices, head.faces, "a head in mm, Z up, no rig")
+    write_hair(d / "hair-mm.data", hair_in(frame, world["hair"]))
+    args = retarget_args(world, out, source=d / "source-head-mm.obj", target=d / "target-head-mm.obj",
+                         hair=d / "hair-mm.data", method="multiscale")
+    code, _, err = run(capsys, args + ["--workers", "1"])
+    assert code == 0, err
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["anchoring"] == "surface" and metrics["penetrating_particles"] == 0
+    assert (metrics["input"]["units"]["hair"], metrics["input"]["axes"]["up"]) == ("mm", "+z")
+    result = read_hair(out / "result.data")  # in the groom's millimetres, Z up
+    target = load_character(d / "target-head-mm.obj")
+    roots = MeshQuery(target.vertices, target.faces).signed_distance(result.points[result.is_root]).distance
+    assert np.abs(roots).max() < 1e-3  # mm: float32 coordinates near 1,700 mm
+    code, _, err = run(capsys, args + ["--anchoring", "bones"])
+    assert_input_error(code, err, "anchoring by bones needs", "skeleton")
+
+
 def test_preprocess_then_retarget_from_the_artifact_equals_the_one_shot_run(capsys, world, out):
     d = world["dir"]
     artifact = out / "groom.hpa"
@@ -481,6 +509,51 @@ def test_bad_hairline_presets_are_refused_before_any_work(capsys, human_world, o
     code, _, err = run(capsys, hairline_args(human_world, out, "--hairline", "round", "--method", "global-translate"))
     assert_input_error(code, err, "baseline")
     assert calls == [] and not any(out.iterdir())
+
+
+@pytest.fixture(scope="module")
+def bust_world(tmp_path_factory) -> dict:
+    """MakeHuman busts as game characters come (eyes and teeth as separate shells, open at the
+    chest and at the eye sockets, three non-manifold edges), a groom 2-5 mm off the skin; and
+    the same pair with a gap in the mesh at the crown."""
+    from hairport.solver.synthetic.makehuman import build_preset
+    from hairport.solver.synthetic.makehuman.bust import build_bust, keep_faces
+    from tests.solver.hairline.real_meshes import lifted_groom
+
+    d = tmp_path_factory.mktemp("cli-bust")
+    busts = [build_bust(name, open_eyes=True, fins=3) for name in ("average-female", "heavy-male")]
+    crown = int(np.argmax(busts[0].vertices[:, 1]))
+    keep = ~(busts[0].faces == crown).any(axis=1)
+    for tag, pair in (("", busts), ("holed-", [keep_faces(bust, keep) for bust in busts])):
+        for name, bust in zip(("female", "male"), pair):
+            write_character(bust, d / f"{tag}{name}.obj", d / f"{tag}{name}.skeleton.json")
+    write_hair(d / "short.data", lifted_groom(build_preset("average-female"), 80, 6))
+    for tag in ("", "holed-"):
+        code = cli.main(["preprocess", "--source", str(d / f"{tag}female.obj"), "--hair", str(d / "short.data"),
+                         "--guides", "20", "--out", str(d / f"{tag}short.hpa"), "--quiet"])
+        assert code == 0
+    return {"dir": d, "adaptable": d / "short.hpa", "target": d / "male.obj"}
+
+
+def test_hairline_edits_on_busts_with_eyes_teeth_and_open_borders(capsys, bust_world, out, tmp_path):
+    curve = tmp_path / "peak.json"
+    code, stdout, err = run(capsys, ["hairline", "--adaptable", str(bust_world["adaptable"]), "--target",
+                                     str(bust_world["target"]), "--preset", "widows-peak", "--out", str(curve),
+                                     "--quiet"])
+    assert code == 0, err
+    assert len(json.loads(curve.read_text())["points"]) > 20
+    code, stdout, err = run(capsys, hairline_args(bust_world, out, "--hairline", "widows-peak:0.6"))
+    assert code == 0, err
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["penetrating_particles"] == 0 and metrics["hairline"]["roots_moved"] > 0
+
+
+def test_a_gap_in_the_scalp_is_a_one_line_error(capsys, bust_world, tmp_path):
+    d = bust_world["dir"]
+    code, _, err = run(capsys, ["hairline", "--adaptable", str(d / "holed-short.hpa"), "--target",
+                                str(d / "holed-male.obj"), "--out", str(tmp_path / "curve.json"), "--quiet"])
+    assert_input_error(code, err, "the scalp under the roots has a hole", "gap in the mesh")
+    assert not (tmp_path / "curve.json").exists()
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ def test_one_record_and_one_preprocessing_per_content(client, files):
     assert first.status_code == second.status_code == 201 and first.json()["id"] == second.json()["id"]
     body = first.json()
     assert (body["strands"], body["particles"], body["format"]) == (20, 120, "data")
-    assert body["options"] == {"k": 5, "guides": 5} and body["preprocessing"] == {"state": "queued", "error": None}
+    assert body["options"] == {"k": 5, "guides": 5, "anchoring": "auto"} and body["preprocessing"] == {"state": "queued", "error": None}
     assert waiting(client, PREPROCESS_QUEUE) == 1
     assert client.get(f"/v1/hairstyles/{body['id']}", headers=AUTH).json() == body
     other = client.post("/v1/hairstyles", headers=AUTH, data={**form, "guides": "6"},
@@ -50,11 +50,18 @@ def test_bad_uploads(client, files, form, name, status, code):
     assert (response.status_code, response.json()["code"]) == (status, code)
 
 
-def test_a_character_without_a_skeleton_cannot_have_hairstyles(client, files):
+def test_a_character_without_a_skeleton_is_anchored_by_its_surface_unless_bones_are_asked_for(client, files):
     bare = client.post("/v1/characters", headers=AUTH, files={"mesh": ("b.obj", files["source.obj"])}).json()["id"]
-    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare},
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare, "anchoring": "bones"},
                            files={"hair": ("g.data", files["groom.data"])})
     assert (response.status_code, response.json()["code"]) == (422, "no_skeleton")
+    assert "anchor by the surface" in response.json()["detail"]
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare},
+                           files={"hair": ("g.data", files["groom.data"])})
+    assert response.status_code == 201 and response.json()["options"]["anchoring"] == "auto"
+    response = client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": bare, "anchoring": "ribs"},
+                           files={"hair": ("g.data", files["groom.data"])})
+    assert response.status_code == 422
 
 
 #: hair files with nothing to retarget, each refused at upload: (name, bytes, code, words of the detail)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import trimesh
 
 from hairport.solver.body.head_frame import (
     BROW_HEIGHT,
@@ -63,6 +64,32 @@ def test_head_vertices_are_the_head_dominant_ones(toy):
     np.testing.assert_array_equal(bare.head_vertices, (toy.vertices - frame.origin) @ frame.up > 0)
 
 
+def with_shell(toy, centre, radius, weights=True):
+    """The toy with a separate closed shell (an icosphere skinned to the head alone) in its mesh."""
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=radius)
+    vertices = np.vstack([toy.vertices, np.asarray(sphere.vertices) + centre])
+    faces = np.vstack([toy.faces, np.asarray(sphere.faces) + toy.n_vertices])
+    if not weights:
+        return Character(vertices, faces, toy.skeleton)
+    n = len(sphere.vertices)
+    head = sp.csr_matrix((np.ones(n), (np.arange(n), np.full(n, toy.skeleton.index("head")))),
+                         shape=(n, toy.skeleton.n_bones))
+    return Character(vertices, faces, toy.skeleton, sp.vstack([toy.weights, head]))
+
+
+@pytest.mark.parametrize("weights", [True, False])
+def test_a_separate_shell_does_not_shape_the_frame(toy, weights):
+    """A hat floating 3 cm over the crown and 3 cm before the brow, in the same mesh, skinned
+    to the head: the frame is the one of the head alone."""
+    plain = head_frame(toy if weights else Character(toy.vertices, toy.faces, toy.skeleton))
+    hat = plain.world(plain.crown + 0.05, plain.front + 0.03)
+    frame = head_frame(with_shell(toy, hat, 0.02, weights))
+    for name in ("crown", "front", "back", "half_width"):
+        assert getattr(frame, name) == getattr(plain, name), name
+    np.testing.assert_array_equal(frame.head_vertices[: toy.n_vertices], plain.head_vertices)
+    assert not frame.head_vertices[toy.n_vertices:].any()
+
+
 def test_coordinates(toy):
     frame = head_frame(toy)
     points = toy.vertices[:50]
@@ -94,8 +121,10 @@ def test_refusals(toy):
     skull = toy.vertices[:, 1] > toy.skeleton.heads[head][1]
     skull_only = sp.csr_matrix((np.ones(toy.n_vertices), (np.arange(toy.n_vertices), np.where(skull, head, 0))),
                                shape=toy.weights.shape)
+    with pytest.raises(InputError, match="hairline edits and presets take the head's frame") as error:
+        head_frame(Character(toy.vertices, toy.faces))
+    assert error.value.code == "no_skeleton"
     cases = [
-        (Character(toy.vertices, toy.faces), "no skeleton"),
         (rigged(toy, names=tuple("skull" if n == "head" else n for n in toy.skeleton.names)), "no bone named 'head'"),
         (rigged(toy, tails=zero_length), "zero length"),
         (rigged(toy, tails=along_z), "points along Z"),

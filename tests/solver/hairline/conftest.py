@@ -1,6 +1,8 @@
 """The MakeHuman head the hairline tests share: the average female with the roots of a
-300-strand "short" groom on her (seed 0), their scalp, and the scalp's parameterized chart."""
+300-strand "short" groom on her (seed 0), their scalp, and the scalp's parameterized chart;
+and her bust (eyes and teeth as separate shells, cut open at the chest) with the same roots."""
 
+import numpy as np
 import pytest
 
 from hairport.solver.body.head_frame import head_frame
@@ -10,6 +12,7 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.triangles import barycentric_coordinates
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
+from hairport.solver.synthetic.makehuman.bust import build_bust, keep_faces
 
 
 @pytest.fixture(scope="session")
@@ -54,3 +57,28 @@ def root_anchors(character):
 def scalp_setup(character, root_anchors):
     """The refined scalp of ``root_anchors`` in its harmonic head chart."""
     return scalp_chart(character, root_anchors[0])
+
+
+@pytest.fixture(scope="session")
+def bust():
+    return build_bust("average-female")
+
+
+@pytest.fixture(scope="session")
+def bust_roots(bust, roots):
+    """(S,) faces of the bust holding the roots of ``roots``."""
+    return MeshQuery(bust.vertices, bust.faces).signed_distance(roots[0]).faces
+
+
+@pytest.fixture(scope="session")
+def gapped(character, scalp, frame, root_anchors):
+    """The average female with a gap in her forehead (the faces around the vertex 1.5 cm below
+    the middle of the front hairline removed) and the roots of ``root_anchors`` on her:
+    ``(character, gap centre (3,), root faces, root barycentric)``."""
+    middle = character.vertices[scalp.vertices[scalp.front[len(scalp.front) // 2]]]
+    gap = int(np.argmin(np.linalg.norm(character.vertices - (middle - 0.015 * frame.up), axis=1)))
+    keep = ~(character.faces == gap).any(axis=1)
+    holed = keep_faces(character, keep)
+    found = MeshQuery(holed.vertices, holed.faces).signed_distance(root_anchors[2])
+    weights = barycentric_coordinates(found.closest, holed.vertices[holed.faces[found.faces]])
+    return holed, character.vertices[gap], found.faces, weights

@@ -1,6 +1,8 @@
 """Hair-root relocation end to end (paper Sec. 6, 7.5): curve correspondence, root relocation by
 the embedded membrane and its baselines, and the re-solve with Eq. 20-21."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -99,6 +101,23 @@ def test_drawn_curves_are_checked(scalp_setup):
         assert caught.value.code == code, (code, str(caught.value))
 
 
+
+def test_an_edit_stopped_by_a_gap_in_the_mesh_names_the_gap(relocations, gapped):
+    """A gap 1.5 cm under the middle of the front hairline: the round edit (down to 2 cm there,
+    tapering) still passes with the density change of the whole head; the widow's peak (2 cm
+    down, straight at the gap) cannot, and says why."""
+    holed, gap, faces, weights = gapped
+    rounded = relocate_roots(holed, faces, weights, HairlineEdit(preset="round"))
+    assert rounded.report["density_change_l1"] == pytest.approx(relocations["round"].report["density_change_l1"],
+                                                                abs=1e-3)
+    with pytest.raises(InputError, match="leaves the head region around the scalp") as caught:
+        relocate_roots(holed, faces, weights, HairlineEdit(preset="widows-peak"))
+    assert caught.value.code == "hairline_off_head"
+    found = re.search(r"a gap in the mesh ([\d.]+) cm from the hairline, near \[([^]]+)\]", caught.value.problem)
+    assert 0.8 < float(found.group(1)) < 1.6
+    near = np.array(found.group(2).split(", "), dtype=float)
+    assert np.linalg.norm(near - gap) < 0.006
+    assert relocations["widows-peak"].report["converged"]  # the whole head takes it
 
 
 # --------------------------------------------------------------------------------------

@@ -1,12 +1,18 @@
 """Scalp extraction, hairline split and refinement on the MakeHuman head (paper Section 6.1)."""
 
+import re
+
 import numpy as np
 import pytest
+import scipy.sparse as sp
+import trimesh
 
+from hairport.solver.body.head_frame import head_frame
 from hairport.solver.hairline.scalp import (
     DEFAULT_MIN_TRIANGLES,
     Scalp,
     ScalpWarning,
+    _disk_defect,
     extract_scalp,
     refine_scalp,
     split_boundary_ears,
@@ -14,6 +20,8 @@ from hairport.solver.hairline.scalp import (
 )
 from hairport.solver.mesh.areas import signed_areas
 from hairport.solver.mesh.parameterization import PARAMETERIZATIONS, parameterize
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.shells import shell_labels
 from hairport.solver.mesh.topology import (
     boundary_edges,
     boundary_loops,
@@ -21,7 +29,9 @@ from hairport.solver.mesh.topology import (
     face_adjacency,
     fill_holes,
 )
+from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.synthetic.makehuman.bust import keep_faces
 
 #: roots dropped within this distance (m) of the crown make a hole no closing can fill
 HOLE_RADIUS_M = 0.04
@@ -209,3 +219,94 @@ def test_the_scalp_of_a_groom_has_ears_to_split(character, scalp):
     _, triangles, split = split_boundary_ears(uv_like, scalp.triangles)
     assert before > 0 and split == before
     assert boundary_edges(triangles, scalp.n_vertices + split).sum(axis=1).max() == 1
+
+
+def test_the_scalp_on_a_bust_is_the_scalp_on_the_body(character, frame, scalp, bust, bust_roots):
+    """Eyes and teeth as separate shells and a body cut open at the chest change nothing."""
+    bust_frame = head_frame(bust)
+    for name in ("crown", "front", "back", "half_width"):
+        assert getattr(bust_frame, name) == getattr(frame, name), name
+    on_bust = extract_scalp(bust, bust_roots, bust_frame)
+    assert_disk_scalp(on_bust, bust, bust_frame)
+    assert (len(on_bust.faces), len(on_bust.vertices), len(on_bust.boundary), len(on_bust.front)) == (466, 264, 60, 33)
+    np.testing.assert_array_equal(bust.vertices[on_bust.vertices[on_bust.boundary]],
+                                  character.vertices[scalp.vertices[scalp.boundary]])
+    assert on_bust.turning_points.tolist() == scalp.turning_points.tolist()
+
+
+def crown_faces(character, scalp, frame):
+    """The faces around the scalp vertex nearest the top of the head (a ring of 4-8 faces)."""
+    top = scalp.vertices[np.argmax(frame.local(character.vertices[scalp.vertices])[:, 0])]
+    return np.flatnonzero((character.faces == top).any(axis=1))
+
+
+@pytest.mark.parametrize("damage", ["removed", "flipped"])
+def test_a_gap_in_the_mesh_under_the_roots_is_refused(bust, bust_roots, roots, damage):
+    bust_frame = head_frame(bust)
+    ring = crown_faces(bust, extract_scalp(bust, bust_roots, bust_frame), bust_frame)
+    assert 4 <= len(ring) <= 8
+    if damage == "removed":
+        keep = np.ones(bust.n_faces, dtype=bool)
+        keep[ring] = False
+        holed = keep_faces(bust, keep)
+    else:
+        faces = bust.faces.copy()
+        faces[ring[:1]] = faces[ring[:1], ::-1]
+        holed = Character(bust.vertices, faces, bust.skeleton, bust.weights, bust.name)
+    root_faces = MeshQuery(holed.vertices, holed.faces).signed_distance(roots[0]).faces
+    with pytest.raises(InputError, match=r"the scalp under the roots has a hole: it surrounds a gap in the mesh") as e:
+        extract_scalp(holed, root_faces)
+    assert e.value.code == "mesh_hole" and e.value.source == bust.name
+    near = np.array(re.search(r"near \[([^]]+)\]", e.value.problem).group(1).split(", "), dtype=float)
+    top = bust.vertices[np.unique(bust.faces[ring])].mean(axis=0)
+    assert np.linalg.norm(near - top) < 0.01
+
+
+def test_a_fin_on_the_scalp_is_left_out(bust, bust_roots):
+    """A face hanging on an edge inside the scalp (a non-manifold edge) is a piece of its own."""
+    plain = extract_scalp(bust, bust_roots)
+    inner = np.flatnonzero(~np.isin(plain.triangles, plain.boundary).any(axis=1))
+    edge = plain.vertices[plain.triangles[inner[len(inner) // 2], :2]]  # an inner edge of the scalp
+    tip = bust.vertices[edge].mean(axis=0) - [0.0, 0.01, 0.0]  # 1 cm down, inside the head
+    finned = Character(np.vstack([bust.vertices, tip]), np.vstack([bust.faces, [[edge[1], edge[0], bust.n_vertices]]]),
+                       bust.skeleton, sp.vstack([bust.weights, bust.weights[edge[0]]]), bust.name)
+    with_fin = extract_scalp(finned, bust_roots)
+    np.testing.assert_array_equal(with_fin.faces, plain.faces)
+    np.testing.assert_array_equal(with_fin.boundary, plain.boundary)
+
+
+def test_roots_on_an_eye(bust, bust_roots):
+    """A few roots on an eye are strays; a tenth of them make two pieces, which is refused."""
+    labels = shell_labels(bust.faces)
+    eye = np.flatnonzero(labels == labels[-1 - 2 * 134])  # the right eye: before both teeth shells
+    assert len(eye) == 140
+    plain = extract_scalp(bust, bust_roots)
+    with pytest.warns(ScalpWarning, match="5 roots on 5 faces lie outside the scalp"):
+        some = extract_scalp(bust, np.concatenate([bust_roots, eye[:5]]))
+    np.testing.assert_array_equal(some.faces, plain.faces)
+    assert np.array_equal(some.strays, eye[:5])
+    with pytest.raises(InputError, match=r"the roots lie on 2 separate pieces of the mesh \(300 on a piece of 11118 "
+                                         r"faces, 40 on a piece of 140 faces\)") as e:
+        extract_scalp(bust, np.concatenate([bust_roots, eye[:40]]))
+    assert e.value.code == "roots_on_several_pieces"
+
+
+def test_roots_everywhere_leave_no_hairline(character, frame):
+    with pytest.raises(InputError, match="the roots do not make one disk-shaped scalp: the scalp would cover a whole "
+                                         "closed piece of the mesh, leaving no hairline") as e:
+        extract_scalp(character, np.arange(character.n_faces), frame)
+    assert e.value.code == "not_a_disk"
+
+
+def test_what_keeps_a_region_from_being_a_disk_in_words():
+    from tests.solver.triangle_grids import grid
+
+    _, square = grid(4, 4, 0.0, 1.0, 0.0, 1.0)
+    ring = np.delete(square, [5, 21], axis=0)  # the two triangles of cell (1, 1)
+    assert _disk_defect(ring, "scalp") == ("its border has 2 loops (the roots surround 1 piece(s) of the mesh "
+                                           "they leave bare)")
+    torus = np.asarray(trimesh.creation.torus(major_radius=1.0, minor_radius=0.3).faces)
+    assert _disk_defect(torus, "head patch") == ("the head patch would cover a whole closed piece of the mesh, "
+                                                 "leaving no hairline")
+    # the torus but one face: one border loop round a surface with a handle
+    assert _disk_defect(torus[1:], "scalp") == "the scalp wraps around 1 tunnel(s) through the mesh"

@@ -14,8 +14,10 @@ from hairport.solver.mesh.topology import (
     fill_holes,
     graph_laplacian,
     half_edges,
+    is_disk,
     largest_piece,
     make_disk,
+    repair_disk,
     subdivide,
     submesh,
     vertex_adjacency,
@@ -211,6 +213,23 @@ def test_make_disk_keeps_the_heaviest_piece_and_fills_its_hole():
     with pytest.raises(InputError, match="the test region is empty") as caught:
         make_disk(faces, np.zeros(len(faces), dtype=bool), adjacency, np.ones(len(faces)), "test region")
     assert caught.value.code == "not_a_disk"
+
+
+def test_repair_disk_returns_what_it_could_not_make_a_disk():
+    # the grid with cell (2, 2) gone from the mesh: a ring around it stays a ring (no faces
+    # to fill the hole with); make_disk refuses it, repair_disk hands it back unchecked
+    _, full = grid(5, 5, 0.0, 1.0, 0.0, 1.0)
+    faces = np.delete(full, cell_faces([(2, 2)]), axis=0)
+    ring = [(1, 1), (2, 1), (3, 1), (3, 2), (3, 3), (2, 3), (1, 3), (1, 2)]
+    region = (faces[:, None] == full[cell_faces(ring)][None]).all(axis=2).any(axis=1)
+    assert region.sum() == 16
+    adjacency = face_adjacency(faces)
+    repaired = repair_disk(faces, region, adjacency, region.astype(float), "ring")
+    np.testing.assert_array_equal(repaired, region)
+    assert not is_disk(submesh(faces, np.flatnonzero(repaired))[1])
+    with pytest.raises(InputError, match="the ring is not a disk: 2 boundary loops and Euler characteristic 0"):
+        make_disk(faces, region, adjacency, region.astype(float), "ring")
+    assert is_disk(full) and not is_disk(TETRAHEDRON) and not is_disk(np.zeros((0, 3), np.int64))
 
 
 def test_subdivide_one_triangle():
