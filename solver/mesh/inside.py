@@ -41,9 +41,8 @@ from dataclasses import dataclass
 
 import igl
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
+from hairport.solver.mesh.shells import edge_table, shell_labels
 from hairport.solver.mesh.topology import half_edges
 
 #: a point is inside where the winding number exceeds this (1 inside a closed shell, 0 outside)
@@ -105,16 +104,7 @@ def manifold_closed(faces: np.ndarray) -> bool:
     ----------
     faces : (F, 3) int64
     """
-    if len(faces) == 0:
-        return False
-    edges = half_edges(faces)
-    n = int(edges.max()) + 1
-    forward = np.sort(edges[:, 0] * n + edges[:, 1])
-    if np.any(forward[1:] == forward[:-1]):
-        return False
-    backward = edges[:, 1] * n + edges[:, 0]
-    at = np.minimum(np.searchsorted(forward, backward), len(forward) - 1)
-    return bool(np.all(forward[at] == backward))
+    return len(faces) > 0 and bool(edge_table(faces).manifold.all())
 
 
 def closed_cycle(faces: np.ndarray) -> bool:
@@ -128,27 +118,20 @@ def closed_cycle(faces: np.ndarray) -> bool:
     """
     if len(faces) == 0:
         return False
-    edges = half_edges(faces)
-    n = int(edges.max()) + 1
-    low, high = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
-    way = np.where(edges[:, 0] < edges[:, 1], 1, -1)
-    keys, inverse = np.unique(low * n + high, return_inverse=True)
-    return bool(np.all(np.bincount(inverse.ravel(), weights=way, minlength=len(keys)) == 0))
+    half = half_edges(faces)
+    way = np.where(half[:, 0] < half[:, 1], 1.0, -1.0)
+    edges = edge_table(faces)
+    return bool(np.all(np.bincount(edges.of_half_edge, weights=way, minlength=len(edges.count)) == 0))
 
 
 def shell_count(faces: np.ndarray) -> int:
-    """Connected pieces of the mesh (faces joined through shared vertices).
+    """Shells of the mesh (:func:`.shells.shell_labels`: pieces joined across manifold edges).
 
     Parameters
     ----------
     faces : (F, 3) int64
     """
-    if len(faces) == 0:
-        return 0
-    used, local = np.unique(np.asarray(faces, dtype=np.int64), return_inverse=True)
-    edges = half_edges(local.reshape(-1, 3))
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(len(used), len(used)))
-    return int(connected_components(graph, directed=False)[0])
+    return int(shell_labels(faces).max()) + 1 if len(faces) else 0
 
 
 def exit_faces(vertices: np.ndarray, faces: np.ndarray, winding: WindingNumber) -> np.ndarray:
@@ -203,17 +186,10 @@ def manifold_features(faces: np.ndarray) -> np.ndarray:
     out = np.ones((len(faces), 7), dtype=bool)
     if len(faces) == 0:
         return out
-    edges = half_edges(faces)
-    n = int(edges.max()) + 1
-    low, high = np.minimum(edges[:, 0], edges[:, 1]), np.maximum(edges[:, 0], edges[:, 1])
-    keys, inverse = np.unique(low * n + high, return_inverse=True)
-    inverse = inverse.ravel()
-    way = np.where(edges[:, 0] < edges[:, 1], 1, -1)
-    good_edge = (np.bincount(inverse, minlength=len(keys)) == 2) & (
-        np.bincount(inverse, weights=way, minlength=len(keys)) == 0)
-    half_good = good_edge[inverse]
-    bad_vertex = np.zeros(n, dtype=bool)
-    bad_vertex[edges[~half_good].ravel()] = True
+    edges = edge_table(faces)
+    half_good = edges.manifold[edges.of_half_edge]
+    bad_vertex = np.zeros(int(faces.max()) + 1, dtype=bool)
+    bad_vertex[half_edges(faces)[~half_good].ravel()] = True
     # half-edge 3 f + j runs from corner j to j + 1: it is the edge opposite corner j + 2
     out[:, 1:4] = half_good.reshape(-1, 3)[:, [1, 2, 0]]
     out[:, 4:7] = ~bad_vertex[faces]
