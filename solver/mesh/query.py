@@ -140,7 +140,7 @@ class MeshQuery:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, inside: InsideTest | None = None):
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
-        self._inside = inside  # built on first use when not given
+        self._inside = inside  # None: pseudonormal signs
         self._rays = None  # Embree scene, built on the first first_hits
         self._closest = None  # face search (BVH), built on the first signed_distance
         self._triangles = None  # (12, F) per-face data for the closest point on a face
