@@ -10,6 +10,9 @@ import trimesh
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character
 from hairport.solver.model.hair import Hair
+from hairport.solver.synthetic.makehuman.bust import keep_faces
+
+__all__ = ["TOY_CHEST_Y_M", "chest_cut", "keep_faces", "sunk", "trap", "with_blocks"]
 
 #: the toy bust's cut (m along Y): across the chest, 13 cm under the shoulders' top
 TOY_CHEST_Y_M = 1.35
@@ -31,15 +34,6 @@ TRAP_ROOTS_XZ = ((0.0, 0.0), (0.01, 0.0), (-0.01, 0.005), (0.0, -0.01))
 def sunk(hair: Hair, depth: float) -> Hair:
     """The groom moved down (-Y) by ``depth`` (m): into its head and shoulders."""
     return hair.with_points(hair.points - np.array([0.0, depth, 0.0]))
-
-
-def keep_faces(character: Character, keep: np.ndarray, name: str) -> Character:
-    """``character`` with the faces ``keep (F,) bool`` only and the vertices they use, rig kept."""
-    used = np.zeros(character.n_vertices, dtype=bool)
-    used[character.faces[keep].ravel()] = True
-    new_id = np.cumsum(used) - 1
-    weights = None if character.weights is None else character.weights[used]
-    return Character(character.vertices[used], new_id[character.faces[keep]], character.skeleton, weights, name)
 
 
 def chest_cut(reference: Character, height: float) -> np.ndarray:

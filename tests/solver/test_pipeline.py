@@ -124,7 +124,7 @@ def toy_bodies():
     """The toy pair, closed and as busts cut across the chest (the same faces on both)."""
     source, target = toy_character(), toy_character(**PRESET_B, name="toy-b")
     keep = chest_cut(source, TOY_CHEST_Y_M)
-    busts = keep_faces(source, keep, "toy-bust"), keep_faces(target, keep, "toy-b-bust")
+    busts = keep_faces(source, keep), keep_faces(target, keep)
     for bust, whole in zip(busts, (source, target)):  # open, from the chest to the crown
         assert not collision_query(bust.vertices, bust.faces).closed
         assert 1.3 < bust.vertices[:, 1].min() < 1.45 and bust.vertices[:, 1].max() == whole.vertices[:, 1].max()

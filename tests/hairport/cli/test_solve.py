@@ -27,8 +27,6 @@ from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
 from hairport.solver.transfer.anchors import root_targets
-from tests.solver.depth_cases import TOY_CHEST_Y_M, chest_cut, keep_faces, sunk, trap
-from tests.solver.synthetic.toy_fixtures import PRESET_B
 from tests.hairport.cli.helpers import (
     BASELINE,
     N_PARTICLES,
@@ -39,6 +37,7 @@ from tests.hairport.cli.helpers import (
     retarget_args,
     run,
 )
+from tests.solver.depth_cases import TOY_CHEST_Y_M, chest_cut, keep_faces, sunk, trap
 from tests.solver.frames import character_in, faces_only, hair_in, head_faces
 from tests.solver.synthetic.toy_fixtures import PRESET_B
 
@@ -566,7 +565,7 @@ def sunk_world(world, tmp_path_factory) -> dict:
     source, target = world["source"], toy.toy_character(**PRESET_B, name="target")
     keep = chest_cut(source, TOY_CHEST_Y_M)
     bodies = {"closed": (source, target),
-              "bust": (keep_faces(source, keep, "source-bust"), keep_faces(target, keep, "target-bust"))}
+              "bust": (keep_faces(source, keep), keep_faces(target, keep))}
     for name, (s, t) in bodies.items():
         write_character(s, d / f"{name}-source.obj", d / f"{name}-source.skeleton.json")
         write_character(t, d / f"{name}-target.obj", d / f"{name}-target.skeleton.json")

@@ -2,7 +2,13 @@
 
 import numpy as np
 
-from hairport.solver.mesh.clearance import INSIDE_PUSH_ROUNDS, MAX_PUSH_ROUNDS, PUSH_TOLERANCE, push_inside_out, push_out
+from hairport.solver.mesh.clearance import (
+    INSIDE_PUSH_ROUNDS,
+    MAX_PUSH_ROUNDS,
+    PUSH_TOLERANCE,
+    push_inside_out,
+    push_out,
+)
 from hairport.solver.mesh.query import MeshQuery, SignedDistance
 from tests.solver.hair_shapes import HEAD_RADIUS, ellipsoid_head
 from tests.solver.mesh.meshes import icosphere

@@ -12,8 +12,8 @@ import pytest
 import trimesh
 
 from hairport.solver.mesh import distance_grid
-from hairport.solver.mesh.distance_grid import DEFAULT_GRID_MARGIN, DEFAULT_GRID_SPACING, DistanceGrid, near_mask
 from hairport.solver.mesh.collision import collision_query
+from hairport.solver.mesh.distance_grid import DEFAULT_GRID_MARGIN, DEFAULT_GRID_SPACING, DistanceGrid, near_mask
 from hairport.solver.mesh.query import MeshQuery
 
 RADIUS = 0.1  # m
