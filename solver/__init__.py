@@ -42,6 +42,7 @@ _EXPORTS = {
     "METERS_PER_UNIT": ("hairport.solver.model.units", "METERS_PER_UNIT"),
     "METHODS": ("hairport.solver.options", "METHODS"),
     "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
+    "PenetrationRemaining": ("hairport.solver.model.errors", "PenetrationRemaining"),
     "PreprocessOptions": ("hairport.solver.options", "PreprocessOptions"),
     "ProgressFn": ("hairport.solver.model.progress", "ProgressFn"),
     "QP_BACKENDS": ("hairport.solver.adaptation.coupled", "QP_BACKENDS"),

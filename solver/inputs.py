@@ -45,6 +45,7 @@ from hairport.solver.body.scale import (
 )
 from hairport.solver.body.skinning import derive_skin_weights
 from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, check_same_topology
 from hairport.solver.model.errors import InputError
@@ -282,7 +283,9 @@ def measure_groom(source: Character, hair: Hair, query: MeshQuery | None = None)
     hair : Hair
         Canonical frame.
     query : MeshQuery, optional
-        Over ``source``.
+        Over ``source``; by default its collision surface
+        (:func:`~hairport.solver.mesh.collision.collision_query`), whose sign is the body's
+        inside at any depth, open bodies included (the test of the final penetration check).
 
     Returns
     -------
@@ -293,7 +296,7 @@ def measure_groom(source: Character, hair: Hair, query: MeshQuery | None = None)
         them inside the body).
     warnings : list of str
     """
-    query = query or MeshQuery(source.vertices, source.faces)
+    query = query or collision_query(source.vertices, source.faces, source.name)
     distance = query.signed_distance(hair.points).distance
     is_root = hair.is_root
     inside = (distance < 0.0) & ~is_root

@@ -43,10 +43,17 @@ def mean_segment_angle(points: np.ndarray, reference: np.ndarray, segments: np.n
 def penetration(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, eps_c: float) -> dict:
     """Signed-distance statistics of the non-root particles against a body.
 
+    Parameters
+    ----------
+    query : MeshQuery
+        The body, best its collision surface (:func:`.mesh.collision.collision_query`): then
+        inside (a negative distance) is the body's inside at any depth, the test of the final
+        check and of the solvers' constraints.
+
     Returns
     -------
     stats : dict
-        ``inside`` (count with distance < 0), ``below_clearance`` (count below eps_c by
+        ``inside`` (count inside the body), ``below_clearance`` (count below eps_c by
         more than :data:`CLEARANCE_REPORT_TOLERANCE`),
         ``min_distance`` (m), and ``distance`` ((N_free,) array, not for JSON).
     """
@@ -87,6 +94,7 @@ def hairstyle_metrics(
     query: MeshQuery,
     eps_c: float,
     weights: EnergyWeights = EnergyWeights(),
+    body: MeshQuery | None = None,
 ) -> dict:
     """All section-4 metrics of a retargeted hairstyle, as a JSON-ready dict.
 
@@ -102,12 +110,15 @@ def hairstyle_metrics(
     root_targets : (S, 3) float64
     model : ShapeModel
     query : MeshQuery
-        The target body.
+        The target body (the roots' distance to its surface).
     eps_c : float
     weights : EnergyWeights
+    body : MeshQuery, optional
+        The target's collision surface (:func:`.mesh.collision.collision_query`) for the
+        penetration figures; ``query`` by default.
     """
     n = len(points)
-    pen = penetration(points, is_root, query, eps_c)
+    pen = penetration(points, is_root, query if body is None else body, eps_c)
     terms = energy_terms(model, points, initial)
     angles = segment_angles(points, source_points, model.segments)
     metrics = {

@@ -2,7 +2,12 @@
 
 ``preprocess(source, hair)`` computes everything that depends on the source only (the
 "adaptable hairstyle"); ``retarget(adaptable, target)`` adapts it to one target: initial
-transfer (Eq. 2-6), then shape adaptation (Eq. 1) or a baseline, then metrics.
+transfer (Eq. 2-6), then shape adaptation (Eq. 1) or a baseline, then the final penetration
+check for the methods that claim a penetration-free result (the solvers, baselines with
+``+pushout``: :func:`~hairport.solver.mesh.penetration.resolve_penetration`), then metrics.
+Collisions (Eq. 13, push-outs, the check, the penetration metrics) are against the target's
+collision surface (:func:`~hairport.solver.mesh.collision.collision_query`); anchoring and the
+roots' metrics against its whole mesh.
 """
 
 from __future__ import annotations
@@ -31,7 +36,9 @@ from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.hairline.presets import parse_preset
 from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
 from hairport.solver.hairline.weights import adaptive_weights
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
+from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
@@ -167,6 +174,7 @@ def retarget(
         progress("prepare", 0.0, "checking the target")
         target = prepare_target(adaptable, target)
         target_query = MeshQuery(target.vertices, target.faces)
+        body = collision_query(target.vertices, target.faces, target.name)
     with timed(timings, "initial_transfer"):
         progress("initial_transfer", 0.05, "initial transfer")
         initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
@@ -181,22 +189,31 @@ def retarget(
 
     weights = EnergyWeights(options.alpha, options.beta)
     if options.method in SOLVER_METHODS:
+        claims_outside = True
         with timed(timings, "solve"):
-            points, solve_report = adapt_shape(adaptable, target_query, initial, options, weights, timings, gamma,
+            points, solve_report = adapt_shape(adaptable, body, initial, options, weights, timings, gamma,
                                                start, progress, should_stop)
     else:
         solve_report = None
         with timed(timings, "baseline"):
             progress("baseline", 0.1, f"baseline {options.method}")
-            base, pushout = parse_method(options.method)
-            points = retarget_baseline(base, adaptable.source, target, hair, pushout=pushout, clearance=options.eps_c,
-                                       target_query=target_query).points
+            base, claims_outside = parse_method(options.method)
+            points = retarget_baseline(base, adaptable.source, target, hair, pushout=claims_outside,
+                                       clearance=options.eps_c, target_query=body).points
+
+    resolved = None
+    if claims_outside:
+        with timed(timings, "penetration_check"):
+            progress("penetration_check", 0.94, "checking that no particle is inside the body")
+            points, resolved = resolve_penetration(points, hair.is_root, body, options.eps_c, target.name)
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
         metrics = hairstyle_metrics(points, hair.points, initial, hair.is_root, roots, adaptable.shape_model,
-                                    target_query, options.eps_c, weights)
+                                    target_query, options.eps_c, weights, body=body)
         metrics["method"] = options.method
+        if resolved is not None:
+            metrics["penetration_resolved"] = resolved
         if relocation is not None:
             metrics["hairline"] = relocation.report
         metrics["smoothed_particles"] = int(unsmooth.sum())
@@ -318,9 +335,10 @@ def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: 
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:
-    """(N,) bool: non-root particles inside the target body."""
-    query = query or MeshQuery(target.vertices, target.faces)
+    """(N,) bool: non-root particles inside the target body (by its collision surface's test,
+    :func:`~hairport.solver.mesh.collision.collision_query`, unless ``query`` is given)."""
+    query = query or collision_query(target.vertices, target.faces, target.name)
     mask = np.zeros(hair.n_particles, dtype=bool)
     free = ~hair.is_root
-    mask[free] = query.signed_distance(hair.points[free]).distance < 0.0
+    mask[free] = query.inside(hair.points[free])
     return mask

@@ -6,8 +6,10 @@ the constraints of Sec. 4.6:
 * Eq. 12, roots held fixed: they are no unknowns of the QP (:func:`free_coordinates`,
   :func:`pinned_coordinates`);
 * Eq. 13 linearised at the iterate ``p``: ``<n_i, d_i> >= eps_c - s_i`` for every free
-  particle near the body, with ``s_i`` its signed distance and ``n_i`` the distance normal
-  (:func:`linearised_clearance`; the broad phase :class:`BodyDistance` says which are near);
+  particle near the body or inside it at any depth, with ``s_i`` its signed distance and
+  ``n_i`` the distance normal (:func:`linearised_clearance`; the broad phase
+  :class:`BodyDistance` says which); the sign is the body's inside test
+  (:mod:`hairport.solver.mesh.collision`), so the half-space of a particle inside pushes it out;
 * the l1 clearance violation of the line search's merit (:func:`clearance_violation`);
 * the push-out of particles short of the clearance when the iteration cap stops the loop
   (:func:`push_out_short`): the result never breaks Eq. 13.
@@ -17,35 +19,45 @@ Convention: particles ``(N, 3) float64`` in meters; ``fixed (N,) bool`` marks th
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from hairport.solver.mesh.clearance import push_out
+from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 
 
 class BodyDistance:
-    """Signed distance to the target for the particles that can be near it.
+    """Signed distance to the target for the particles that can be near it or are inside it.
 
-    Without a broad phase every particle gets an exact query. With one (a function giving a
-    lower bound of ``|distance|`` per point, such as :meth:`~hairport.solver.mesh.distance_grid.DistanceGrid.lower_bound`),
-    particles whose bound is ``band`` or more get no query: distance ``inf``, a zero normal,
-    and no constraint (they are not near).
+    Without a broad phase every particle gets an exact query. With a distance grid over the
+    body, a particle gets one when it may be within ``band`` of the surface (the grid's lower
+    bound of ``|distance|``) or when it may be inside: the grid proves it (a certain
+    negative sign), cannot say (a closed body's grid is unsure only next to the surface), or,
+    on a body whose grid knows no sign (an open one), the winding number says so
+    (:attr:`~hairport.solver.mesh.query.MeshQuery.inside_test`). So every particle inside the body
+    gets its Eq. 13 constraint whatever its depth. The others are far outside: distance
+    ``inf``, a zero normal, and no constraint.
     """
 
-    def __init__(self, query: MeshQuery, band: float = np.inf, broad_phase: Callable[[np.ndarray], np.ndarray] | None = None):
+    def __init__(self, query: MeshQuery, band: float = np.inf, grid: DistanceGrid | None = None):
         self.query = query
         self.band = band
-        self.broad_phase = broad_phase
+        self.grid = grid
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``points (N, 3)`` -> distance ``(N,)``, normal ``(N, 3)``, near ``(N,) bool``."""
         n = len(points)
-        if self.broad_phase is None:
+        if self.grid is None:
             sd = self.query.signed_distance(points)
             return sd.distance, sd.normal, np.ones(n, dtype=bool)
-        near = self.broad_phase(points) < self.band
+        bound, sign = self.grid.bound_and_sign(points)
+        near = (bound < self.band) | (sign < 0)
+        unknown = np.flatnonzero(~near & (sign == 0))
+        if len(unknown):
+            # at least ``band`` from the surface: the winding number alone decides (a plain
+            # query over an open mesh has none: all of them are queried)
+            test = self.query.inside_test
+            near[unknown] = True if test is None else test.inside(points[unknown])
         distance = np.full(n, np.inf)
         normal = np.zeros((n, 3))
         if near.any():

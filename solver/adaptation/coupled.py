@@ -12,6 +12,7 @@ from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import problem_from_shape_model
+from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.progress import ProgressFn
 
@@ -30,7 +31,7 @@ def solve_hairstyle(
     gamma: np.ndarray | None = None,
     backend: str = active_set.BACKEND,
     start: np.ndarray | None = None,
-    broad_phase: Callable[[np.ndarray], np.ndarray] | None = None,
+    grid: DistanceGrid | None = None,
     band: float = np.inf,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
@@ -48,8 +49,8 @@ def solve_hairstyle(
         One of :data:`QP_BACKENDS`.
     start : (N, 3) float64, optional
         First iterate (``initial`` by default); fixed particles stay where it puts them.
-    broad_phase, band
-        See :class:`.constraints.BodyDistance` (active-set backend only).
+    grid, band
+        Broad phase, see :class:`.constraints.BodyDistance` (active-set backend only).
     progress : ProgressFn, optional
         ``progress("solve", fraction, message)`` after every outer iteration.
 
@@ -73,6 +74,6 @@ def solve_hairstyle(
         raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
     problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
     return active_set.solve_strands(
-        problem, BodyDistance(target, band, broad_phase), weights, options, start=start, progress=progress,
+        problem, BodyDistance(target, band, grid), weights, options, start=start, progress=progress,
         should_stop=should_stop,
     )

@@ -39,9 +39,10 @@ from hairport.solver.model.progress import ProgressFn, rescaled
 
 #: particles per fine-level chunk: bounds the fine solve's working memory (~1 kB per particle)
 DEFAULT_CHUNK_PARTICLES = 200_000
-#: particles farther than this from the body (by the distance grid's bound) get no exact
-#: closest-point query and no Eq. 13 constraint in an iteration (m); it exceeds every step
-#: the line search accepts near the body, and the merit test re-queries moved particles
+#: particles outside the body and farther than this from it (by the distance grid's bound)
+#: get no exact closest-point query and no Eq. 13 constraint in an iteration (m); it exceeds
+#: every step the line search accepts near the body, and the merit test re-queries moved
+#: particles; particles inside are queried at any depth (:class:`.constraints.BodyDistance`)
 CONTACT_BAND = 0.02
 #: the coarse level reports its progress in [0, this] of the solve's range, the fine level in the rest
 COARSE_PROGRESS_SHARE = 0.5
@@ -182,9 +183,8 @@ def _labelled(progress: ProgressFn, label: str) -> ProgressFn:
 
 
 def _solve_chunk(args) -> tuple[np.ndarray, SolveReport]:
-    problem, start, vertices, faces, grid, weights, options = args
-    query = MeshQuery(vertices, faces)
-    distance = BodyDistance(query, CONTACT_BAND, None if grid is None else grid.lower_bound)
+    problem, start, query, grid, weights, options = args
+    distance = BodyDistance(query, CONTACT_BAND, grid)
     return solve_strands(problem, distance, weights, options, start=start)
 
 
@@ -262,7 +262,7 @@ def solve_multiscale(
     guide_points, report.coarse = solve_hairstyle(
         coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights, options,
         gamma=gamma_all[guide_particles], backend=backend, start=first[guide_particles],
-        broad_phase=None if grid is None else grid.lower_bound, band=CONTACT_BAND,
+        grid=grid, band=CONTACT_BAND,
         progress=coarse_progress, should_stop=should_stop,
     )
     points[guide_particles] = guide_points
@@ -299,12 +299,13 @@ def solve_multiscale(
             fine_progress(SOLVE_STAGE, (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
 
         if report.workers == 1:
-            distance = BodyDistance(target, CONTACT_BAND, None if grid is None else grid.lower_bound)
+            distance = BodyDistance(target, CONTACT_BAND, grid)
             for number, (piece, piece_start) in enumerate(pieces()):
                 store(number, *solve_strands(piece, distance, weights, options, start=piece_start,
                                              should_stop=should_stop))
         else:
-            jobs = ((piece, piece_start, target.vertices, target.faces, grid, weights, options)
+            # the query pickles without its trees (rebuilt in the worker), with its inside test
+            jobs = ((piece, piece_start, target, grid, weights, options)
                     for piece, piece_start in pieces())
             with ProcessPoolExecutor(report.workers, mp_context=get_context("spawn")) as pool:
                 for number, result in enumerate(pool.map(_solve_chunk, jobs)):

@@ -1,4 +1,6 @@
-"""Pushing points out of a closed body to a clearance along the distance normal."""
+"""Pushing points out of a body to a clearance along the distance normal: every particle closer
+than the clearance (:func:`push_out`, the baselines' ``+pushout`` and the solvers' cap), or the
+particles inside the body (:func:`push_inside_out`, the final check of :mod:`.penetration`)."""
 
 from __future__ import annotations
 
@@ -11,6 +13,12 @@ MAX_PUSH_ROUNDS = 5
 #: a particle within this distance (m) below the clearance counts as clear: a pushed particle
 #: lands at the clearance up to round-off, and must not be pushed again every round for it
 PUSH_TOLERANCE = 1e-10
+#: rounds of :func:`push_inside_out`, each with half the clearance of the one before: a
+#: particle that the full clearance puts into another part of the body (across a gap
+#: narrower than it) lands in the gap a round later; the last round's clearance is 1/32 of it
+INSIDE_PUSH_ROUNDS = 6
+#: below this distance (m) from its closest point a particle goes out along the surface normal
+ON_SURFACE = 1e-12
 
 
 def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float) -> np.ndarray:
@@ -49,3 +57,48 @@ def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearanc
         active = active[close]
         out[active] += (clearance - sd.distance[close])[:, None] * sd.normal[close]
     return out
+
+
+def push_inside_out(
+    points: np.ndarray, rows: np.ndarray, query: MeshQuery, clearance: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Move particles that are inside the body out, to a clearance beyond its surface.
+
+    A particle inside goes through its closest point ``q`` on the body's surface to
+    ``q + c u``, ``u`` the unit vector from it to ``q`` (the surface normal at ``q`` when it is
+    on the surface): straight out by the shortest way. Particles still inside
+    (:meth:`~.query.MeshQuery.inside`: a gap narrower than ``c`` put them into another part of
+    the body) go again with half the clearance, for :data:`INSIDE_PUSH_ROUNDS` rounds.
+    Particles are independent; nothing keeps segment lengths.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    rows : (K,) int64
+        The particles inside (never roots).
+    query : MeshQuery
+        The body (its collision surface, :func:`.collision.collision_query`).
+    clearance : float
+        Meters, >= 0: the first round's.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        A new array.
+    inside : (J,) int64
+        The rows still inside after the last round (none on success).
+    """
+    out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 3)
+    rows = np.asarray(rows, dtype=np.int64)
+    c = float(clearance)
+    for _ in range(INSIDE_PUSH_ROUNDS):
+        if rows.size == 0:
+            break
+        sd = query.signed_distance(out[rows])
+        offset = sd.closest - out[rows]
+        length = np.linalg.norm(offset, axis=1)
+        away = np.where((length > ON_SURFACE)[:, None], offset / np.maximum(length, ON_SURFACE)[:, None], sd.normal)
+        out[rows] = sd.closest + c * away
+        rows = rows[query.inside(out[rows])]
+        c *= 0.5
+    return out, rows

@@ -37,8 +37,11 @@ bound. No node with ``|d| < exact_band`` is skipped (its bound is ``<= |d|``), s
 :func:`near_mask` with ``band <= exact_band - spacing * sqrt(3)`` returns exactly what it
 would on the fully exact grid (a far corner's stored value is still ``>= exact_band``).
 
-Signs (:meth:`DistanceGrid.sign_where_certain`) assume, like MeshQuery's sign, a closed,
-consistently oriented mesh; the lower bound holds for any mesh.
+Signs (:meth:`DistanceGrid.sign_where_certain`) hold where inside and outside change only
+across the surface: a closed body (:attr:`.query.MeshQuery.closed`, also a collision
+surface with extra shells, :mod:`.collision`). Over an open body (a bust cut at the chest)
+inside also changes across the film closing the cut, where no surface is: the grid then
+knows no sign (0 everywhere). The lower bound holds for any mesh.
 """
 
 from __future__ import annotations
@@ -95,6 +98,9 @@ class DistanceGrid:
         Whether the box contains the whole mesh. A grid built over a region (the space the
         hair can reach) may not: points outside its box then get the bound 0 and an unknown
         sign, so the exact query decides for them.
+    closed : bool
+        Whether inside and outside change only across the surface (the query's
+        :attr:`~.query.MeshQuery.closed`); if not, :meth:`sign_where_certain` knows no sign.
     """
 
     origin: np.ndarray
@@ -102,6 +108,7 @@ class DistanceGrid:
     values: np.ndarray
     exact_band: float = field(default=math.inf)
     covers_mesh: bool = True
+    closed: bool = True
 
     def __post_init__(self) -> None:
         origin = np.ascontiguousarray(self.origin, dtype=np.float64).reshape(3)
@@ -187,7 +194,7 @@ class DistanceGrid:
                 hi = np.maximum(hi, lo + 2 * spacing)
         spacing, shape = _fit_spacing(lo, hi, spacing, max_nodes)
         values = _node_values(query, lo, spacing, shape, exact_band)
-        return cls(lo, spacing, values, exact_band, covers_mesh)
+        return cls(lo, spacing, values, exact_band, covers_mesh, query.closed)
 
     def lower_bound(self, points: np.ndarray) -> np.ndarray:
         """A lower bound of ``|signed distance|`` at each point.
@@ -222,9 +229,14 @@ class DistanceGrid:
         has ``|v(c)| > |p - c|`` (by more than :data:`SIGN_MARGIN`, for round-off): the ball of
         radius ``|d(c)| >= |v(c)|`` around ``c`` holds no surface point, so the segment from
         ``c`` to ``p`` does not cross the surface and ``p`` has the sign of ``c``. Points outside the box are outside the (closed) mesh: +1.
-        Points on or next to the surface get 0. Assumes a closed, consistently oriented mesh.
+        Points on or next to the surface get 0; every point gets 0 on a grid that is not
+        :attr:`closed`.
         """
         return self._evaluate(points, want_sign=True)[1]
+
+    def bound_and_sign(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`lower_bound` and :meth:`sign_where_certain` in one pass: ``(N,) float64``, ``(N,) int8``."""
+        return self._evaluate(points, want_sign=True)
 
     def _evaluate(self, points: np.ndarray, want_sign: bool) -> tuple[np.ndarray, np.ndarray | None]:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -241,7 +253,7 @@ class DistanceGrid:
                     s[outside] = 0
             bound[block] = b
             if want_sign:
-                sign[block] = s
+                sign[block] = s if self.closed else 0
         return bound, sign
 
 

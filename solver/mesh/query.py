@@ -20,9 +20,11 @@ with libigl's tolerance, so this is exactly the sign rule of
 implementation called on every query, rebuilding its tree and normals each time.
 
 The pseudonormal sign is exact for a closed, consistently oriented, manifold mesh (the
-MakeHuman body is one). On an open mesh it is still the side of the nearest feature, which
-is what the collision constraint wants near the surface, but "inside" far from a hole means
-nothing (``igl.fast_winding_number`` would say it, at a higher price).
+MakeHuman body is one). On an open mesh it is still the side of the nearest feature, but
+"inside" far from a hole means nothing, and between nested shells it is the side of the
+nearer shell. A query given an :class:`~.inside.InsideTest` (the collision surface of
+:mod:`.collision`) takes the sign from the generalized winding number wherever the
+pseudonormal's is not exact (:mod:`.inside`).
 
 Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: libigl's
 ``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH; not a
@@ -49,6 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport.solver.mesh.backends import _PARALLEL, _closest_face_index, _EmbreeFaces, _IglFaces
+from hairport.solver.mesh.inside import InsideTest, manifold_closed, shell_count
 
 #: below this distance (m) a point counts as on the surface and the pseudonormal gives the direction
 ON_SURFACE_DISTANCE = 1e-12
@@ -60,6 +63,12 @@ SORT_QUERIES_FROM = 2048
 #: of its face (the pseudonormal's feature), libigl's value
 FEATURE_EPSILON = 1e-12
 
+
+#: on an open body's collision surface, points closer to a manifold part of it than this
+#: fraction of the mesh's bounding-box diagonal (20 um on a 2 m body) take the pseudonormal's
+#: sign: libigl's winding number is single precision, noise within ~1e-7 of the coordinates'
+#: size of a face, and a hole's closing film is far from any point this near the skin
+NEAR_SURFACE = 1e-5
 
 #: with a float32 face search (fcpw), points closer to the surface than this fraction of the mesh's
 #: bounding-box diagonal are searched again in float64 (exact sign next to sharp creases)
@@ -123,11 +132,15 @@ class MeshQuery:
     ----------
     vertices : (V, 3) float64
     faces : (F, 3) int64
+    inside : InsideTest, optional
+        How the signs are told (a body's collision surface, :func:`.collision.collision_query`);
+        by default from the pseudonormal of the closest feature.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, inside: InsideTest | None = None):
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self._inside = inside  # None: pseudonormal signs
         self._rays = None  # Embree scene, built on the first first_hits
         self._closest = None  # face search (BVH), built on the first signed_distance
         self._triangles = None  # (12, F) per-face data for the closest point on a face
@@ -135,6 +148,8 @@ class MeshQuery:
         self._face_normals = None  # (3, F) unit face normals
         self._exact = None  # float64 face search for points near the surface, when _closest is float32
         self._exact_band = 0.0
+        self._near_band = 0.0
+        self._closed = None
 
     def __getstate__(self):
         # the native BVHs do not pickle; they are rebuilt lazily after unpickling
@@ -156,7 +171,37 @@ class MeshQuery:
             self._closest = _closest_face_index(self.vertices, self.faces)
             extent = np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)) if len(self.vertices) else 1.0
             self._exact_band = EXACT_BAND * extent
+            self._near_band = NEAR_SURFACE * extent
         return self._closest
+
+    @property
+    def inside_test(self) -> InsideTest | None:
+        """The body's inside test when the query was given one (a collision surface)."""
+        return self._inside
+
+    @property
+    def closed(self) -> bool:
+        """Whether the sign of the signed distance changes only across the surface: a single
+        closed, consistently oriented manifold shell, or a collision surface of a body without
+        an open cut (:attr:`.inside.InsideTest.closed`)."""
+        if self._closed is None:
+            if self._inside is not None:
+                self._closed = self._inside.closed
+            else:
+                self._closed = manifold_closed(self.faces) and shell_count(self.faces) == 1
+        return self._closed
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """(N,) bool: points with a negative signed distance. For a collision surface
+        (:func:`.collision.collision_query`) that is the body's inside at any depth, closed
+        or open; for a plain query the side of the nearest feature (exact on a single closed
+        shell).
+
+        Parameters
+        ----------
+        points : (N, 3) float64
+        """
+        return self.signed_distance(points).distance < 0.0
 
     def _exact_index(self):
         if self._exact is None:
@@ -192,6 +237,13 @@ class MeshQuery:
                 length[near] = np.sqrt(np.einsum("ij,ij->i", offset[near], offset[near]))
         pseudonormal = self._pseudonormals[faces, feature]
         sign = np.where(np.einsum("ij,ij->i", offset, pseudonormal) < 0.0, -1.0, 1.0)
+        if self._inside is not None and self._inside.manifold is not None:
+            trusted = self._inside.manifold[faces, feature]
+            if not self._inside.closed:
+                trusted &= length < self._near_band
+            counted = np.flatnonzero(~trusted)
+            if len(counted):
+                sign[counted] = np.where(self._inside.inside(points[counted]), -1.0, 1.0)
         distance = sign * length
         on_surface = length < ON_SURFACE_DISTANCE
         normal = offset * (sign / np.where(on_surface, 1.0, length))[:, None]

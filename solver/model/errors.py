@@ -1,7 +1,9 @@
 """Errors raised on bad input.
 
 Every reader and validator raises :class:`InputError` naming the file (or argument) and
-the problem, so that the CLI can print one line and the service can answer 422.
+the problem, so that the CLI can print one line and the service can answer 422. Inputs that
+pass every check but admit no valid result hairport can find (a target body that traps hair
+inside it, :class:`PenetrationRemaining`) raise one too: the job fails with its code.
 """
 
 from __future__ import annotations
@@ -32,3 +34,12 @@ class TopologyMismatch(InputError):
 
     def __init__(self, problem: str, source: str | None = None):
         super().__init__(problem, source, code="topology_mismatch")
+
+
+class PenetrationRemaining(InputError):
+    """Hair particles stay inside the target body after the solve and a push-out: no result
+    that keeps the hair out of this body was found, and none is reported as one (code
+    ``penetration_remaining``)."""
+
+    def __init__(self, problem: str, source: str | None = None):
+        super().__init__(problem, source, code="penetration_remaining")

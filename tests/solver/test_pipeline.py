@@ -1,16 +1,20 @@
-"""End-to-end retargeting on MakeHuman characters (paper Table 2's regression tests)."""
+"""End-to-end retargeting on MakeHuman characters (paper Table 2's regression tests), and grooms sunk into
+toy bodies closed and open, and a body that traps hair (no result with a particle inside)."""
 
 import numpy as np
 import pytest
 
 from hairport.solver import pipeline
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import mean_particle_distance, mean_segment_angle
 from hairport.solver.model.character import Character
-from hairport.solver.model.errors import InputError, TopologyMismatch
+from hairport.solver.model.errors import InputError, PenetrationRemaining, TopologyMismatch
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
 from hairport.solver.synthetic.toy import toy_character
+from tests.solver.depth_cases import TOY_CHEST_Y_M, chest_cut, keep_faces, sunk, trap
+from tests.solver.synthetic.toy_fixtures import PRESET_B
 
 
 @pytest.fixture(scope="module")
@@ -113,3 +117,70 @@ def test_the_metrics_carry_the_input_section_of_the_groom_and_the_target():
                                target_input={"units": "cm", "up": "+z"})
     assert result.metrics["input"] == {"units": {"hair": "cm"}, "warnings": [], "target": {"units": "cm", "up": "+z"}}
     assert result.report()["metrics"]["input"]["target"]["up"] == "+z"
+
+
+@pytest.fixture(scope="module")
+def toy_bodies():
+    """The toy pair, closed and as busts cut across the chest (the same faces on both)."""
+    source, target = toy_character(), toy_character(**PRESET_B, name="toy-b")
+    keep = chest_cut(source, TOY_CHEST_Y_M)
+    busts = keep_faces(source, keep), keep_faces(target, keep)
+    for bust, whole in zip(busts, (source, target)):  # open, from the chest to the crown
+        assert not collision_query(bust.vertices, bust.faces).closed
+        assert 1.3 < bust.vertices[:, 1].min() < 1.45 and bust.vertices[:, 1].max() == whole.vertices[:, 1].max()
+    return {"closed": (source, target), "bust": busts}
+
+
+@pytest.fixture(scope="module")
+def toy_long(toy_bodies):
+    return generate_groom(toy_bodies["closed"][0], "long", 100, 16, seed=0)
+
+
+@pytest.mark.parametrize("depth", [0.03, 0.06])
+@pytest.mark.parametrize("body", ["closed", "bust"])
+def test_a_groom_sunk_into_its_body_comes_out_whole_on_the_target(toy_bodies, toy_long, body, depth):
+    """The groom sunk 3 or 6 cm into a closed body and an open bust: the initial transfer leaves
+    over a hundred particles inside, some more than 2 cm deep (which the broad phase used to
+    take for far outside: 4 and 36 stayed inside); the result has none, roots exact."""
+    source, target = toy_bodies[body]
+    hair = sunk(toy_long, depth)
+    result = pipeline.retarget(pipeline.preprocess(source, hair), target)
+    body_query = collision_query(target.vertices, target.faces)
+    initial = body_query.signed_distance(result.initial.points[~hair.is_root]).distance
+    assert (initial < 0).sum() > 150 and initial.min() < -0.02, ((initial < 0).sum(), initial.min())
+    after = body_query.signed_distance(result.hair.points[~hair.is_root]).distance
+    assert (after < 0).sum() == 0 and after.min() >= 5e-4 - 1e-5
+    assert result.metrics["penetrating_particles"] == 0 and result.metrics["particles_below_clearance"] == 0
+    assert result.metrics["penetration_resolved"] == {"particles": 0, "deepest_m": 0.0}  # the solver got them all
+    assert result.metrics["root_to_target_max"] <= 1e-12 and result.metrics["root_to_surface_max"] <= 1e-12
+    assert result.solve.converged
+
+
+def test_particles_a_method_leaves_inside_are_pushed_out_and_reported(toy_bodies, toy_long, monkeypatch):
+    """A solver that stops at the initial transfer (sunk 6 cm): the final check pushes every
+    particle out and says how many and how deep; nothing is reported with a particle inside."""
+    source, target = toy_bodies["bust"]
+    hair = sunk(toy_long, 0.06)
+    adaptable = pipeline.preprocess(source, hair)
+    monkeypatch.setattr(pipeline, "adapt_shape", lambda adaptable, body, initial, *rest: (initial.copy(), None))
+    result = pipeline.retarget(adaptable, target)
+    body = collision_query(target.vertices, target.faces)
+    initial = body.signed_distance(result.initial.points[~hair.is_root]).distance
+    resolved = result.metrics["penetration_resolved"]
+    assert resolved["particles"] == (initial < 0).sum() > 150
+    assert resolved["deepest_m"] == pytest.approx(-initial.min(), abs=1e-12) and resolved["deepest_m"] > 0.02
+    assert result.metrics["penetrating_particles"] == 0 and result.timings["penetration_check"] > 0
+
+
+@pytest.mark.parametrize("method", ["multiscale", "global", "root-translate+pushout"])
+def test_a_body_that_traps_hair_fails_with_its_code(method):
+    """Hair through a stack of plates 10 um apart over the crown (tests/solver/depth_cases.py):
+    neither the solve nor the push-out gets it out, and the result is refused."""
+    body, hair = trap(toy_character())
+    adaptable = pipeline.preprocess(body, hair)
+    with pytest.raises(PenetrationRemaining, match=r"^toy-trap: \d+ of the \d+ hair particles .* still inside") as error:
+        pipeline.retarget(adaptable, body, pipeline.RetargetOptions(method=method))
+    assert error.value.code == "penetration_remaining"
+    # the baseline without push-out claims nothing, and reports its penetration
+    plain = pipeline.retarget(adaptable, body, pipeline.RetargetOptions(method="root-translate"))
+    assert plain.metrics["penetrating_particles"] > 20 and "penetration_resolved" not in plain.metrics

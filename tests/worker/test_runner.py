@@ -158,6 +158,30 @@ def test_a_wrong_topology_fails_the_job_with_its_code(world):
     assert "/blobs/" not in failed.error.message
 
 
+def test_a_body_that_traps_hair_fails_the_job_with_penetration_remaining(world, tmp_path):
+    """The result would have particles inside the body: the job fails with the code, stores nothing."""
+    from tests.solver.depth_cases import trap
+
+    repository, settings = world["repository"], world["settings"]
+    body, hair = trap(toy.toy_character(name="trap"))
+    mesh, skeleton = tmp_path / "trap.obj", tmp_path / "trap.skeleton.json"
+    write_character(body, mesh, skeleton)
+    record = CharacterRecord(
+        id="f" * 32, owner=OWNER, created_at=now(), vertices=body.n_vertices, faces=body.n_faces,
+        bones=list(body.skeleton.names),
+        mesh=BlobRef(sha256=repository.storage.save_file(mesh, ".obj").sha256, suffix=".obj"),
+        skeleton=BlobRef(sha256=repository.storage.save_file(skeleton, ".json").sha256, suffix=".json"))
+    repository.put(record, record.id)
+    world["ids"]["trap"] = record
+    world["ids"]["trapped"] = add_hairstyle(repository, record, hair, tmp_path / "trapped.data", "9")
+    runner.run_preprocess(repository, settings, world["ids"]["trapped"].id)
+    job = add_job(world, target="trap", hairstyle="trapped")
+    runner.run_retarget(repository, settings, job.id, "w1")
+    failed = repository.job(job.id)
+    assert failed.state == "failed" and failed.error.code == "penetration_remaining" and failed.outputs is None
+    assert "still inside after pushing them out" in failed.error.message and failed.metrics is None
+
+
 def test_waiting_for_preprocessing(world):
     repository = world["repository"]
     job = add_job(world)

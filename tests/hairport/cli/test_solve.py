@@ -1,6 +1,7 @@
 """``hairport preprocess``, ``retarget`` and ``hairline``: bad inputs exit 2 with one line and leave nothing;
 outputs, report, preview, units; the artifact gives the one-shot result; hairline edits (on MakeHuman
-characters: the toy groom does not reach the ears)."""
+characters: the toy groom does not reach the ears); grooms sunk into closed bodies and busts come out
+whole, and a body that traps hair is an error."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from hairport.solver import pipeline
 from hairport.solver.io.character import load_character
 from hairport.solver.io.character.obj import write_obj
 from hairport.solver.io.hair import read_hair, write_hair
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
@@ -35,6 +37,7 @@ from tests.hairport.cli.helpers import (
     retarget_args,
     run,
 )
+from tests.solver.depth_cases import TOY_CHEST_Y_M, chest_cut, keep_faces, sunk, trap
 from tests.solver.frames import character_in, faces_only, hair_in, head_faces
 from tests.solver.synthetic.toy_fixtures import PRESET_B
 
@@ -550,3 +553,64 @@ def test_a_gap_in_the_scalp_is_a_one_line_error(capsys, bust_world, tmp_path):
                                 str(d / "holed-male.obj"), "--out", str(tmp_path / "curve.json"), "--quiet"])
     assert_input_error(code, err, "the scalp under the roots has a hole", "gap in the mesh")
     assert not (tmp_path / "curve.json").exists()
+
+
+@pytest.fixture(scope="module")
+def sunk_world(world, tmp_path_factory) -> dict:
+    """Two toys as closed bodies and as busts cut across the chest, a long groom sunk 3 and 6 cm
+    into the source, and a body that traps hair with the hair it traps, as files. (Not the
+    world's target: with the default neck radius its rings collapse at the crown, a toy with no
+    chest to cut.)"""
+    d = tmp_path_factory.mktemp("cli-depth")
+    source, target = world["source"], toy.toy_character(**PRESET_B, name="target")
+    keep = chest_cut(source, TOY_CHEST_Y_M)
+    bodies = {"closed": (source, target),
+              "bust": (keep_faces(source, keep), keep_faces(target, keep))}
+    for name, (s, t) in bodies.items():
+        write_character(s, d / f"{name}-source.obj", d / f"{name}-source.skeleton.json")
+        write_character(t, d / f"{name}-target.obj", d / f"{name}-target.skeleton.json")
+    groom = generate_groom(source, "long", 100, 16, seed=0)
+    for depth in (3, 6):
+        write_hair(d / f"sunk{depth}.npz", sunk(groom, depth / 100))
+    body, hair = trap(source)
+    write_character(body, d / "trap.obj", d / "trap.skeleton.json")
+    write_hair(d / "trapped.npz", hair)
+    return {"dir": d}
+
+
+@pytest.mark.parametrize("depth", [3, 6])
+@pytest.mark.parametrize("body", ["closed", "bust"])
+def test_a_groom_sunk_into_its_body_retargets_with_no_particle_inside(capsys, sunk_world, out, body, depth):
+    d = sunk_world["dir"]
+    args = ["retarget", "--source", str(d / f"{body}-source.obj"), "--target", str(d / f"{body}-target.obj"),
+            "--hair", str(d / f"sunk{depth}.npz"), "--out", str(out / "result.npz"), "--report",
+            str(out / "report.json"), "--method", "multiscale", "--units", "m", "--quiet"]
+    code, stdout, err = run(capsys, args)
+    assert code == 0, err
+    # the input report says the groom is inside its own body; nothing else is wrong
+    assert all(line.startswith("hairport: warning:") for line in err.splitlines()), err
+    assert "inside the source body" in err
+    assert "penetrating particles 0," in stdout
+    result = read_hair(out / "result.npz")
+    target = load_character(d / f"{body}-target.obj")  # the file's numbers (the OBJ rounds to ~1e-9 m)
+    distance = collision_query(target.vertices, target.faces).signed_distance(result.points).distance
+    assert (distance[~result.is_root] < 0).sum() == 0
+    assert np.abs(distance[result.is_root]).max() <= 1e-12
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["input"]["source_penetration"]["particles"] > 100
+    assert metrics["input"]["source_penetration"]["deepest_m"] > 0.02
+    assert metrics["penetration_resolved"] == {"particles": 0, "deepest_m": 0.0}
+    assert metrics["root_to_target_max"] <= 1e-12
+
+
+@pytest.mark.parametrize("method", ["multiscale", "root-translate+pushout"])
+def test_a_body_that_traps_hair_exits_2_with_one_line_and_writes_nothing(capsys, sunk_world, out, method):
+    d = sunk_world["dir"]
+    args = ["retarget", "--source", str(d / "trap.obj"), "--target", str(d / "trap.obj"), "--hair",
+            str(d / "trapped.npz"), "--out", str(out / "result.npz"), "--report", str(out / "report.json"),
+            "--preview", str(out / "preview.png"), "--method", method, "--units", "m", "--quiet"]
+    code, _, err = run(capsys, args)
+    line = [line for line in err.splitlines() if not line.startswith("hairport: warning:")]
+    assert_input_error(code, "\n".join(line), "hair particles", "still inside after pushing them out",
+                       "no penetration-free result")
+    assert_nothing_written(out)

@@ -5,7 +5,14 @@ import osqp
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.adaptation.active_set import BACKEND, Frames, normal_frames, solve_qp, solve_strands
+from hairport.solver.adaptation.active_set import (
+    BACKEND,
+    STALLED_ITERATIONS,
+    Frames,
+    normal_frames,
+    solve_qp,
+    solve_strands,
+)
 from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
 from hairport.solver.adaptation.options import Cancelled, SolveOptions
@@ -195,3 +202,17 @@ def test_frames_rotate_only_their_rows_and_invert(rows):
         np.testing.assert_allclose(rotated_diagonal[i], R[i].T @ diagonal[i] @ R[i], rtol=0, atol=1e-14)
     for i in range(n - 1):
         np.testing.assert_allclose(rotated_upper[i], R[i].T @ upper[i] @ R[i + 1], rtol=0, atol=1e-14)
+
+
+def test_a_group_stops_after_two_iterations_in_a_row_below_the_energy_tolerance(sphere):
+    """With a tolerance no decrease can beat (the whole merit), every iteration is "small": the
+    coupled loop stops after exactly STALLED_ITERATIONS of them, not at the first."""
+    source, query = sphere
+    hair = outward_strands(source, n_strands=20, n_points=10)
+    start = tilt_into_surface(hair, query, np.radians(95.0))
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, start, hair.is_root)
+    assert problem.coupled
+    _, report = solve_strands(problem, BodyDistance(query), options=SolveOptions(energy_tolerance=1.0, eps_c=5e-4))
+    assert report.converged and report.iterations == STALLED_ITERATIONS == 2
+    _, loose = solve_strands(problem, BodyDistance(query), options=SolveOptions(energy_tolerance=0.0, eps_c=5e-4))
+    assert loose.iterations > STALLED_ITERATIONS

@@ -11,6 +11,7 @@ from hairport.solver.adaptation.constraints import (
     linearised_clearance,
     push_out_short,
 )
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from tests.solver.mesh.meshes import icosphere
@@ -98,20 +99,42 @@ def test_body_distance_without_a_broad_phase_is_exact(sphere):
     assert near.all()
 
 
-def test_body_distance_skips_particles_the_broad_phase_puts_far(sphere):
+def test_body_distance_skips_particles_the_broad_phase_puts_far_outside(sphere):
     query, centroid, normal = sphere
-    height = np.array([1e-3, -2e-3, 0.05, 0.2, 0.008, 0.03])
-    points = centroid + height[:, None] * normal
+    # 1 mm out, 2 mm in, 5 and 20 cm out, 8 mm out, 3 cm out, 3 and 6 cm deep (the sphere's radius is 10 cm)
+    height = np.array([1e-3, -2e-3, 0.05, 0.2, 0.008, 0.03, -0.03, -0.06])
+    points = centroid[np.arange(8) % 6] + height[:, None] * normal[np.arange(8) % 6]
     band = 0.02
     grid = DistanceGrid.build(query)
-    distance, normals, near = BodyDistance(query, band, grid.lower_bound)(points)
-    np.testing.assert_array_equal(near, grid.lower_bound(points) < band)
-    np.testing.assert_array_equal(near, [True, True, False, False, True, False])
+    distance, normals, near = BodyDistance(query, band, grid)(points)
+    np.testing.assert_array_equal(near, [True, True, False, False, True, False, True, True])
     sd = query.signed_distance(points[near])
     np.testing.assert_array_equal(distance[near], sd.distance)
     np.testing.assert_array_equal(normals[near], sd.normal)
     assert np.isinf(distance[~near]).all() and (normals[~near] == 0).all()
-    # far particles get no half-space and no violation
-    constrained, _ = linearised_clearance(distance, EPS_C, near=near)
+    # far particles get no half-space and no violation; deep ones must come out by their depth
+    constrained, lower = linearised_clearance(distance, EPS_C, near=near)
     np.testing.assert_array_equal(constrained, near)
     assert (clearance_violation(distance, EPS_C)[~near] == 0).all()
+    np.testing.assert_allclose(lower[6:], EPS_C + np.array([0.03, 0.06]), rtol=0, atol=1e-3)  # the icosphere's facets
+    # a deep particle's normal points to its closest point: a step along it by ``lower`` lands out
+    moved = points[6:] + lower[6:, None] * normals[6:]
+    np.testing.assert_allclose(query.signed_distance(moved).distance, EPS_C, rtol=0, atol=1e-12)
+
+
+def test_body_distance_on_an_open_body_asks_the_winding_number_far_from_the_surface():
+    """A sphere of radius 0.1 m open below z = -0.05: the grid knows no sign; a particle deep
+    inside is queried (its winding number says inside), one far below the cut is not."""
+    vertices, faces = icosphere()
+    keep = ~(vertices[faces, 2] < -0.05).any(axis=1)
+    query = collision_query(vertices, faces[keep])
+    assert not query.closed
+    grid = DistanceGrid.build(query)
+    points = np.array([[0.0, 0.0, 0.02], [0.0, 0.0, -0.03], [0.0, 0.0, -0.078], [0.0, 0.0, 0.3]])
+    distance, normals, near = BodyDistance(query, 0.02, grid)(points)
+    # the centre and 3 cm below it are inside (above the cut's plane); 2.8 cm below the
+    # cut's plane (9 cm from the rim) and 20 cm over the top are outside and far
+    np.testing.assert_array_equal(near, [True, True, False, False])
+    assert distance[0] < -0.07 and distance[1] < -0.02
+    # their normals point from them to their closest points: out of the body
+    assert np.all(np.einsum("ij,ij->i", normals[:2], points[:2] - query.signed_distance(points[:2]).closest) < 0)

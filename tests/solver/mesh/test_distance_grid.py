@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from hairport.solver.mesh import distance_grid
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DEFAULT_GRID_MARGIN, DEFAULT_GRID_SPACING, DistanceGrid, near_mask
 from hairport.solver.mesh.query import MeshQuery
 
@@ -200,6 +201,28 @@ def test_sign_where_certain(exact_grid, banded_grid, samples):
         # certain wherever the bound is positive, in particular beyond a cell diagonal
         np.testing.assert_array_equal(known, grid.lower_bound(points) > 0)
         assert known[np.abs(exact) > SPACING * math.sqrt(3)].all()
+
+
+def test_bound_and_sign_in_one_pass(banded_grid, samples):
+    points, _ = samples
+    bound, sign = banded_grid.bound_and_sign(points)
+    np.testing.assert_array_equal(bound, banded_grid.lower_bound(points))
+    np.testing.assert_array_equal(sign, banded_grid.sign_where_certain(points))
+
+
+def test_an_open_body_has_bounds_but_no_certain_sign():
+    """A sphere open below z = -0.05: inside changes across the film over the hole too, where
+    no surface bounds it: the grid claims no sign, not even outside its box."""
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=RADIUS)
+    vertices, faces = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    query = collision_query(vertices, faces[~(vertices[faces, 2] < -0.05).any(axis=1)])
+    grid = DistanceGrid.build(query, spacing=SPACING)
+    assert not grid.closed and not query.closed
+    points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.08], [0.0, 0.0, 0.5]])
+    bound, sign = grid.bound_and_sign(points)
+    np.testing.assert_array_equal(sign, [0, 0, 0])
+    assert (bound <= np.abs(query.signed_distance(points).distance) + TOL).all() and bound[2] > 0.3
+    assert DistanceGrid.build(collision_query(vertices, faces), spacing=0.02).closed
 
 
 def cube_grid():

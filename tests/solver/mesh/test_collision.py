@@ -1,0 +1,113 @@
+"""The surface hair collides with (solver/mesh/collision.py): closed, open, nested and inverted bodies."""
+
+import threading
+
+import igl
+import numpy as np
+import pytest
+
+from hairport.solver.mesh.collision import collision_query
+from hairport.solver.mesh.inside import WindingNumber
+from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.errors import InputError
+from tests.solver.mesh.meshes import icosphere
+from tests.solver.mesh.test_inside import face_probes, open_capsule
+
+
+def test_a_closed_shell_is_its_own_collision_surface_with_pseudonormal_signs():
+    vertices, faces = icosphere()
+    body = collision_query(vertices, faces)
+    assert body.closed and body.inside_test.manifold is None
+    np.testing.assert_array_equal(body.faces, faces)
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-0.12, 0.12, size=(2000, 3))
+    np.testing.assert_array_equal(body.signed_distance(points).distance,
+                                  MeshQuery(vertices, faces).signed_distance(points).distance)
+    np.testing.assert_array_equal(body.inside(points), WindingNumber(vertices, faces).inside(points))
+
+
+def test_an_open_bust_is_inside_above_its_cut_and_outside_below_it():
+    """The plain query's pseudonormal puts a point 3 cm under the cut inside (its closest point
+    is on the rim, seen from within the wall); the collision surface does not."""
+    vertices, faces = open_capsule()
+    body = collision_query(vertices, faces, "bust")
+    assert not body.closed and body.inside_test.manifold is not None
+    points = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.06], [0.09, 0.0, -0.005], [0.0, 0.0, -0.03]])
+    sd = body.signed_distance(points)
+    np.testing.assert_array_equal(sd.distance < 0, [True, True, False, False])
+    np.testing.assert_array_equal(body.inside(points), [True, True, False, False])
+    plain = MeshQuery(vertices, faces).signed_distance(points).distance
+    assert plain[2] < 0 and plain[3] < 0  # the side of the nearest feature, not inside
+    # |distance| is the distance to the surface either way; the normal points out for the inside ones
+    np.testing.assert_allclose(np.abs(sd.distance), np.abs(plain), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", sd.normal[:2], sd.closest[:2] - points[:2]),
+                               -sd.distance[:2], rtol=1e-12)
+
+
+def test_next_to_the_skin_of_an_open_bust_the_sign_is_exact():
+    """1 nm off a face, where the single-precision winding number is noise, the pseudonormal decides."""
+    vertices, faces = open_capsule()
+    body = collision_query(vertices, faces)
+    for offset in (1e-9, 1e-6, 1e-3):
+        assert (body.signed_distance(face_probes(vertices, faces, -offset)).distance < 0).all()
+        assert (body.signed_distance(face_probes(vertices, faces, offset)).distance > 0).all()
+
+
+def test_an_inner_shell_is_no_collision_surface():
+    """A particle between the skin and an inner shell is inside, and its way out is the skin,
+    not across the inner shell (where the plain query's pseudonormal sends it)."""
+    outer, outer_faces = icosphere(radius=0.1)
+    inner, inner_faces = icosphere(radius=0.05)
+    vertices = np.vstack([outer, inner])
+    faces = np.vstack([outer_faces, inner_faces + len(outer)])
+    body = collision_query(vertices, faces)
+    assert body.closed and len(body.faces) == len(outer_faces)
+    point = np.array([[0.0, 0.0, 0.06]])  # 1 cm over the inner shell, 4 cm under the skin
+    sd = body.signed_distance(point)
+    assert -0.041 < sd.distance[0] < -0.039 and sd.closest[0, 2] > 0.09
+    plain = MeshQuery(vertices, faces).signed_distance(point)
+    assert 0.009 < plain.distance[0] < 0.011  # "outside", 1 cm from the inner shell
+    assert body.inside(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.12]])).tolist() == [True, False]
+
+
+def test_a_body_turned_inside_out_is_refused():
+    vertices, faces = icosphere()
+    with pytest.raises(InputError, match="encloses no volume") as error:
+        collision_query(vertices, faces[:, ::-1], "inverted")
+    assert error.value.code == "no_inside" and error.value.source == "inverted"
+
+
+def test_the_makehuman_body_leaves_out_only_the_faces_where_its_lips_cross():
+    """MakeHuman bodies cross themselves in a few faces: the heavy male at the lips (the female
+    and the child at the toes): those separate nothing and leave the collision surface."""
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+    from tests.solver.synthetic.makehuman_fixtures import makehuman_assets
+
+    makehuman_assets()
+    male = build_character(PRESETS["heavy-male"])
+    body = collision_query(male.vertices, male.faces, male.name)
+    kept = set(map(tuple, body.faces))
+    left_out = np.array([f for f in male.faces if tuple(f) not in kept])
+    assert 0 < len(left_out) < 30 and body.closed
+    centres = male.vertices[left_out].mean(axis=1)
+    mouth = male.vertices[male.vertices[:, 1] > male.vertices[:, 1].max() - 0.25]
+    mouth = mouth[np.argmax(mouth[:, 2])]  # the tip of the nose, just over the mouth
+    assert np.linalg.norm(centres - mouth, axis=1).max() < 0.06 and np.abs(centres[:, 0]).max() < 0.03
+    # around the head and shoulders, 3 and 6 cm deep included: the sign is the exact winding number's
+    head = male.vertices[male.vertices[:, 1] > male.vertices[:, 1].max() - 0.4]
+    points = np.random.default_rng(1).uniform(head.min(axis=0) - 0.03, head.max(axis=0) + 0.03, size=(20000, 3))
+    exact = igl.winding_number(male.vertices, male.faces, points) > 0.5
+    assert 2000 < exact.sum() < 18000
+    np.testing.assert_array_equal(body.signed_distance(points).distance < 0, exact)
+
+
+def test_a_body_is_analysed_once_per_thread():
+    vertices, faces = icosphere()
+    first = collision_query(vertices, faces)
+    assert collision_query(vertices.copy(), faces.copy()) is first
+    assert collision_query(vertices + [0.0, 0.0, 1e-9], faces) is not first
+    other = []
+    thread = threading.Thread(target=lambda: other.append(collision_query(vertices, faces)))
+    thread.start()
+    thread.join()
+    assert other[0] is not first and np.array_equal(other[0].faces, first.faces)

@@ -1,0 +1,89 @@
+"""The final penetration check (solver/mesh/penetration.py): push out what a method left inside, or refuse."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from hairport.solver.mesh.clearance import INSIDE_PUSH_ROUNDS
+from hairport.solver.mesh.collision import collision_query
+from hairport.solver.mesh.penetration import inside_depths, resolve_penetration
+from hairport.solver.model.errors import InputError, PenetrationRemaining
+from tests.solver.mesh.meshes import icosphere
+from tests.solver.mesh.test_inside import open_capsule
+
+EPS_C = 5e-4
+
+
+def boxes(*bounds):
+    """Closed boxes ``(lower, upper)`` (m) as one mesh."""
+    vertices, faces, n = [], [], 0
+    for lower, upper in bounds:
+        box = trimesh.creation.box(bounds=[lower, upper])
+        vertices.append(np.asarray(box.vertices))
+        faces.append(np.asarray(box.faces, dtype=np.int64) + n)
+        n += len(box.vertices)
+    return np.vstack(vertices), np.vstack(faces)
+
+
+@pytest.mark.parametrize("shape", ["sphere", "open bust"])
+def test_particles_3_and_6_cm_deep_are_pushed_out_and_reported(shape):
+    vertices, faces = icosphere() if shape == "sphere" else open_capsule()
+    body = collision_query(vertices, faces)
+    centre = np.array([0.0, 0.0, 0.0 if shape == "sphere" else 0.1])  # the bust's wall is 10 cm off its cut
+    direction = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-0.6, 0.8, 0.0], [0.6, -0.8, 0.0]])
+    radius = np.linalg.norm(body.signed_distance(centre + 0.2 * direction).closest - centre, axis=1)
+    depth = np.array([0.03, 0.06, 0.03, 0.06])
+    points = centre + np.vstack([(radius - depth)[:, None] * direction, 0.2 * direction])  # 4 inside, 4 outside
+    is_root = np.zeros(8, dtype=bool)
+    is_root[4] = True
+    rows, found = inside_depths(points, is_root, body)
+    np.testing.assert_array_equal(rows, [0, 1, 2, 3])
+    np.testing.assert_allclose(found, depth, atol=2e-3)  # facets: the distance to them is not along the ray
+    out, resolved = resolve_penetration(points, is_root, body, EPS_C)
+    assert resolved["particles"] == 4 and resolved["deepest_m"] == pytest.approx(found.max(), abs=1e-15)
+    after = body.signed_distance(out).distance
+    np.testing.assert_allclose(after[:4], EPS_C, rtol=0, atol=1e-12)  # straight out through the closest point
+    np.testing.assert_array_equal(out[4:], points[4:])
+    assert inside_depths(out, is_root, body)[0].size == 0
+
+
+def test_nothing_inside_returns_the_same_array():
+    vertices, faces = icosphere()
+    points = np.array([[0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    is_root = np.array([False, True])  # a root at the centre is not checked
+    same, resolved = resolve_penetration(points, is_root, collision_query(vertices, faces), EPS_C)
+    assert same is points and resolved == {"particles": 0, "deepest_m": 0.0}
+
+
+def test_a_particle_between_an_inner_shell_and_the_skin_leaves_through_the_skin():
+    outer, outer_faces = icosphere(radius=0.1)
+    inner, inner_faces = icosphere(radius=0.05)
+    body = collision_query(np.vstack([outer, inner]), np.vstack([outer_faces, inner_faces + len(outer)]))
+    points = np.array([[0.0, 0.0, 0.06], [0.0, 0.03, 0.0]])  # 1 cm over the inner shell; inside it
+    out, resolved = resolve_penetration(points, np.zeros(2, dtype=bool), body, EPS_C)
+    assert resolved["particles"] == 2
+    np.testing.assert_allclose(body.signed_distance(out).distance, EPS_C, rtol=0, atol=1e-12)
+    assert np.linalg.norm(out, axis=1).min() > 0.098
+
+
+def test_a_gap_narrower_than_the_clearance_takes_a_smaller_push():
+    """Two blocks 0.2 mm apart: 0.5 mm out of one is inside the other; a quarter of it lands in the gap."""
+    vertices, faces = boxes(([0.0, 0.0, 0.0], [0.02, 0.02, 0.02]), ([0.0202, 0.0, 0.0], [0.04, 0.02, 0.02]))
+    body = collision_query(vertices, faces)
+    points = np.array([[0.018, 0.01, 0.01]])  # 2 mm inside the first block, nearest its face on the gap
+    out, resolved = resolve_penetration(points, np.zeros(1, dtype=bool), body, EPS_C)
+    assert resolved["particles"] == 1
+    assert 0.02 < out[0, 0] < 0.0202 and body.signed_distance(out).distance[0] > 0
+
+
+def test_a_crack_narrower_than_every_push_fails_with_its_code():
+    """Two blocks 10 um apart: every round (down to eps_c / 32 = 15.6 um) crosses the crack into
+    the other block; the result is refused, not reported."""
+    vertices, faces = boxes(([0.0, 0.0, 0.0], [0.02, 0.02, 0.02]), ([0.02001, 0.0, 0.0], [0.04, 0.02, 0.02]))
+    body = collision_query(vertices, faces, "blocks")
+    points = np.array([[0.018, 0.01, 0.01], [0.01, 0.01, 0.01], [0.05, 0.01, 0.01]])
+    assert EPS_C / 2 ** (INSIDE_PUSH_ROUNDS - 1) > 1e-5
+    with pytest.raises(PenetrationRemaining, match=r"^blocks: 1 of the 2 hair particles .*deepest 10.00 mm.*"
+                                                   r"particle 0\); no penetration-free result") as error:
+        resolve_penetration(points, np.zeros(3, dtype=bool), body, EPS_C, "blocks")
+    assert error.value.code == "penetration_remaining" and isinstance(error.value, InputError)
