@@ -4,14 +4,17 @@ The API and the worker read and write records only through :class:`Repository`, 
 storage documents into :mod:`hairport.records` models and back, keeps the job index in step
 with the job records, and decides who runs a hairstyle's preprocessing.
 
-The job index (one empty file per job, ``index/jobs/<owner>/<created>-<job id>.<state>``) is
-renamed under the job record's lock whenever the state changes, so listing an owner's jobs
-(newest first, optionally by state, with a total) reads only the directory and the records of
-the page asked for.
+The job index (:class:`hairport.storage.job_index.JobIndex`, a SQLite table in the storage) gets
+a job's row under the job record's lock whenever its state changes, so listing an owner's jobs
+(newest first, optionally by state, with a total), the counts by state and the stage totals of
+succeeded jobs read the index and the records of the page asked for only, whatever the history
+kept. The index is rebuilt from the records when it is missing, corrupt or behind
+(:meth:`Repository.rebuild_job_index`, ``hairport reindex``).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Iterator
 from typing import TypeVar
 
@@ -21,6 +24,7 @@ from hairport.records import (
     QUEUED,
     READY,
     RUNNING,
+    SUCCEEDED,
     ArtifactRecord,
     CharacterRecord,
     ErrorInfo,
@@ -34,18 +38,19 @@ from hairport.records import (
     now,
 )
 from hairport.storage import LocalStorage
+from hairport.storage.job_index import IndexRow, JobIndex
 
 R = TypeVar("R", bound=Record)
 
-JOB_INDEX = "jobs"
-#: digits of the microsecond creation time that starts a job's index key (sorts until year 5138)
-INDEX_TIME_DIGITS = 17
 PURGE_CLOCK_ID = "purge"
+#: the state whose jobs' stage timings the index sums (``/metrics``)
+TIMED_STATE = SUCCEEDED
 
 
-def job_index_key(job: JobRecord) -> str:
-    """The job's index key: its creation time (µs, zero-padded) then its id, so that names sort by age."""
-    return f"{round(job.created_at * 1e6):0{INDEX_TIME_DIGITS}d}-{job.id}"
+def index_row(job: JobRecord) -> IndexRow:
+    """What the job index keeps of a job: its stage timings only once it succeeded."""
+    timings = json.dumps(job.timings) if job.state == TIMED_STATE and job.timings else None
+    return IndexRow(job.id, job.owner, job.state, job.created_at, job.updated_at, timings)
 
 
 class Repository:
@@ -53,6 +58,7 @@ class Repository:
 
     def __init__(self, storage: LocalStorage):
         self.storage = storage
+        self.job_index = JobIndex(storage.root, self._index_rows, durable=storage.durable)
 
     # ---------------------------------------------------------------- any record
 
@@ -110,47 +116,41 @@ class Repository:
                   offset: int = 0) -> tuple[list[JobRecord], int]:
         """``owner``'s jobs newest first (optionally in one state): the page and the total count.
 
-        Only the index (names) and the page's records are read."""
-        entries = self.storage.index_entries(JOB_INDEX, owner)
-        keys = sorted((key for key, tag in entries if state is None or tag == state), reverse=True)
-        page = []
-        for key in keys[offset:offset + limit]:
-            job = self.job(key.split("-", 1)[1])
-            if job is not None:
-                page.append(job)
-        return page, len(keys)
+        Only the index and the page's records are read."""
+        ids, total = self.job_index.page(owner, state, limit, offset)
+        page = [job for job in map(self.job, ids) if job is not None]
+        return page, total
 
     def job_counts(self) -> dict[str, int]:
         """Jobs by state over every owner, from the index."""
-        counts = dict.fromkeys(JOB_STATES, 0)
-        for owner in self.storage.index_groups(JOB_INDEX):
-            for _, tag in self.storage.index_entries(JOB_INDEX, owner):
-                counts[tag] = counts.get(tag, 0) + 1
-        return counts
+        return dict.fromkeys(JOB_STATES, 0) | self.job_index.counts()
+
+    def stage_totals(self) -> dict[str, tuple[float, int]]:
+        """``{stage: (seconds, jobs)}`` over the succeeded jobs kept, from the index."""
+        return self.job_index.stage_totals()
 
     def jobs_in_state(self, state: str) -> Iterator[JobRecord]:
-        """Every job in ``state`` (reads those records only)."""
-        for owner in self.storage.index_groups(JOB_INDEX):
-            for key, tag in self.storage.index_entries(JOB_INDEX, owner):
-                job = self.job(key.split("-", 1)[1]) if tag == state else None
-                if job is not None:
-                    yield job
+        """Every job in ``state`` (the index finds them; only those records are read, and a job whose record
+        is gone or has moved on meanwhile is skipped)."""
+        for job_id in self.job_index.ids_in_state(state):
+            job = self.job(job_id)
+            if job is not None and job.state == state:
+                yield job
 
     def _reindex(self, old: dict | None, new: dict) -> None:
-        job = JobRecord.model_validate(new)
-        old_state = None if old is None else old.get("state")
-        if old_state != job.state:
-            self.storage.index_put(JOB_INDEX, job.owner, job_index_key(job), job.state, old_tag=old_state)
+        # under the job record's lock: the index changes in the order the record does. Progress writes
+        # (every ~0.5 s while a job runs) change none of the indexed fields and skip the index.
+        if old is not None and all(old.get(field) == new.get(field) for field in ("state", "owner", "timings")):
+            return
+        self.job_index.put(index_row(JobRecord.model_validate(new)))
 
-    def prune_job_index(self) -> int:
-        """Drop index entries whose job record is gone (purged); how many."""
-        dropped = 0
-        for owner in self.storage.index_groups(JOB_INDEX):
-            for key, _ in self.storage.index_entries(JOB_INDEX, owner):
-                if not self.exists(JobRecord, key.split("-", 1)[1]):
-                    self.storage.index_drop(JOB_INDEX, owner, key)
-                    dropped += 1
-        return dropped
+    def _index_rows(self) -> Iterator[IndexRow]:
+        for document in self.storage.list_records(JobRecord.KIND):
+            yield index_row(JobRecord.model_validate(document))
+
+    def rebuild_job_index(self) -> int:
+        """Refill the job index from the job records; jobs indexed."""
+        return self.job_index.rebuild()
 
     # ---------------------------------------------------------------- preprocessing
 
@@ -214,8 +214,11 @@ class Repository:
         return self.purge(older_than_seconds) if due else None
 
     def purge(self, older_than_seconds: float) -> int:
-        """Remove what is older than the retention (see :meth:`hairport.storage.LocalStorage.purge`), then the
-        index entries of purged jobs; files removed."""
-        removed = self.storage.purge(older_than_seconds)
-        self.prune_job_index()
-        return removed
+        """Remove what is older than the retention (see :meth:`hairport.storage.LocalStorage.purge`), dropping
+        the index rows of purged jobs (under their records' locks); files removed."""
+
+        def purged(kind: str, record_id: str) -> None:
+            if kind == JobRecord.KIND:
+                self.job_index.drop(record_id)
+
+        return self.storage.purge(older_than_seconds, removed=purged)

@@ -1,4 +1,4 @@
-"""Operations commands: ``serve``, ``worker``, ``purge``, ``openapi`` and ``assets fetch``.
+"""Operations commands: ``serve``, ``worker``, ``purge``, ``reindex``, ``openapi`` and ``assets fetch``.
 
 The web framework, Celery and the asset downloader are imported inside the commands that
 use them, so that the other commands start without them.
@@ -95,6 +95,21 @@ def cmd_purge(args: argparse.Namespace) -> int:
     settings = get_settings()
     removed = Repository(LocalStorage(settings.storage_dir)).purge(retention_seconds(settings.retention_days))
     print(f"removed {removed} files older than {settings.retention_days:g} days from {settings.storage_dir}")
+    return 0
+
+
+def add_reindex(sub) -> None:
+    p = sub.add_parser("reindex", help="rebuild the job index (listings, counts, /metrics) from the job records")
+    p.set_defaults(run=cmd_reindex)
+
+
+def cmd_reindex(args: argparse.Namespace) -> int:
+    from hairport.repository import Repository
+    from hairport.storage import LocalStorage
+
+    settings = get_settings()
+    jobs = Repository(LocalStorage(settings.storage_dir)).rebuild_job_index()
+    print(f"indexed {jobs} jobs of {settings.storage_dir}")
     return 0
 
 

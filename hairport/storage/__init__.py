@@ -7,7 +7,7 @@ Layout of a :class:`LocalStorage` under its ``root`` (``Settings.storage_dir``):
     root/records/<kind>/<id>.lock       empty file, ``flock``-ed around every write of that record
     root/tmp/                           uploads and copies being written (same file system as blobs/)
     root/work/<dir>/                    scratch directories of jobs (:meth:`LocalStorage.work_dir`)
-    root/index/<index>/<group>/<key>.<tag>  empty files: sorted listings without reading records
+    root/index/jobs.sqlite3             the job index (:mod:`.job_index`): listings and counts without reading records
 
 Conventions: sizes in bytes, times in seconds since the epoch (file ``st_mtime``), digests
 as 64 lower-case hex characters of SHA-256. Every write is atomic: the data goes to a new
@@ -40,7 +40,6 @@ from pathlib import Path
 
 from .blobs import UPLOAD_CHUNK_BYTES, Blob, BlobStore, UploadTooLarge, iter_upload
 from .documents import DocumentStore
-from .index import IndexStore
 from .layout import (
     FILE_MODE,
     LOCK_SUFFIX,
@@ -63,7 +62,7 @@ __all__ = [
 ]
 
 
-class LocalStorage(BlobStore, DocumentStore, IndexStore, Retention):
+class LocalStorage(BlobStore, DocumentStore, Retention):
     """Blobs and records in a local directory (see the module docstring for layout and assumptions).
 
     Parameters

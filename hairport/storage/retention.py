@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from .documents import _read_json
@@ -25,7 +26,8 @@ from .layout import (
 class Retention:
     """The purge of a :class:`hairport.storage.LocalStorage`."""
 
-    def purge(self, older_than_seconds: float, now: float | None = None) -> int:
+    def purge(self, older_than_seconds: float, now: float | None = None,
+              removed: Callable[[str, str], None] | None = None) -> int:
         """Delete what was not written (or, for blobs, saved or read) for ``older_than_seconds``.
 
         Removes, in this order: records whose mtime is older than the cutoff (under their
@@ -46,6 +48,9 @@ class Retention:
             Retention (s), e.g. ``retention_seconds(settings.retention_days)``.
         now : float, optional
             The current time (s since the epoch); ``time.time()`` by default.
+        removed : callable, optional
+            ``removed(kind, record_id)`` runs under a purged record's lock right after its
+            removal (to drop what is derived from it, e.g. an index row).
 
         Returns
         -------
@@ -53,13 +58,13 @@ class Retention:
             Files removed (blobs, records, temporary files and files in work directories).
         """
         cutoff = (time.time() if now is None else now) - older_than_seconds
-        removed = 0
+        on_removed, removed = removed, 0
         referenced: set[str] = set()
         for kind_dir in _subdirs(self.records_dir):
             for entry in _files(kind_dir):
                 name = entry.name
                 if name.endswith(RECORD_SUFFIX) and not name.startswith("."):
-                    if _is_old(entry, cutoff) and self._purge_record(entry, cutoff):
+                    if _is_old(entry, cutoff) and self._purge_record(entry, cutoff, on_removed):
                         removed += 1
                     else:
                         referenced |= blob_references(_read_json(entry))
@@ -86,12 +91,14 @@ class Retention:
                 removed += files
         return removed
 
-    def _purge_record(self, path: Path, cutoff: float) -> bool:
+    def _purge_record(self, path: Path, cutoff: float, removed: Callable[[str, str], None] | None) -> bool:
         """Remove an old record unless it was written meanwhile; whether it was removed."""
         with self._locked(path) as lock:
             mtime = _mtime(path)
             if mtime is None or mtime >= cutoff:
                 return False
             _unlink(path)
+            if removed is not None:
+                removed(path.parent.name, path.name[:-len(RECORD_SUFFIX)])
             _unlink(lock)
             return True

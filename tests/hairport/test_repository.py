@@ -1,5 +1,7 @@
 """Typed records over the storage: the job index, listing by pages, preprocessing claims, purging."""
 
+import os
+
 import pytest
 
 from hairport.records import (
@@ -13,7 +15,7 @@ from hairport.records import (
     PreprocessSettings,
     artifact_key,
 )
-from hairport.repository import Repository, job_index_key
+from hairport.repository import Repository
 from hairport.storage import LocalStorage
 
 
@@ -62,19 +64,56 @@ def test_a_page_reads_only_its_own_records(repository, monkeypatch):
 def test_index_follows_every_state_change_and_drops_purged_jobs(repository):
     job = make_job(1)
     repository.create_job(job)
-    folder = repository.storage.root / "index" / "jobs" / "kowner"
     for state in ("running", "running", "failed", "running", "succeeded"):
         repository.set_job(job.id, state=state, progress=0.5)
-        assert sorted(p.name for p in folder.iterdir()) == [f"{job_index_key(job)}.{state}"]
+        [row] = repository.job_index.rows()
+        assert (row.id, row.owner, row.state) == (job.id, "kowner", state)
+        assert repository.job_counts()[state] == 1 and sum(repository.job_counts().values()) == 1
     assert repository.job(job.id).updated_at > 0
-    repository.storage.delete_record("jobs", job.id)
-    assert repository.prune_job_index() == 1 and list(folder.iterdir()) == []
+    record = repository.storage.root / "records" / "jobs" / f"{job.id}.json"
+    os.utime(record, (0, 0))
+    assert repository.purge(older_than_seconds=3600.0) == 1
+    assert repository.job_index.rows() == [] and repository.list_jobs("kowner") == ([], 0)
+    assert repository.job_counts()["succeeded"] == 0
     assert repository.set_job(job.id, state="failed") is None
 
 
-def test_index_keys_sort_by_creation_time():
-    assert job_index_key(make_job(1, created_at=9.5)) < job_index_key(make_job(0, created_at=10.0))
-    assert job_index_key(make_job(1, created_at=10.0)).startswith("00000000010000000-")
+def test_equal_creation_times_sort_by_id_and_order_is_exact_to_the_microsecond(repository):
+    repository.create_job(make_job(1, created_at=10.000001))
+    repository.create_job(make_job(2, created_at=10.0))
+    repository.create_job(make_job(3, created_at=10.0))
+    repository.create_job(make_job(4, created_at=9.5))
+    page, total = repository.list_jobs("kowner")
+    assert total == 4 and [job.id for job in page] == [f"{n:032x}" for n in (1, 3, 2, 4)]
+
+
+def test_stage_totals_sum_the_succeeded_jobs_only(repository):
+    for number, seconds in enumerate((1.5, 2.0, 4.0)):
+        repository.create_job(make_job(number))
+        repository.set_job(f"{number:032x}", state="running", timings={"job": 99.0})  # not summed: running
+    assert repository.stage_totals() == {}
+    for number, seconds in enumerate((1.5, 2.0, 4.0)):
+        repository.set_job(f"{number:032x}", state="succeeded", timings={"job": seconds, "solve": seconds / 2})
+    totals = repository.stage_totals()
+    assert totals["job"] == (pytest.approx(7.5), 3) and totals["solve"] == (pytest.approx(3.75), 3)
+    repository.set_job(f"{2:032x}", state="failed")  # leaves the sum
+    assert repository.stage_totals()["job"] == (pytest.approx(3.5), 2)
+    record = repository.storage.root / "records" / "jobs" / f"{0:032x}.json"
+    os.utime(record, (0, 0))
+    repository.purge(older_than_seconds=3600.0)  # a purged succeeded job leaves it too
+    assert repository.stage_totals()["job"] == (pytest.approx(2.0), 1)
+    assert repository.job_counts() == {"queued": 0, "running": 0, "succeeded": 1, "failed": 1, "cancelled": 0}
+
+
+def test_progress_writes_do_not_touch_the_index(repository, monkeypatch):
+    repository.create_job(make_job(1))
+    writes = []
+    monkeypatch.setattr(repository.job_index, "put", writes.append)
+    for progress in (0.1, 0.2, 0.3):
+        repository.set_job(f"{1:032x}", progress=progress, stage="solve")
+    assert writes == []
+    repository.set_job(f"{1:032x}", state="running")
+    assert [row.state for row in writes] == ["running"]
 
 
 def test_set_job_validates_its_fields(repository):

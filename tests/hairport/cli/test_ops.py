@@ -1,6 +1,5 @@
 """Operations commands: the OpenAPI contract, purging, and refusing to serve without keys."""
 
-import json
 import os
 from pathlib import Path
 
@@ -49,4 +48,29 @@ def test_purge_command_removes_old_records_and_their_index_entries(tmp_path, mon
         get_settings.cache_clear()
     assert "removed 1 files older than 1 days" in capsys.readouterr().out
     assert not record.exists() and repository.list_jobs("kowner") == ([], 0)
-    assert json.dumps(storage.index_groups("jobs")) == '["kowner"]'
+    assert repository.job_index.rows() == [] and sum(repository.job_counts().values()) == 0
+
+
+def test_reindex_command_rebuilds_the_job_index_from_the_records(tmp_path, monkeypatch, capsys):
+    from hairport.settings import get_settings
+    from hairport.storage.job_index import INDEX_FILE
+
+    repository = Repository(LocalStorage(tmp_path))
+    for number, state in enumerate(("queued", "running", "succeeded")):
+        repository.create_job(JobRecord(id=f"{number:032x}", owner="kowner", hairstyle_id="h" * 32,
+                                        target_character_id="c" * 32, options={},
+                                        preprocess_options=PreprocessSettings(k=5, guides=9), artifact_key="e" * 64,
+                                        output_format="data", created_at=1.0, updated_at=1.0, state=state))
+    repository.job_index._close()
+    with repository.job_index._transaction() as db:  # an index that lost its rows
+        db.execute("DELETE FROM jobs")
+    assert repository.list_jobs("kowner")[1] == 0
+    monkeypatch.setenv("HAIRPORT_STORAGE_DIR", str(tmp_path))
+    get_settings.cache_clear()
+    try:
+        assert main(["reindex"]) == 0
+    finally:
+        get_settings.cache_clear()
+    assert f"indexed 3 jobs of {tmp_path}" in capsys.readouterr().out
+    assert repository.list_jobs("kowner")[1] == 3 and repository.job_counts()["running"] == 1
+    assert (tmp_path / INDEX_FILE).is_file()
