@@ -1,0 +1,350 @@
+"""Service read latency under load: job polls while jobs run, listings and /metrics with 10^4 jobs kept.
+
+Starts its own ``redis-server`` (a free port, nothing on disk), a real ``hairport serve`` and one
+real ``hairport worker`` on a temporary storage folder, stores ``--records`` job records (written
+directly through the Repository, as the API would write them, so that 10^4 jobs take seconds, not
+hours of solving), uploads the toy characters and a procedural groom of the tests through the API,
+and keeps the worker busy with real retarget jobs (a new one is submitted whenever fewer than two
+are queued or running) while it measures:
+
+* ``GET /v1/jobs/{id}``: ``--pollers`` concurrent pollers (asyncio + httpx, one connection each),
+  two load models: *closed loop* (each poller sends its next request as soon as the last one
+  answered: the server's saturation, latency ~ pollers / throughput) and *paced* (each poller waits
+  ``--think`` seconds between the answer and its next request, as a client polling a job does);
+* ``GET /v1/jobs?limit=50``, ``GET /v1/jobs?state=succeeded&limit=50`` and ``GET /metrics`` with
+  the records kept: ``--list-clients`` closed-loop clients each.
+
+Every window runs ``--seconds`` seconds; each figure is the median over ``--runs`` runs. With
+``--baseline-ref REV`` the same measurements run first against the code of that git revision (its
+files exported into a temporary folder and put first on ``PYTHONPATH``), so old and new are
+measured in the same session on the same machine.
+
+    python bench/service_load.py                       # this tree
+    python bench/service_load.py --baseline-ref ad5d7e2 --serve-workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import datetime
+import os
+import platform
+import shutil
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+KEY = "bench-key"
+AUTH = {"Authorization": f"Bearer {KEY}"}
+#: seconds to wait for redis, the API and the worker to answer
+START_SECONDS = 60.0
+#: jobs kept queued or running by the feeder, so that the worker never idles during a window
+BUSY_JOBS = 2
+#: groom of the retarget jobs: strands x particles (a job of a few seconds on one core)
+GROOM = (400, 16)
+#: seconds between the feeder's checks
+FEED_SECONDS = 0.5
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def wait_until(check, what: str, seconds: float = START_SECONDS) -> None:
+    deadline = time.monotonic() + seconds
+    while True:
+        with contextlib.suppress(Exception):
+            if check():
+                return
+        if time.monotonic() > deadline:
+            raise SystemExit(f"bench: {what} did not start")
+        time.sleep(0.1)
+
+
+# ---------------------------------------------------------------------- the code under test
+
+
+def source_tree(ref: str | None, folder: Path) -> dict:
+    """Environment additions running the code of ``ref`` (None: the installed tree)."""
+    if ref is None:
+        return {}
+    export = folder / "export"
+    export.mkdir()
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(export)], input=archive, check=True)
+    # the installed layout: solver/, service/ and worker/ are subpackages of hairport
+    package = folder / "site" / "hairport"
+    shutil.copytree(export / "hairport", package)
+    for sub in ("solver", "service", "worker"):
+        shutil.copytree(export / sub, package / sub)
+    return {"PYTHONPATH": str(folder / "site")}
+
+
+def populate(storage: str, records: int, owner: str) -> None:
+    """Store ``records`` job records of ``owner`` (run in a subprocess under the code being measured)."""
+    import random
+
+    from hairport.records import JOB_STATES, JobRecord, PreprocessSettings, now
+    from hairport.repository import Repository
+    from hairport.storage import LocalStorage
+
+    repository = Repository(LocalStorage(Path(storage), durable=False))
+    rng = random.Random(0)
+    moment = now() - records
+    for number in range(records):
+        state = rng.choice(JOB_STATES)
+        timings = {"job": 3.0, "solve": 2.0} if state == "succeeded" else None
+        repository.create_job(JobRecord(
+            id=f"{number:032x}", owner=owner, state=state, hairstyle_id="0" * 32, target_character_id="0" * 32,
+            options={}, preprocess_options=PreprocessSettings(k=5, guides=20), artifact_key="0" * 64,
+            output_format="data", created_at=moment + number, updated_at=moment + number, timings=timings))
+
+
+class Service:
+    """redis-server, ``hairport serve`` and ``hairport worker`` on a temporary storage."""
+
+    def __init__(self, folder: Path, extra_env: dict, serve_args: list[str]):
+        self.folder, self.processes = folder, []
+        self.storage = folder / "storage"
+        self.storage.mkdir()
+        redis_port, self.port = free_port(), free_port()
+        self.env = {**os.environ, **extra_env, "HAIRPORT_REDIS_URL": f"redis://127.0.0.1:{redis_port}/0",
+                    "HAIRPORT_STORAGE_DIR": str(self.storage), "HAIRPORT_API_KEYS": KEY,
+                    "HAIRPORT_INSECURE_DEV": "false"}
+        self.redis_port = redis_port
+        self.serve_args = serve_args
+
+    def start_redis(self) -> None:
+        import redis
+
+        self._spawn("redis", ["redis-server", "--port", str(self.redis_port), "--bind", "127.0.0.1", "--save", "",
+                              "--appendonly", "no", "--dir", str(self.folder)])
+        client = redis.Redis(port=self.redis_port)
+        wait_until(client.ping, "redis-server")
+
+    def start_api_and_worker(self) -> None:
+        import httpx
+
+        hairport = [sys.executable, "-m", "hairport.cli"]
+        self._spawn("serve", hairport + ["serve", "--port", str(self.port), *self.serve_args])
+        self._spawn("worker", hairport + ["worker", "--concurrency", "1", "--loglevel", "WARNING"])
+        wait_until(lambda: httpx.get(f"{self.url}/readyz", timeout=5).status_code == 200, "the API and the worker")
+
+    def run_python(self, *args: str) -> None:
+        subprocess.run([sys.executable, *args], env=self.env, check=True, cwd=self.folder)
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def _spawn(self, name: str, command: list[str]) -> None:
+        log = open(self.folder / f"{name}.log", "wb")
+        self.processes.append(subprocess.Popen(command, env=self.env, stdout=log, stderr=subprocess.STDOUT,
+                                               cwd=self.folder, start_new_session=True))
+
+    def stop(self) -> None:
+        for process in reversed(self.processes):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, 15)
+        for process in self.processes:
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, 9)
+
+
+# ---------------------------------------------------------------------- inputs and the feeder
+
+
+def upload_inputs(url: str, folder: Path) -> dict:
+    """The toy characters and a procedural groom of the tests, uploaded; ids."""
+    import httpx
+
+    from hairport.solver.io.hair import write_hair
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import write_character
+
+    source = toy.toy_character(name="source")
+    target = toy.toy_character(head_scale=(1.1, 0.95, 1.05), neck_length=0.15, shoulder_width=0.42, name="target")
+    ids = {}
+    with httpx.Client(base_url=url, headers=AUTH, timeout=120) as client:
+        for name, character in (("source", source), ("target", target)):
+            write_character(character, folder / f"{name}.obj", folder / f"{name}.skeleton.json")
+            response = client.post("/v1/characters", files={
+                "mesh": (f"{name}.obj", (folder / f"{name}.obj").read_bytes()),
+                "skeleton": (f"{name}.skeleton.json", (folder / f"{name}.skeleton.json").read_bytes())})
+            response.raise_for_status()
+            ids[name] = response.json()["id"]
+        write_hair(folder / "hair.data", generate_groom(source, "short", *GROOM, seed=0))
+        response = client.post("/v1/hairstyles", data={"source_character_id": ids["source"], "guides": "20"},
+                               files={"hair": ("groom.data", (folder / "hair.data").read_bytes())})
+        response.raise_for_status()
+        ids["hairstyle"] = response.json()["id"]
+    return ids
+
+
+async def feeder(client, ids: dict, jobs: list[str], busy: list[float], stop: asyncio.Event) -> None:
+    """Keep BUSY_JOBS retargets queued or running; record when a job was seen running."""
+    request = {"hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]]}
+    pending: list[str] = []
+    while not stop.is_set():
+        states = []
+        for job_id in pending:
+            states.append((job_id, (await client.get(f"/v1/jobs/{job_id}")).json()["state"]))
+        pending = [job_id for job_id, state in states if state in ("queued", "running")]
+        if any(state == "running" for _, state in states):
+            busy.append(time.monotonic())
+        if any(state == "failed" for _, state in states):
+            raise SystemExit("bench: a retarget job failed (see the worker log)")
+        while len(pending) < BUSY_JOBS:
+            response = await client.post("/v1/retargets", json=request)
+            response.raise_for_status()
+            pending.append(response.json()["jobs"][0]["id"])
+            jobs.append(pending[-1])
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(stop.wait(), FEED_SECONDS)
+
+
+# ---------------------------------------------------------------------- load
+
+
+async def load(client, paths: list[str], clients: int, seconds: float, think: float) -> tuple[list[float], int]:
+    """``clients`` loops sending GETs of ``paths`` (round robin) for ``seconds``; latencies (ms), errors."""
+    latencies: list[float] = []
+    errors = 0
+    end = time.monotonic() + seconds
+
+    async def loop(offset: int) -> None:
+        nonlocal errors
+        turn = offset
+        while time.monotonic() < end:
+            began = time.perf_counter()
+            response = await client.get(paths[turn % len(paths)])
+            latencies.append((time.perf_counter() - began) * 1000.0)
+            errors += response.status_code != 200
+            turn += 1
+            if think:
+                await asyncio.sleep(think)
+
+    await asyncio.gather(*(loop(i) for i in range(clients)))
+    return latencies, errors
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(q / 100.0 * (len(ordered) - 1))))] if ordered else float("nan")
+
+
+async def measure(url: str, ids: dict, args) -> dict:
+    """Every window, ``args.runs`` times: ``{name: [(p50, p99, requests per second, errors), ...]}``."""
+    import httpx
+
+    limits = httpx.Limits(max_connections=args.pollers + args.list_clients + 4,
+                          max_keepalive_connections=args.pollers + args.list_clients + 4)
+    results: dict[str, list] = {}
+    async with httpx.AsyncClient(base_url=url, headers=AUTH, timeout=60, limits=limits) as client:
+        jobs: list[str] = []
+        busy: list[float] = []
+        stop = asyncio.Event()
+        feed = asyncio.create_task(feeder(client, ids, jobs, busy, stop))
+        deadline = time.monotonic() + START_SECONDS * 4
+        while not busy:  # the first job running (after the hairstyle's preprocessing)
+            if feed.done():
+                feed.result()
+            if time.monotonic() > deadline:
+                raise SystemExit("bench: no retarget job started running")
+            await asyncio.sleep(0.2)
+        windows = {
+            "poll, closed loop": ("poll", args.pollers, 0.0),
+            f"poll, {args.think:g} s think": ("poll", args.pollers, args.think),
+            "list 50": (["/v1/jobs?limit=50"], args.list_clients, 0.0),
+            "list 50, state": (["/v1/jobs?state=succeeded&limit=50"], args.list_clients, 0.0),
+            "metrics": (["/metrics"], args.list_clients, 0.0),
+        }
+        for _ in range(args.runs):
+            for name, (paths, clients, think) in windows.items():
+                if paths == "poll":
+                    paths = [f"/v1/jobs/{job_id}" for job_id in jobs[-BUSY_JOBS:]]
+                began = time.monotonic()
+                latencies, errors = await load(client, paths, clients, args.seconds, think)
+                ran = any(began <= moment for moment in busy[-3:])
+                results.setdefault(name, []).append((percentile(latencies, 50), percentile(latencies, 99),
+                                                     len(latencies) / args.seconds, errors, ran))
+        stop.set()
+        await feed
+    return results
+
+
+def run(ref: str | None, args) -> dict:
+    with tempfile.TemporaryDirectory(prefix="hairport-bench-") as temp:
+        folder = Path(temp)
+        service = Service(folder, source_tree(ref, folder), [] if ref else args.serve_args)
+        try:
+            service.start_redis()
+            began = time.perf_counter()
+            from hairport.service.auth import owner_of
+
+            service.run_python(str(Path(__file__).resolve()), "populate", str(service.storage), str(args.records),
+                               owner_of(KEY))
+            print(f"  {args.records} job records stored in {time.perf_counter() - began:.1f} s", flush=True)
+            service.start_api_and_worker()
+            ids = upload_inputs(service.url, folder)
+            return asyncio.run(measure(service.url, ids, args))
+        finally:
+            service.stop()
+
+
+def table(results: dict[str, dict], args) -> str:
+    lines = [f"hairport service load - {datetime.date.today()} - {platform.node()} ({os.cpu_count()} cores, "
+             f"{platform.processor() or platform.machine()}, Python {platform.python_version()})",
+             f"load: {args.pollers} pollers on the jobs being run (closed loop, and with {args.think:g} s think time); "
+             f"listings and /metrics: {args.list_clients} closed-loop clients, {args.records} jobs kept; "
+             f"{args.seconds:g} s windows, median of {args.runs} runs; one worker busy with retargets throughout",
+             "", "| code | request | p50 ms | p99 ms | req/s | errors | job running |", "|---|---|---:|---:|---:|---:|---|"]
+    for code, windows in results.items():
+        for name, runs in windows.items():
+            p50 = statistics.median(r[0] for r in runs)
+            p99 = statistics.median(r[1] for r in runs)
+            rate = statistics.median(r[2] for r in runs)
+            lines.append(f"| {code} | {name} | {p50:.1f} | {p99:.1f} | {rate:.0f} | {sum(r[3] for r in runs)} | "
+                         f"{'yes' if all(r[4] for r in runs) else 'not always'} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["populate"]:
+        populate(argv[1], int(argv[2]), argv[3])
+        return 0
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--records", type=int, default=10_000, help="job records kept")
+    parser.add_argument("--pollers", type=int, default=100, help="concurrent pollers of GET /v1/jobs/{id}")
+    parser.add_argument("--think", type=float, default=0.5, help="seconds a paced poller waits between polls")
+    parser.add_argument("--list-clients", type=int, default=10, help="concurrent clients of the listings")
+    parser.add_argument("--seconds", type=float, default=8.0, help="length of one measurement window")
+    parser.add_argument("--runs", type=int, default=3, help="runs of every window (the median is reported)")
+    parser.add_argument("--baseline-ref", help="also measure the code of this git revision, first")
+    parser.add_argument("--serve-args", default="", help="extra arguments of `hairport serve` (this tree only)")
+    args = parser.parse_args(argv)
+    args.serve_args = args.serve_args.split()
+    results = {}
+    for ref in ([args.baseline_ref] if args.baseline_ref else []) + [None]:
+        code = ref or f"this tree {' '.join(args.serve_args)}".strip()
+        print(f"measuring {code} ...", flush=True)
+        results[code] = run(ref, args)
+    print(table(results, args))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
