@@ -24,7 +24,7 @@ def owner_of(key: str) -> str:
     return "k" + hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
-def current_owner(
+async def current_owner(
     request: Request,
     authorization: Annotated[str | None, Header()] = None,
     x_api_key: Annotated[str | None, Header()] = None,

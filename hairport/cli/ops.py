@@ -16,6 +16,9 @@ from hairport.settings import Settings, get_settings
 
 from .common import EXIT_BAD_INPUT
 
+#: the API's application factory, as uvicorn imports it in each worker process
+APP_FACTORY = "hairport.service.app:create_app"
+
 
 def add_assets(sub) -> None:
     p = sub.add_parser("assets", help="manage the downloaded MakeHuman assets")
@@ -39,6 +42,9 @@ def add_serve(sub) -> None:
     p.add_argument("--port", type=int, default=8000)
     p.add_argument("--embedded", action="store_true",
                    help="run a worker inside the server on an in-memory queue (no Redis; for a laptop)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="API processes (uvicorn workers) sharing the port; each serves requests on its own event loop "
+                        "and GIL (not with --embedded)")
     p.set_defaults(run=cmd_serve)
 
 
@@ -54,6 +60,13 @@ def cmd_serve(args: argparse.Namespace) -> int:
     except RuntimeError as error:
         print(f"hairport: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if args.workers < 1 or (args.embedded and args.workers != 1):
+        print("hairport: error: --workers must be 1 or more, and 1 with --embedded (its queue is in memory)",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.workers > 1:  # each process builds its own app from the settings (uvicorn imports the factory)
+        uvicorn.run(APP_FACTORY, factory=True, host=args.host, port=args.port, workers=args.workers)
+        return 0
     if args.embedded:
         from hairport.worker.embedded import start_embedded_worker
 

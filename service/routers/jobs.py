@@ -33,7 +33,8 @@ def list_jobs(
 
 
 @router.get("/{job_id}", response_model=JobOut, summary="A job's state, progress, timings and metrics")
-def get_job(job: OwnedJob) -> JobOut:
+async def get_job(job: OwnedJob) -> JobOut:
+    # async (on the event loop, no threadpool hop): the poll path is one lock-free record read
     return JobOut.of(job)
 
 

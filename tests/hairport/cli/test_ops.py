@@ -74,3 +74,16 @@ def test_reindex_command_rebuilds_the_job_index_from_the_records(tmp_path, monke
     assert f"indexed 3 jobs of {tmp_path}" in capsys.readouterr().out
     assert repository.list_jobs("kowner")[1] == 3 and repository.job_counts()["running"] == 1
     assert (tmp_path / INDEX_FILE).is_file()
+
+
+def test_serve_refuses_several_workers_with_the_embedded_queue(monkeypatch, capsys):
+    from hairport.settings import get_settings
+
+    monkeypatch.setenv("HAIRPORT_INSECURE_DEV", "true")
+    get_settings.cache_clear()
+    try:
+        assert main(["serve", "--embedded", "--workers", "2"]) == 2
+        assert main(["serve", "--workers", "0"]) == 2
+    finally:
+        get_settings.cache_clear()
+    assert capsys.readouterr().err.count("hairport: error: --workers must be 1 or more") == 2
