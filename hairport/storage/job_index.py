@@ -151,9 +151,12 @@ class JobIndex:
             where = (owner, state)
 
         def read(db: sqlite3.Connection) -> tuple[list[str], int]:
-            with db:  # one read transaction: the page and the total of one snapshot
+            db.execute("BEGIN")  # one read transaction: the page and the total of one snapshot
+            try:
                 page = [row[0] for row in db.execute(ids, (*where, limit, offset))]
                 return page, db.execute(total, where).fetchone()[0]
+            finally:
+                db.execute("COMMIT")
 
         return self._read(read)
 
