@@ -36,14 +36,19 @@ def new_task_id() -> str:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process of that id exists on this host (one of another user counts)."""
+    """Whether a process of that id runs on this host (one of another user counts; a zombie, killed and
+    not yet reaped, does not)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
 
 
 def silent(run: RunInfo, stale_after: float, moment: float, started: float | None = None) -> bool:
