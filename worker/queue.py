@@ -65,11 +65,12 @@ class TaskQueue:
 
     def ping_workers(self, timeout: float) -> list:
         """The replies of the workers (of any deployment on this broker) that answer within ``timeout`` s."""
-        return self.celery.control.ping(timeout=timeout)
+        return self._fresh(lambda connection=None: self.celery.control.ping(timeout=timeout, connection=connection))
 
     def workers(self, timeout: float) -> list[str]:
         """The names of the workers that consume this deployment's queues and answer within ``timeout`` s."""
-        replies = self.celery.control.inspect(timeout=timeout).active_queues() or {}
+        replies = self._fresh(lambda connection=None: self.celery.control.inspect(
+            timeout=timeout, connection=connection).active_queues()) or {}
         ours = set(self.names.values())
         return sorted(name for name, queues in replies.items() if ours & {queue.get("name") for queue in queues or []})
 
@@ -77,10 +78,8 @@ class TaskQueue:
         """Messages waiting per queue (short names), or {} when the broker cannot say."""
         if self.broker != "redis":
             return {}
-        with self.celery.connection_for_read() as connection:
-            client = connection.default_channel.client
-            return {short: sum(int(client.llen(name)) for name in _priority_lists(full))
-                    for short, full in self.names.items()}
+        return self._with_redis(lambda client: {
+            short: sum(int(client.llen(name)) for name in _priority_lists(full)) for short, full in self.names.items()})
 
     def task_ids_in_broker(self) -> set[str] | None:
         """The ids of every task of this deployment the broker holds (waiting in its queues, or delivered
@@ -88,19 +87,25 @@ class TaskQueue:
         listed (the in-memory one)."""
         if self.broker != "redis":
             return None
-        found = set()
+        return self._with_redis(_held_task_ids, self.names.values())
+
+    def _fresh(self, call):
+        # pooled connections may have died with a Redis restart: try once more on a new connection
+        try:
+            return call()
+        except (KombuError, redis.RedisError, OSError):
+            with self.celery.connection() as connection:
+                return call(connection)
+
+    def _with_redis(self, read, *args):
+        # a pooled connection may have died with a Redis restart: one more try on a fresh one
         with self.celery.connection_for_read() as connection:
             client = connection.default_channel.client
-            for full in self.names.values():
-                for name in _priority_lists(full):
-                    found.update(_task_id(raw) for raw in client.lrange(name, 0, -1))
-            for raw in client.hvals(UNACKED_KEY):
-                try:
-                    found.add(_task_id(json.loads(raw)[0]))
-                except (ValueError, IndexError, TypeError):
-                    continue
-        found.discard(None)
-        return found
+            try:
+                return read(client, *args)
+            except redis.ConnectionError:
+                client.connection_pool.disconnect()
+                return read(client, *args)
 
     def _send(self, name: str, task_id: str | None, *args) -> str:
         try:
@@ -108,6 +113,20 @@ class TaskQueue:
                                          queue=self.names[ROUTES[name]], task_id=task_id or new_task_id()).id
         except (KombuError, redis.RedisError, OSError) as error:
             raise QueueUnavailable(f"the task queue did not take the task: {type(error).__name__}") from error
+
+
+def _held_task_ids(client, queues) -> set[str]:
+    found = set()
+    for full in queues:
+        for name in _priority_lists(full):
+            found.update(_task_id(raw) for raw in client.lrange(name, 0, -1))
+    for raw in client.hvals(UNACKED_KEY):
+        try:
+            found.add(_task_id(json.loads(raw)[0]))
+        except (ValueError, IndexError, TypeError):
+            continue
+    found.discard(None)
+    return found
 
 
 def _priority_lists(queue: str) -> list[str]:

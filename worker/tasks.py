@@ -51,10 +51,10 @@ def foreign(task, deployment: str | None) -> bool:
         log.error("task %s %s names no deployment; %s: refused, not run", task.name, task.request.id, where)
         return True
     target = queue_name(deployment, ROUTES[task.name])
-    log.error("task %s %s belongs to deployment %s; %s: refused, not run, sent on to %s", task.name,
-              task.request.id, deployment, where, target)
     task.app.send_task(task.name, args=list(task.request.args or ()), kwargs=dict(task.request.kwargs or {}),
                        queue=target, task_id=task.request.id)
+    log.error("task %s %s belongs to deployment %s; %s: refused, not run, sent on to %s", task.name,
+              task.request.id, deployment, where, target)
     return True
 
 
