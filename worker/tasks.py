@@ -10,13 +10,14 @@ preprocessing is retried after a pause. The worker's signals limit each pool chi
 from __future__ import annotations
 
 import logging
+from functools import lru_cache
 
 from celery import shared_task
 from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
 from hairport.repository import Repository
 from hairport.settings import get_settings
-from hairport.storage import LocalStorage, queue_name, retention_seconds
+from hairport.storage import LocalStorage, deployment_id, queue_name, retention_seconds
 
 from . import runner
 from .app import PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK, ROUTES
@@ -40,10 +41,16 @@ def repository() -> Repository:
     return Repository(LocalStorage(get_settings().storage_dir))
 
 
+@lru_cache(maxsize=1)
+def own_deployment() -> str:
+    """The deployment of this worker: the id written in its storage folder."""
+    return deployment_id(get_settings().storage_dir)
+
+
 def foreign(task, deployment: str | None) -> bool:
     """Whether a task belongs to another deployment than this worker's (then it is not run, loudly: sent on
     to its own deployment's queue, or dropped when it names none)."""
-    own = task.app.hairport_deployment
+    own = own_deployment()
     if deployment == own:
         return False
     where = f"this worker serves deployment {own} (storage {get_settings().storage_dir})"
