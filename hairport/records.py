@@ -6,8 +6,12 @@ shared storage (:mod:`hairport.storage`) under their kind (``characters``, ``hai
 ``artifacts``, ``preprocessing``, ``jobs``, ``idempotency``); :class:`Records` reads and writes
 them typed.
 
-Job states: ``queued`` -> ``running`` -> ``succeeded`` | ``failed`` | ``cancelled``; a job
-whose worker died goes back to ``running`` on its next delivery (``attempts`` counts them).
+Job states: ``queued`` -> ``running`` -> ``succeeded`` | ``failed`` | ``cancelled``. A running
+job whose heartbeat stopped (its worker died) becomes ``stale`` and is queued again; it goes
+back to ``running`` on its next start (``attempts`` counts the starts, and a job started
+``max_attempts`` times whose worker died again fails with ``worker_lost``). Each message sent
+for a job carries the record's ``task_id`` and each start writes a new ``run_token``: a message
+or a run that is not the record's current one changes nothing (see :mod:`hairport.worker.runner`).
 Preprocessing states (per artifact key, shared by every hairstyle of the same inputs):
 ``queued`` -> ``running`` -> ``ready`` | ``failed``.
 
@@ -25,10 +29,16 @@ from typing import ClassVar, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
-JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+JobState = Literal["queued", "running", "stale", "succeeded", "failed", "cancelled"]
 JOB_STATES: tuple[str, ...] = get_args(JobState)
-QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED = JOB_STATES
+QUEUED, RUNNING, STALE, SUCCEEDED, FAILED, CANCELLED = JOB_STATES
 TERMINAL_STATES = (SUCCEEDED, FAILED, CANCELLED)
+#: states of a job no worker is running, waiting for its message to be taken
+WAITING_STATES = (QUEUED, STALE)
+#: error code of a job (or preprocessing) whose worker died ``max_attempts`` times while running it
+WORKER_LOST = "worker_lost"
+#: error code of a job whose message the broker lost ``max_attempts`` times
+MESSAGE_LOST = "message_lost"
 
 PreprocessingState = Literal["queued", "running", "ready", "failed"]
 READY = "ready"
@@ -126,16 +136,34 @@ class ArtifactRecord(Record):
     created_at: float
 
 
-class PreprocessingRecord(Record):
+class RunInfo(BaseModel):
+    """Who runs a job or a preprocessing, and how recently it said so (see :mod:`hairport.records`)."""
+
+    task_id: str | None = Field(None, description="the message that may start it (an older one is a no-op)")
+    enqueued_at: float | None = None
+    requeues: int = 0
+    attempts: int = 0
+    run_token: str | None = None
+    heartbeat_at: float | None = None
+    worker: str | None = None
+    worker_host: str | None = None
+    worker_pid: int | None = None
+    stale_at: float | None = None
+
+
+class PreprocessingRecord(Record, RunInfo):
     KIND: ClassVar[str] = "preprocessing"
     key: str
     state: PreprocessingState
     error: ErrorInfo | None = None
     seconds: float | None = None
     updated_at: float = 0.0
+    #: what a sweeper needs to send the preprocessing again
+    hairstyle_id: str | None = None
+    options: dict | None = None
 
 
-class JobRecord(Record):
+class JobRecord(Record, RunInfo):
     KIND: ClassVar[str] = "jobs"
     id: str
     owner: str
@@ -151,14 +179,10 @@ class JobRecord(Record):
     preprocess_options: PreprocessSettings
     artifact_key: str
     output_format: str
-    attempts: int = 0
     created_at: float
     updated_at: float
     started_at: float | None = None
     finished_at: float | None = None
-    task_id: str | None = None
-    worker: str | None = None
-    worker_pid: int | None = None
     cancel_requested: bool = False
     error: ErrorInfo | None = None
     metrics: dict | None = None
@@ -178,6 +202,13 @@ class PurgeClock(Record):
 
     KIND: ClassVar[str] = "maintenance"
     last_purge: float = 0.0
+
+
+class SweepClock(Record):
+    """When the last sweep for stale jobs and lost messages ran (shared by workers and API)."""
+
+    KIND: ClassVar[str] = "maintenance"
+    last_sweep: float = 0.0
 
 
 def artifact_key(character: CharacterRecord, hair_sha256: str, units: str, options: PreprocessSettings,

@@ -34,6 +34,7 @@ from hairport.records import (
     PreprocessSettings,
     PurgeClock,
     Record,
+    SweepClock,
     artifact_key,
     now,
 )
@@ -43,6 +44,7 @@ from hairport.storage.job_index import IndexRow, JobIndex
 R = TypeVar("R", bound=Record)
 
 PURGE_CLOCK_ID = "purge"
+SWEEP_CLOCK_ID = "sweep"
 #: the state whose jobs' stage timings the index sums (``/metrics``)
 TIMED_STATE = SUCCEEDED
 
@@ -112,6 +114,11 @@ class Repository:
 
         return self.change_job(job_id, change)
 
+    def delete_job(self, job: JobRecord) -> None:
+        """Remove a job that never ran (its request failed) and its index entry."""
+        self.storage.delete_record(JobRecord.KIND, job.id)
+        self.job_index.drop(job.id)
+
     def list_jobs(self, owner: str, state: str | None = None, limit: int = 50,
                   offset: int = 0) -> tuple[list[JobRecord], int]:
         """``owner``'s jobs newest first (optionally in one state): the page and the total count.
@@ -171,9 +178,11 @@ class Repository:
         status = self.get(PreprocessingRecord, key)
         return status if status is not None else PreprocessingRecord(key=key, state=QUEUED)
 
-    def claim_preprocessing(self, key: str, stale_after: float) -> bool:
-        """Whether the caller should start preprocessing ``key``: no artifact yet, and no run under way
-        (a queued or running claim older than ``stale_after`` seconds, or a failed one, is taken over)."""
+    def claim_preprocessing(self, key: str, stale_after: float, hairstyle_id: str | None = None,
+                            options: dict | None = None, task_id: str | None = None) -> bool:
+        """Whether the caller should start preprocessing ``key`` (of ``hairstyle_id``, with ``options``, by
+        the message ``task_id``): no artifact yet, and no run under way (a queued or running claim older
+        than ``stale_after`` seconds, or a failed one, is taken over)."""
         if self.exists(ArtifactRecord, key):
             return False
         if not self.exists(PreprocessingRecord, key):
@@ -185,33 +194,74 @@ class Repository:
             if status.state in (QUEUED, RUNNING) and now() - status.updated_at < stale_after:
                 return None
             claimed = True
-            return PreprocessingRecord(key=key, state=QUEUED, updated_at=now())
+            return PreprocessingRecord(key=key, state=QUEUED, updated_at=now(), hairstyle_id=hairstyle_id,
+                                       options=options, task_id=task_id, enqueued_at=now())
 
         self.update(PreprocessingRecord, key, claim)
         return claimed
 
+    def release_preprocessing(self, key: str, task_id: str) -> None:
+        """Drop the claim of ``key`` made for the message ``task_id`` (its sending failed), so that the next
+        request claims it again; a claim made since by someone else stays."""
+        status = self.get(PreprocessingRecord, key)
+        if status is not None and status.task_id == task_id and status.state == QUEUED:
+            self.storage.delete_record(PreprocessingRecord.KIND, key)
+
     def set_preprocessing(self, key: str, state: str, error: ErrorInfo | None = None,
                           seconds: float | None = None) -> None:
-        self.put(PreprocessingRecord(key=key, state=state, error=error, seconds=seconds, updated_at=now()), key)
+        """The state of ``key``'s preprocessing (who runs it and the claim are kept)."""
+        if not self.exists(PreprocessingRecord, key):
+            self.put(PreprocessingRecord(key=key, state=state, error=error, seconds=seconds, updated_at=now()), key)
+            return
+        self.change_preprocessing(key, lambda status: status.model_copy(update=dict(
+            state=state, error=error, seconds=seconds)))
 
-    # ---------------------------------------------------------------- retention
+    def change_preprocessing(self, key: str, change: Callable[[PreprocessingRecord], PreprocessingRecord | None]
+                             ) -> PreprocessingRecord | None:
+        """Read-modify-write of a preprocessing record under its lock (``updated_at`` set)."""
+
+        def apply(status: PreprocessingRecord) -> PreprocessingRecord | None:
+            new = change(status)
+            if new is not None:
+                new.updated_at = now()
+            return new
+
+        return self.update(PreprocessingRecord, key, apply)
+
+    def preprocessing_in(self, states: tuple[str, ...]) -> Iterator[PreprocessingRecord]:
+        """Every preprocessing record in one of ``states`` (reads every preprocessing record: one per
+        hairstyle variant, not per job)."""
+        for document in self.storage.list_records(PreprocessingRecord.KIND):
+            status = PreprocessingRecord.model_validate(document)
+            if status.state in states:
+                yield status
+
+    # ---------------------------------------------------------------- maintenance
 
     def purge_if_due(self, older_than_seconds: float, interval_seconds: float) -> int | None:
         """Purge at most every ``interval_seconds`` (the clock is shared by all workers); files removed,
         or None when it was not due."""
+        due = self._clock_due(PurgeClock, PURGE_CLOCK_ID, "last_purge", interval_seconds)
+        return self.purge(older_than_seconds) if due else None
+
+    def sweep_due(self, interval_seconds: float) -> bool:
+        """Whether the caller should sweep now: at most one sweep every ``interval_seconds`` in a deployment."""
+        return self._clock_due(SweepClock, SWEEP_CLOCK_ID, "last_sweep", interval_seconds)
+
+    def _clock_due(self, model: type[R], clock_id: str, field: str, interval_seconds: float) -> bool:
         due = False
 
-        def claim(clock: PurgeClock) -> PurgeClock | None:
+        def claim(clock):
             nonlocal due
-            if now() - clock.last_purge < interval_seconds:
+            if now() - getattr(clock, field) < interval_seconds:
                 return None
             due = True
-            return PurgeClock(last_purge=now())
+            return model(**{field: now()})
 
-        if not self.exists(PurgeClock, PURGE_CLOCK_ID):
-            self.put(PurgeClock(), PURGE_CLOCK_ID)
-        self.update(PurgeClock, PURGE_CLOCK_ID, claim)
-        return self.purge(older_than_seconds) if due else None
+        if not self.exists(model, clock_id):
+            self.put(model(), clock_id)
+        self.update(model, clock_id, claim)
+        return due
 
     def purge(self, older_than_seconds: float) -> int:
         """Remove what is older than the retention (see :meth:`hairport.storage.LocalStorage.purge`), dropping

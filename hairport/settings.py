@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+def default_storage_dir() -> Path:
+    """``$XDG_DATA_HOME/hairport`` (by default ``~/.local/share/hairport``): absolute, one per user."""
+    data_home = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(data_home) / "hairport"
 
 
 class Settings(BaseSettings):
@@ -21,11 +28,13 @@ class Settings(BaseSettings):
     max_vertices: int = Field(5_000_000, description="Largest vertex count a character mesh may have.")
     max_faces: int = Field(10_000_000, description="Largest face count a character mesh may have.")
     max_file_bytes: int = Field(4 * 1024**3, description="Largest input file read from disk (bytes).")
+    memory_budget_bytes: int = Field(8 * 1024**3, description="Memory one job may use (bytes): inputs whose estimated need is larger are refused, and the worker child is limited to it.")
 
     # service and worker
     redis_url: str = Field("redis://127.0.0.1:6379/0", description="Redis: Celery broker and readiness check.")
-    storage_dir: Path = Field(Path("hairport-data"),
-                              description="Uploads, artifacts, results and records (a volume shared by API and workers).")
+    storage_dir: Path = Field(default_factory=default_storage_dir, description=(
+        "Uploads, artifacts, results and records (a volume shared by API and workers); made absolute at "
+        "start-up. Default ~/.local/share/hairport (a laptop); a deployment sets it."))
     api_keys: str = Field("", description="Comma-separated API keys; each key owns what it creates.")
     insecure_dev: bool = Field(False, description="Accept requests without a key (owner 'dev'); never in production.")
     max_upload_bytes: int = Field(512 * 1024**2, description="Largest accepted upload (bytes); larger gets 413.")
@@ -36,6 +45,25 @@ class Settings(BaseSettings):
     visibility_timeout: int = Field(3900, description="Seconds before a job whose worker died is delivered again.")
     solver_workers: int = Field(1, description="Processes a worker job uses for the multi-scale fine level.")
     max_targets_per_request: int = Field(64, description="Largest target_character_ids list of one retarget request.")
+    max_attempts: int = Field(3, ge=1, description=(
+        "Runs a job (or a preprocessing) may start: one whose worker died this many times fails with worker_lost."))
+    heartbeat_seconds: float = Field(10.0, gt=0, description="A running job writes its heartbeat this often (s).")
+    stale_after_seconds: float = Field(40.0, gt=0, description=(
+        "A running job whose heartbeat is older than this (s) is marked stale and queued again."))
+    sweep_seconds: float = Field(15.0, gt=0, description=(
+        "How often workers and the API look for stale jobs and lost messages (s; one sweep per period "
+        "for the whole deployment)."))
+    lost_after_seconds: float = Field(60.0, gt=0, description=(
+        "A job queued this long (s) whose message is in no queue of the broker is sent again."))
+    enqueue_timeout_seconds: float = Field(3.0, gt=0, description=(
+        "Longest wait for the broker when a request sends a task (s); past it the request is 503."))
+
+    @field_validator("storage_dir")
+    @classmethod
+    def _absolute_storage(cls, value: Path) -> Path:
+        # resolved once, when the settings are read: a relative path would mean another folder in
+        # every process started from another working directory
+        return Path(value).expanduser().resolve()
 
     @property
     def api_key_list(self) -> list[str]:

@@ -11,8 +11,8 @@ from fastapi.middleware.cors import CORSMiddleware
 from hairport import __version__
 from hairport.repository import Repository
 from hairport.settings import Settings, get_settings
-from hairport.storage import LocalStorage
-from hairport.worker.queue import QUEUES, TaskQueue, connect
+from hairport.storage import LocalStorage, deployment_id
+from hairport.worker.queue import TaskQueue, connect
 
 from . import errors
 from .auth import check_configuration
@@ -51,7 +51,7 @@ class ContentLengthLimit:
 
 
 def redis_checks(redis_url: str, queue: TaskQueue) -> tuple[Callable[[], dict], Callable[[], dict]]:
-    """Readiness (Redis answers, a worker answers) and queue depths against a Redis broker."""
+    """Readiness (Redis answers, a worker of this deployment answers) and queue depths against a Redis broker."""
     client = redis.Redis.from_url(redis_url, socket_timeout=READY_TIMEOUT_SECONDS,
                                   socket_connect_timeout=READY_TIMEOUT_SECONDS)
 
@@ -61,15 +61,15 @@ def redis_checks(redis_url: str, queue: TaskQueue) -> tuple[Callable[[], dict], 
         except redis.RedisError:
             return {"redis": False, "worker": False}
         try:
-            workers = queue.ping_workers(READY_TIMEOUT_SECONDS)
+            workers = queue.workers(READY_TIMEOUT_SECONDS)
         except Exception:  # noqa: BLE001 - any broker trouble means not ready
             workers = []
         return {"redis": redis_ok, "worker": bool(workers)}
 
     def queue_depths() -> dict:
         try:
-            return {name: int(client.llen(name)) for name in QUEUES}
-        except redis.RedisError:
+            return queue.depths()
+        except Exception:  # noqa: BLE001 - no depths while the broker is away
             return {}
 
     return readiness, queue_depths
@@ -83,9 +83,13 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     check_configuration(settings)
     app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION)
     app.state.settings = settings
-    app.state.storage = LocalStorage(settings.storage_dir.resolve())
+    app.state.storage = LocalStorage(settings.storage_dir)
     app.state.repository = Repository(app.state.storage)
-    app.state.queue = queue or connect(settings.redis_url)
+    app.state.deployment = deployment_id(settings.storage_dir)
+    app.state.queue = queue or connect(settings.redis_url, settings.storage_dir)
+    if app.state.queue.deployment != app.state.deployment:
+        raise RuntimeError(f"the task queue is deployment {app.state.queue.deployment}'s, the storage "
+                           f"{settings.storage_dir} is deployment {app.state.deployment}'s")
     if readiness is None or queue_depths is None:
         redis_readiness, redis_depths = redis_checks(settings.redis_url, app.state.queue)
         readiness, queue_depths = readiness or redis_readiness, queue_depths or redis_depths

@@ -161,8 +161,12 @@ class JobOut(BaseModel):
     target_character_id: str
     output_format: HairFormat
     options: dict
-    attempts: int = Field(0, description="deliveries so far: a job whose worker died runs again")
+    attempts: int = Field(0, description="starts so far: a job whose worker died runs again, up to "
+                                         "HAIRPORT_MAX_ATTEMPTS starts (then it fails with worker_lost)")
     worker: str | None = Field(None, description="the worker running (or last running) the job")
+    heartbeat_at: float | None = Field(None, description="when the worker running the job last said it was alive")
+    stale_at: float | None = Field(None, description="when the job was last found with a silent worker (state stale, "
+                                                     "then queued again)")
     created_at: float
     started_at: float | None = None
     finished_at: float | None = None

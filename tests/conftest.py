@@ -1,9 +1,11 @@
 """Fixtures shared by the test modules: a private Redis server for the service tests, and the
 markers by test folder. (The hairline tests' MakeHuman head is in tests/solver/hairline/conftest.py.)"""
 
+import os
 import shutil
 import socket
 import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -12,6 +14,12 @@ import pytest
 TESTS = Path(__file__).parent
 #: test folders whose tests carry their own marker; everything else is a unit test
 MARKED_FOLDERS = ("integration", "quality")
+
+
+def pytest_configure(config):
+    """The default storage folder (``$XDG_DATA_HOME/hairport``) of every test is a temporary one: a test that
+    builds default settings never writes a deployment id into the home folder."""
+    os.environ["XDG_DATA_HOME"] = tempfile.mkdtemp(prefix="hairport-tests-data-")
 
 
 def pytest_collection_modifyitems(config, items):

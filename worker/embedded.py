@@ -10,14 +10,15 @@ import threading
 
 from celery import Celery
 
-from .app import MEMORY_BROKER, QUEUES, celery_for
+from .app import MEMORY_BROKER, celery_for, queue_names
 
 
 def start_embedded_worker() -> tuple[Celery, threading.Thread]:
     """Consume every queue of the in-memory transport in a thread; the app to send tasks with, and the thread."""
     app = celery_for(MEMORY_BROKER)
+    queues = list(queue_names(app.hairport_deployment).values())
     controller = app.WorkController(
-        pool_cls="solo", concurrency=1, queues=list(QUEUES), without_heartbeat=True, without_mingle=True,
+        pool_cls="solo", concurrency=1, queues=queues, without_heartbeat=True, without_mingle=True,
         without_gossip=True, hostname="hairport-embedded@localhost",
     )
     thread = threading.Thread(target=controller.start, name="hairport-embedded-worker", daemon=True)

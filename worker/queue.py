@@ -1,44 +1,141 @@
 """How the API reaches the workers: tasks sent by name over the broker (this module imports no task).
 
 The service uses this module and nothing else of the worker. A :class:`TaskQueue` wraps the
-Celery app of one broker (:func:`connect`).
+Celery app of one broker and one deployment (:func:`connect`): it sends tasks to the
+deployment's queues with the deployment id, finds the deployment's workers, and lists the
+task ids the broker holds (for the sweeper, :class:`Sweeper`, re-exported here for the API).
 """
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import redis
 from celery import Celery
+from kombu.exceptions import KombuError
 
-from .app import PREPROCESS_TASK, QUEUES, RETARGET_TASK, ROUTES, celery_for
+from .app import PREPROCESS_TASK, QUEUES, RETARGET_TASK, ROUTES, celery_for, queue_names
+from .runs import new_task_id
+from .sweeper import Sweeper
 
-__all__ = ["QUEUES", "TaskQueue", "connect"]
+__all__ = ["QUEUES", "QueueUnavailable", "Sweeper", "TaskQueue", "connect", "new_task_id"]
+
+#: the Redis transport keeps a queue's messages of priority p > 0 in ``<queue><SEP><p>`` (kombu's layout)
+PRIORITY_SEPARATOR = "\x06\x16"
+PRIORITY_STEPS = (3, 6, 9)
+#: the Redis transport's hash of delivered, unacknowledged messages (kombu's default name)
+UNACKED_KEY = "unacked"
 
 
-def connect(broker_url: str) -> TaskQueue:
-    """The task queue of a broker (``redis://...``, or ``memory://`` for the embedded mode)."""
-    return TaskQueue(celery_for(broker_url))
+class QueueUnavailable(Exception):
+    """The broker did not take a task (down, unreachable, or too slow): try again later."""
+
+
+def connect(broker_url: str, storage_dir: Path | None = None) -> TaskQueue:
+    """The task queue of a broker (``redis://...``, or ``memory://`` for the embedded mode) for the
+    deployment of ``storage_dir`` (default: the configured storage)."""
+    return TaskQueue(celery_for(broker_url, storage_dir))
 
 
 class TaskQueue:
-    """Send, revoke and ping over one Celery app (and its broker)."""
+    """Send, revoke, ping and list over one Celery app (its broker and deployment)."""
 
     def __init__(self, celery: Celery):
         self.celery = celery
+        self.deployment: str = celery.hairport_deployment
+        self.names = queue_names(self.deployment)
 
-    def send_preprocess(self, hairstyle_id: str, options: dict | None = None) -> str:
+    @property
+    def broker(self) -> str:
+        """The broker's kind: ``redis`` or ``memory``."""
+        return self.celery.conf.broker_url.split(":", 1)[0]
+
+    def send_preprocess(self, hairstyle_id: str, options: dict | None = None, task_id: str | None = None) -> str:
         """Preprocess a hairstyle (with its own options, or those of a variant); the task id."""
-        return self._send(PREPROCESS_TASK, hairstyle_id, options)
+        return self._send(PREPROCESS_TASK, task_id, hairstyle_id, options)
 
-    def send_retarget(self, job_id: str) -> str:
+    def send_retarget(self, job_id: str, task_id: str | None = None) -> str:
         """Run a retarget job; the task id."""
-        return self._send(RETARGET_TASK, job_id)
+        return self._send(RETARGET_TASK, task_id, job_id)
 
     def revoke(self, task_id: str) -> None:
         """Ask workers not to start a queued task."""
         self.celery.control.revoke(task_id)
 
     def ping_workers(self, timeout: float) -> list:
-        """The replies of the workers that answer within ``timeout`` seconds."""
-        return self.celery.control.ping(timeout=timeout)
+        """The replies of the workers (of any deployment on this broker) that answer within ``timeout`` s."""
+        return self._fresh(lambda connection=None: self.celery.control.ping(timeout=timeout, connection=connection))
 
-    def _send(self, name: str, *args) -> str:
-        return self.celery.send_task(name, args=list(args), queue=ROUTES[name]).id
+    def workers(self, timeout: float) -> list[str]:
+        """The names of the workers that consume this deployment's queues and answer within ``timeout`` s."""
+        replies = self._fresh(lambda connection=None: self.celery.control.inspect(
+            timeout=timeout, connection=connection).active_queues()) or {}
+        ours = set(self.names.values())
+        return sorted(name for name, queues in replies.items() if ours & {queue.get("name") for queue in queues or []})
+
+    def depths(self) -> dict[str, int]:
+        """Messages waiting per queue (short names), or {} when the broker cannot say."""
+        if self.broker != "redis":
+            return {}
+        return self._with_redis(lambda client: {
+            short: sum(int(client.llen(name)) for name in _priority_lists(full)) for short, full in self.names.items()})
+
+    def task_ids_in_broker(self) -> set[str] | None:
+        """The ids of every task of this deployment the broker holds (waiting in its queues, or delivered
+        and not acknowledged, e.g. held by a worker until its countdown); None when the broker cannot be
+        listed (the in-memory one)."""
+        if self.broker != "redis":
+            return None
+        return self._with_redis(_held_task_ids, self.names.values())
+
+    def _fresh(self, call):
+        # pooled connections may have died with a Redis restart: try once more on a new connection
+        try:
+            return call()
+        except (KombuError, redis.RedisError, OSError):
+            with self.celery.connection() as connection:
+                return call(connection)
+
+    def _with_redis(self, read, *args):
+        # a pooled connection may have died with a Redis restart: one more try on a fresh one
+        with self.celery.connection_for_read() as connection:
+            client = connection.default_channel.client
+            try:
+                return read(client, *args)
+            except redis.ConnectionError:
+                client.connection_pool.disconnect()
+                return read(client, *args)
+
+    def _send(self, name: str, task_id: str | None, *args) -> str:
+        try:
+            return self.celery.send_task(name, args=list(args), kwargs={"deployment": self.deployment},
+                                         queue=self.names[ROUTES[name]], task_id=task_id or new_task_id()).id
+        except (KombuError, redis.RedisError, OSError) as error:
+            raise QueueUnavailable(f"the task queue did not take the task: {type(error).__name__}") from error
+
+
+def _held_task_ids(client, queues) -> set[str]:
+    found = set()
+    for full in queues:
+        for name in _priority_lists(full):
+            found.update(_task_id(raw) for raw in client.lrange(name, 0, -1))
+    for raw in client.hvals(UNACKED_KEY):
+        try:
+            found.add(_task_id(json.loads(raw)[0]))
+        except (ValueError, IndexError, TypeError):
+            continue
+    found.discard(None)
+    return found
+
+
+def _priority_lists(queue: str) -> list[str]:
+    return [queue] + [f"{queue}{PRIORITY_SEPARATOR}{step}" for step in PRIORITY_STEPS]
+
+
+def _task_id(message) -> str | None:
+    try:
+        message = json.loads(message) if isinstance(message, (str, bytes)) else message
+        return message["headers"]["id"]
+    except (ValueError, KeyError, TypeError):
+        return None

@@ -10,7 +10,7 @@ that fails, is cancelled or loses its worker leaves no partial result.
 from __future__ import annotations
 
 import json
-import os
+import logging
 import time
 import traceback
 from functools import lru_cache
@@ -23,16 +23,19 @@ from hairport.outputs import json_default
 from hairport.records import (
     CANCELLED,
     FAILED,
+    QUEUED,
     READY,
     RUNNING,
     SUCCEEDED,
     TERMINAL_STATES,
+    WAITING_STATES,
     ArtifactRecord,
     BlobRef,
     CharacterRecord,
     ErrorInfo,
     HairstyleRecord,
     JobRecord,
+    PreprocessingRecord,
     PreprocessSettings,
     now,
 )
@@ -40,6 +43,8 @@ from hairport.repository import Repository
 from hairport.settings import Settings
 from hairport.solver.render.preview import write_result_preview
 from hairport.storage import Blob, retention_seconds
+
+from .runs import Heartbeat, run_gone, start_fields, worker_lost
 
 #: a running job writes its progress at most this often (s)
 PROGRESS_INTERVAL_SECONDS = 0.5
@@ -49,6 +54,10 @@ PURGE_INTERVAL_SECONDS = 3600.0
 PREPROCESS_POLL_LIMIT = 1800
 #: errors worth retrying: the task retries them with backoff, the job's state is left alone
 TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
+#: error code of a job or preprocessing that needed more memory than ``Settings.memory_budget_bytes``
+OVER_MEMORY_BUDGET = "over_memory_budget"
+
+log = logging.getLogger(__name__)
 
 
 class PreprocessingPending(Exception):
@@ -109,6 +118,9 @@ def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
         return ErrorInfo(code=error.code or "bad_input", message=error.problem)
     if isinstance(error, SoftTimeLimitExceeded):
         return ErrorInfo(code="time_limit", message=f"the job ran over its time limit ({soft_time_limit:g} s)")
+    if isinstance(error, MemoryError):
+        return ErrorInfo(code=OVER_MEMORY_BUDGET, message="the job needed more memory than a job may use "
+                                                          "(HAIRPORT_MEMORY_BUDGET_BYTES)")
     return ErrorInfo(code="internal", message=f"{type(error).__name__}: {error}")
 
 
@@ -116,7 +128,83 @@ def stored(blob: Blob, suffix: str) -> BlobRef:
     return BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size)
 
 
-def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str, options: dict | None = None) -> None:
+class OwnRun:
+    """The writes of one run of a record (a job or a preprocessing), each applied only while the record is
+    still running under this run's token (see :mod:`.runs`)."""
+
+    def __init__(self, change, token: str):
+        self.change, self.token = change, token
+
+    def write(self, **fields) -> bool:
+        """Set ``fields`` if the run is still the record's; whether it was."""
+        applied = False
+
+        def apply(current):
+            nonlocal applied
+            if current.run_token != self.token or current.state != RUNNING:
+                return None
+            applied = True
+            return current.model_validate({**current.model_dump(), **fields})
+
+        self.change(apply)
+        return applied
+
+    def beat(self) -> bool:
+        return self.write(heartbeat_at=now())
+
+    def release(self) -> bool:
+        """Hand the record back to the queue (a transient error: the task is retried, the run did not die)."""
+        applied = False
+
+        def apply(current):
+            nonlocal applied
+            if current.run_token != self.token or current.state != RUNNING:
+                return None
+            applied = True
+            return current.model_copy(update=dict(state=QUEUED, run_token=None, heartbeat_at=None,
+                                                  attempts=max(current.attempts - 1, 0)))
+
+        self.change(apply)
+        return applied
+
+
+def start_run(change, settings: Settings, task_id: str | None, worker: str, what: str,
+              waiting: tuple[str, ...], fields: dict | None = None) -> OwnRun | None:
+    """Start a run of a record through ``change`` (its read-modify-write under the lock): the run, or None
+    when this message must not run it (obsolete, finished, running elsewhere, or failed now with
+    ``worker_lost`` after ``max_attempts`` starts)."""
+    token = None
+
+    def apply(current):
+        nonlocal token
+        if task_id is not None and current.task_id not in (None, task_id):
+            return None  # an older message: the record was queued again since
+        if current.state not in waiting and current.state != RUNNING:
+            return None
+        if current.state == RUNNING and not run_gone(current, settings.stale_after_seconds,
+                                                     getattr(current, "started_at", None) or current.updated_at):
+            return None  # its run is alive: this is a duplicate delivery
+        if getattr(current, "cancel_requested", False):
+            return current.model_copy(update=dict(state=CANCELLED, stage="cancelled", run_token=None,
+                                                  **_finished(current)))
+        if current.attempts >= settings.max_attempts:
+            return current.model_copy(update=dict(state=FAILED, error=worker_lost(current, settings, what),
+                                                  run_token=None, **_finished(current)))
+        started = start_fields(current, worker)
+        token = started["run_token"]
+        return current.model_validate({**current.model_dump(), "state": RUNNING, "error": None, **started,
+                                       **(fields or {})})
+
+    change(apply)
+    return None if token is None else OwnRun(change, token)
+
+
+def _finished(record) -> dict:
+    return {"finished_at": now()} if hasattr(record, "finished_at") else {}
+
+
+def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str, options: dict | None = None,
+                   task_id: str | None = None, worker: str = "") -> None:
     """Compute (once) the adaptable hairstyle of a hairstyle record (with its options, or ``options``)."""
     hairstyle = repository.get(HairstyleRecord, hairstyle_id)
     if hairstyle is None:
@@ -129,26 +217,34 @@ def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str
     if repository.exists(ArtifactRecord, key):
         repository.set_preprocessing(key, READY)
         return
-    repository.set_preprocessing(key, RUNNING)
+    if not repository.exists(PreprocessingRecord, key):  # a message sent without a claim (an older API)
+        repository.put(PreprocessingRecord(key=key, state=QUEUED, task_id=task_id, hairstyle_id=hairstyle_id,
+                                           options=options, updated_at=now()), key)
+    run = start_run(lambda change: repository.change_preprocessing(key, change), settings, task_id, worker,
+                    "its preprocessing", (QUEUED,))
+    if run is None:
+        return
     began = time.perf_counter()
     try:
-        inputs = read_source(repository, settings, hairstyle)
-        adaptable = solver.preprocess(inputs.source, inputs.hair, solver.PreprocessOptions(**variant.model_dump()),
-                                      frame=inputs.frame, input_report=inputs.report)
-        with repository.storage.work_dir() as work:
-            path = work / f"adaptable{solver.ARTIFACT_EXTENSION}"
-            solver.save_adaptable(adaptable, path)
-            blob = repository.storage.save_file(path, solver.ARTIFACT_EXTENSION)
+        with Heartbeat(run.beat, settings.heartbeat_seconds):
+            inputs = read_source(repository, settings, hairstyle)
+            adaptable = solver.preprocess(inputs.source, inputs.hair, solver.PreprocessOptions(**variant.model_dump()),
+                                          frame=inputs.frame, input_report=inputs.report)
+            with repository.storage.work_dir() as work:
+                path = work / f"adaptable{solver.ARTIFACT_EXTENSION}"
+                solver.save_adaptable(adaptable, path)
+                blob = repository.storage.save_file(path, solver.ARTIFACT_EXTENSION)
         repository.put(ArtifactRecord(
             key=key, sha256=blob.sha256, suffix=solver.ARTIFACT_EXTENSION, size=blob.size,
             format_version=solver.ARTIFACT_FORMAT_VERSION, seconds=time.perf_counter() - began,
             guides=int(len(adaptable.multiscale.guides)), created_at=now(),
         ), key)
-        repository.set_preprocessing(key, READY, seconds=time.perf_counter() - began)
+        run.write(state=READY, error=None, seconds=time.perf_counter() - began)
     except TRANSIENT_ERRORS:
+        run.release()
         raise
     except Exception as error:  # noqa: BLE001 - every other failure is this hairstyle's, reported on it
-        repository.set_preprocessing(key, FAILED, error=error_info(error, settings.task_soft_time_limit))
+        run.write(state=FAILED, error=error_info(error, settings.task_soft_time_limit))
         if not isinstance(error, solver.InputError):
             traceback.print_exc()
 
@@ -157,8 +253,8 @@ class JobProgress:
     """Writes a job's stage and progress to its record, at most every PROGRESS_INTERVAL_SECONDS,
     and reads its cancellation flag as often (a :data:`hairport.solver.ProgressFn`)."""
 
-    def __init__(self, repository: Repository, job_id: str):
-        self.repository, self.job_id = repository, job_id
+    def __init__(self, repository: Repository, job_id: str, run: OwnRun | None = None):
+        self.repository, self.job_id, self.run = repository, job_id, run
         self.last_write = 0.0
         self.last_check = 0.0
         self.stage = None
@@ -168,19 +264,26 @@ class JobProgress:
         moment = time.monotonic()
         if stage != self.stage or moment - self.last_write >= PROGRESS_INTERVAL_SECONDS:
             self.stage, self.last_write = stage, moment
-            self.repository.set_job(self.job_id, stage=stage, progress=round(float(fraction), 4), message=message)
+            fields = dict(stage=stage, progress=round(float(fraction), 4), message=message)
+            if self.run is None:
+                self.repository.set_job(self.job_id, **fields)
+            elif not self.run.write(**fields, heartbeat_at=now()):
+                self.cancelled = True  # another run took the job over: stop
 
     def should_stop(self) -> bool:
         moment = time.monotonic()
         if moment - self.last_check >= PROGRESS_INTERVAL_SECONDS:
             self.last_check = moment
             job = self.repository.job(self.job_id)
-            self.cancelled = job is None or job.cancel_requested
+            taken_over = self.run is not None and (job is None or job.run_token != self.run.token)
+            self.cancelled = self.cancelled or job is None or job.cancel_requested or taken_over
         return self.cancelled
 
 
-def run_retarget(repository: Repository, settings: Settings, job_id: str, worker: str, polls: int = 0) -> None:
-    """Retarget one hairstyle onto one target character (one job record).
+def run_retarget(repository: Repository, settings: Settings, job_id: str, worker: str, polls: int = 0,
+                 task_id: str | None = None) -> None:
+    """Retarget one hairstyle onto one target character (one job record), if the message ``task_id`` is
+    the job's current one and no live run has it (see :mod:`.runs`).
 
     Raises :class:`PreprocessingPending` while the hairstyle is being preprocessed (after
     ``polls`` earlier checks; the job fails with ``preprocess_timeout`` after
@@ -188,8 +291,14 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
     job = repository.job(job_id)
     if job is None or job.state in TERMINAL_STATES:
         return
-    if job.cancel_requested:
+    if task_id is not None and job.task_id not in (None, task_id):
+        log.info("job %s: message %s is not the job's current one (%s): nothing to do", job_id, task_id, job.task_id)
+        return
+    if job.cancel_requested and job.state in WAITING_STATES:
         repository.set_job(job_id, state=CANCELLED, finished_at=now())
+        return
+    if job.state == RUNNING and not run_gone(job, settings.stale_after_seconds, job.started_at):
+        log.info("job %s is running on %s: a duplicate delivery, nothing to do", job_id, job.worker)
         return
     hairstyle = repository.get(HairstyleRecord, job.hairstyle_id)
     key = job.artifact_key
@@ -208,24 +317,27 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
         repository.set_job(job_id, stage="waiting_for_preprocessing", progress=0.0)
         raise PreprocessingPending(key)
 
-    repository.set_job(job_id, state=RUNNING, stage="loading", progress=0.0, attempts=job.attempts + 1,
-                       started_at=now(), error=None, worker=worker, worker_pid=os.getpid())
-    progress = JobProgress(repository, job_id)
+    run = start_run(lambda change: repository.change_job(job_id, change), settings, task_id, worker, "it",
+                    WAITING_STATES, dict(stage="loading", progress=0.0, started_at=now()))
+    if run is None:
+        return
+    progress = JobProgress(repository, job_id, run)
     began = time.perf_counter()
     try:
-        outputs, result = _retarget_and_store(repository, settings, job, artifact, progress)
+        with Heartbeat(run.beat, settings.heartbeat_seconds):
+            outputs, result = _retarget_and_store(repository, settings, job, artifact, progress)
         timings = {**result.timings, "job": time.perf_counter() - began}
-        repository.set_job(job_id, state=SUCCEEDED, stage="done", progress=1.0, message="done",
-                           finished_at=now(), metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
+        run.write(state=SUCCEEDED, stage="done", progress=1.0, message="done", finished_at=now(),
+                  metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
         repository.purge_if_due(retention_seconds(settings.retention_days), PURGE_INTERVAL_SECONDS)
     except solver.Cancelled:
-        repository.set_job(job_id, state=CANCELLED, stage="cancelled", finished_at=now())
+        run.write(state=CANCELLED, stage="cancelled", finished_at=now())
     except TRANSIENT_ERRORS:
+        run.release()
         raise
     except Exception as error:  # noqa: BLE001 - the job fails with a reason; the worker lives on
-        repository.set_job(job_id, state=FAILED, finished_at=now(),
-                           error=error_info(error, settings.task_soft_time_limit))
-        if not isinstance(error, (solver.InputError, SoftTimeLimitExceeded)):
+        run.write(state=FAILED, finished_at=now(), error=error_info(error, settings.task_soft_time_limit))
+        if not isinstance(error, (solver.InputError, SoftTimeLimitExceeded, MemoryError)):
             traceback.print_exc()
 
 

@@ -1,20 +1,30 @@
 """Celery tasks: thin wrappers of the job bodies in :mod:`.runner`, registered under the names of :mod:`.queue`.
 
-A task finds its storage and settings, calls one runner function, and turns what Celery must
-know into Celery terms: transient errors are retried with exponential backoff, a retarget
-waiting for its hairstyle's preprocessing is retried after a pause.
+A task finds its storage and settings, checks that it belongs to this worker's deployment,
+calls one runner function, and turns what Celery must know into Celery terms: transient
+errors are retried with exponential backoff, a retarget waiting for its hairstyle's
+preprocessing is retried after a pause. The worker's signals limit each pool child's memory
+(:mod:`.memory`) and run the sweeper (:mod:`.sweeper`) in the worker's main process.
 """
 
 from __future__ import annotations
 
+import logging
+from functools import lru_cache
+
 from celery import shared_task
+from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
 from hairport.repository import Repository
 from hairport.settings import get_settings
-from hairport.storage import LocalStorage, retention_seconds
+from hairport.storage import LocalStorage, deployment_id, queue_name, retention_seconds
 
 from . import runner
-from .app import PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK
+from .app import PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK, ROUTES
+from .memory import data_bytes, limit_memory
+from .queue import Sweeper, TaskQueue
+
+log = logging.getLogger(__name__)
 
 #: seconds between checks whether a retarget's hairstyle has been preprocessed
 PREPROCESS_POLL_SECONDS = 2.0
@@ -31,17 +41,47 @@ def repository() -> Repository:
     return Repository(LocalStorage(get_settings().storage_dir))
 
 
+@lru_cache(maxsize=1)
+def own_deployment() -> str:
+    """The deployment of this worker: the id written in its storage folder."""
+    return deployment_id(get_settings().storage_dir)
+
+
+def foreign(task, deployment: str | None) -> bool:
+    """Whether a task belongs to another deployment than this worker's (then it is not run, loudly: sent on
+    to its own deployment's queue, or dropped when it names none)."""
+    own = own_deployment()
+    if deployment == own:
+        return False
+    where = f"this worker serves deployment {own} (storage {get_settings().storage_dir})"
+    if deployment is None:
+        log.error("task %s %s names no deployment; %s: refused, not run", task.name, task.request.id, where)
+        return True
+    target = queue_name(deployment, ROUTES[task.name])
+    task.app.send_task(task.name, args=list(task.request.args or ()), kwargs=dict(task.request.kwargs or {}),
+                       queue=target, task_id=task.request.id)
+    log.error("task %s %s belongs to deployment %s; %s: refused, not run, sent on to %s", task.name,
+              task.request.id, deployment, where, target)
+    return True
+
+
 @shared_task(name=PREPROCESS_TASK, **JOB_TASK_OPTIONS)
-def preprocess_task(self, hairstyle_id: str, options: dict | None = None) -> None:
+def preprocess_task(self, hairstyle_id: str, options: dict | None = None, deployment: str | None = None) -> None:
     """Compute (once) the adaptable hairstyle of a hairstyle record (with its options, or ``options``)."""
-    runner.run_preprocess(repository(), get_settings(), hairstyle_id, options)
+    if foreign(self, deployment):
+        return
+    runner.run_preprocess(repository(), get_settings(), hairstyle_id, options, task_id=self.request.id,
+                          worker=self.request.hostname)
 
 
 @shared_task(name=RETARGET_TASK, **JOB_TASK_OPTIONS)
-def retarget_task(self, job_id: str) -> None:
+def retarget_task(self, job_id: str, deployment: str | None = None) -> None:
     """Retarget one hairstyle onto one target character (one job record)."""
+    if foreign(self, deployment):
+        return
     try:
-        runner.run_retarget(repository(), get_settings(), job_id, self.request.hostname, polls=self.request.retries)
+        runner.run_retarget(repository(), get_settings(), job_id, self.request.hostname, polls=self.request.retries,
+                            task_id=self.request.id)
     except runner.PreprocessingPending:
         raise self.retry(countdown=PREPROCESS_POLL_SECONDS, max_retries=runner.PREPROCESS_POLL_LIMIT) from None
 
@@ -50,3 +90,31 @@ def retarget_task(self, job_id: str) -> None:
 def purge_task() -> int:
     """Delete what is older than the retention period (also run by workers after jobs)."""
     return repository().purge(retention_seconds(get_settings().retention_days))
+
+
+@worker_process_init.connect
+def _limit_child_memory(**_) -> None:
+    # in each pool child (not in the embedded worker, which shares the API's process)
+    budget = get_settings().memory_budget_bytes
+    used = data_bytes()
+    limit_memory(budget)
+    log.info("memory budget of this worker child: %s bytes (%s in use at start)", f"{budget:,}", f"{used:,}")
+
+
+_sweepers: dict[int, Sweeper] = {}
+
+
+@worker_ready.connect
+def _start_sweeper(sender=None, **_) -> None:
+    app = sender.app
+    sweeper = Sweeper(repository(), TaskQueue(app), get_settings())
+    _sweepers[id(app)] = sweeper
+    sweeper.start()
+    log.warning("hairport worker of deployment %s, storage %s: consuming %s", app.hairport_deployment,
+                get_settings().storage_dir, ", ".join(sorted(queue.name for queue in sender.task_consumer.queues)))
+
+
+@worker_shutdown.connect
+def _stop_sweepers(**_) -> None:
+    for sweeper in _sweepers.values():
+        sweeper.stop()

@@ -51,12 +51,15 @@ def add_serve(sub) -> None:
 def cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
 
+    from hairport.repository import Repository
     from hairport.service.app import create_app
     from hairport.service.auth import check_configuration
-    from hairport.worker.queue import TaskQueue
+    from hairport.storage import LocalStorage
+    from hairport.worker.queue import Sweeper, TaskQueue
 
+    settings = get_settings()
     try:
-        check_configuration(get_settings())
+        check_configuration(settings)
     except RuntimeError as error:
         print(f"hairport: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -71,10 +74,14 @@ def cmd_serve(args: argparse.Namespace) -> int:
         from hairport.worker.embedded import start_embedded_worker
 
         celery, thread = start_embedded_worker()
-        app = create_app(readiness=lambda: {"redis": True, "worker": thread.is_alive()}, queue_depths=lambda: {},
+        app = create_app(readiness=lambda: {"worker": thread.is_alive()}, queue_depths=lambda: {},
                          queue=TaskQueue(celery))
     else:
         app = create_app()
+    # the API sweeps too: stale jobs are found when every worker host is gone
+    Sweeper(Repository(LocalStorage(settings.storage_dir)), app.state.queue, settings).start()
+    print(f"hairport: deployment {app.state.deployment}, storage {settings.storage_dir}, broker "
+          f"{app.state.queue.broker}", file=sys.stderr)
     uvicorn.run(app, host=args.host, port=args.port)
     return 0
 
@@ -89,10 +96,25 @@ def add_worker(sub) -> None:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    from hairport.worker.app import configured_celery
+    from hairport.worker.app import QUEUES, configured_celery, queue_names
 
-    configured_celery().worker_main(["worker", "-Q", args.queues, "-c", str(args.concurrency), "--loglevel", args.loglevel,
-                              "-n", args.hostname])
+    settings = get_settings()
+    if not settings.storage_dir.is_dir():
+        # a worker on a folder that does not exist is on the wrong one (or the volume is not mounted):
+        # it would make a new, empty deployment there and never see a job
+        print(f"hairport: error: the storage folder {settings.storage_dir} does not exist (HAIRPORT_STORAGE_DIR): "
+              "mount the deployment's storage, or start its API first", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    wanted = [name.strip() for name in args.queues.split(",") if name.strip()]
+    unknown = sorted(set(wanted) - set(QUEUES))
+    if unknown or not wanted:
+        print(f"hairport: error: unknown queues {', '.join(unknown) or '(none)'}: choose from {', '.join(QUEUES)}",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    celery = configured_celery()
+    names = queue_names(celery.hairport_deployment)
+    celery.worker_main(["worker", "-Q", ",".join(names[name] for name in wanted), "-c", str(args.concurrency),
+                        "--loglevel", args.loglevel, "-n", args.hostname])
     return 0
 
 

@@ -8,6 +8,7 @@ Layout of a :class:`LocalStorage` under its ``root`` (``Settings.storage_dir``):
     root/tmp/                           uploads and copies being written (same file system as blobs/)
     root/work/<dir>/                    scratch directories of jobs (:meth:`LocalStorage.work_dir`)
     root/index/jobs.sqlite3             the job index (:mod:`.job_index`): listings and counts without reading records
+    root/deployment.json                the deployment id (:mod:`.deployment`), written once
 
 Conventions: sizes in bytes, times in seconds since the epoch (file ``st_mtime``), digests
 as 64 lower-case hex characters of SHA-256. Every write is atomic: the data goes to a new
@@ -39,6 +40,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .blobs import UPLOAD_CHUNK_BYTES, Blob, BlobStore, UploadTooLarge, iter_upload
+from .deployment import DEPLOYMENT_FILE, deployment_id, queue_name
 from .documents import DocumentStore
 from .layout import (
     FILE_MODE,
@@ -56,9 +58,9 @@ from .layout import (
 from .retention import Retention
 
 __all__ = [
-    "Blob", "FILE_MODE", "LOCK_SUFFIX", "LocalStorage", "RECORD_SUFFIX", "SECONDS_PER_DAY", "TEMP_SUFFIX",
+    "Blob", "DEPLOYMENT_FILE", "FILE_MODE", "LOCK_SUFFIX", "LocalStorage", "RECORD_SUFFIX", "SECONDS_PER_DAY", "TEMP_SUFFIX",
     "UPLOAD_CHUNK_BYTES", "UploadTooLarge", "blob_references", "blob_relpath", "check_name", "check_sha256",
-    "check_suffix", "iter_upload", "retention_seconds",
+    "check_suffix", "deployment_id", "iter_upload", "queue_name", "retention_seconds",
 ]
 
 

@@ -1,4 +1,4 @@
-"""``/healthz`` (process up), ``/readyz`` (Redis and a worker answer), ``/metrics`` (Prometheus)."""
+"""``/healthz`` (process up), ``/readyz`` (the broker and a worker of this deployment answer), ``/metrics`` (Prometheus)."""
 
 from __future__ import annotations
 
@@ -20,12 +20,16 @@ def healthz() -> dict:
     return {"status": "ok"}
 
 
-@router.get("/readyz", summary="Redis reachable and at least one worker answering",
+@router.get("/readyz", summary="The broker reachable and at least one worker of this deployment answering",
             responses={503: {"description": "not ready"}})
 def readyz(request: Request):
-    checks = request.app.state.readiness()
+    state = request.app.state
+    checks = state.readiness()
     ready = all(checks.values())
-    return JSONResponse({"status": "ready" if ready else "not ready", "checks": checks}, status_code=200 if ready else 503)
+    queue = state.queue
+    return JSONResponse({"status": "ready" if ready else "not ready", "checks": checks, "broker": queue.broker,
+                         "worker": "embedded" if queue.broker == "memory" else "celery",
+                         "deployment": state.deployment}, status_code=200 if ready else 503)
 
 
 @router.get("/metrics", summary="Prometheus metrics", response_class=PlainTextResponse)

@@ -18,12 +18,22 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
-from hairport.worker.queue import TaskQueue
+from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
 from ..deps import owned
 from ..errors import Problem
 from ..schemas import HairstyleOut, PreprocessingOut
 from ..uploads import check_units, extension_of, input_problem, store_upload, validated
+
+#: seconds a client should wait before trying again when the task queue is away (Retry-After)
+RETRY_AFTER_SECONDS = 10
+
+
+def queue_unavailable(error: QueueUnavailable) -> Problem:
+    """503 ``queue_unavailable``: the broker did not take the request's task; nothing was kept."""
+    return Problem(503, "queue_unavailable", f"the task queue is unavailable ({error}); nothing was started, "
+                                             f"try again in {RETRY_AFTER_SECONDS} s",
+                   headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
 
 
 def preprocessing_settings(k: int, guides: int | None, anchoring: str) -> PreprocessSettings:
@@ -90,14 +100,23 @@ def check_fit(repository: Repository, settings: Settings, character: CharacterRe
 def start_preprocessing(repository: Repository, queue: TaskQueue, settings: Settings, hairstyle: HairstyleRecord,
                         variant: PreprocessSettings | None = None, key: str | None = None) -> bool:
     """Send the preprocessing of a hairstyle (or of its ``variant`` under ``key``) unless it is done or
-    under way (a failed one is tried again); whether a task was sent."""
+    under way (a failed one is tried again); whether a task was sent. 503 ``queue_unavailable`` (the
+    claim released) when the broker does not take it."""
     key = key or hairstyle.artifact_key
     if repository.preprocessing_status(hairstyle, key).state not in (QUEUED, FAILED):
         return False
-    # a queued or running claim older than a job's time limit plus redelivery is stale
-    if not repository.claim_preprocessing(key, settings.task_time_limit + settings.visibility_timeout):
+    # a queued or running claim older than a job's time limit plus redelivery is stale (the sweeper
+    # normally finds it first: a silent run or a lost message)
+    options = None if variant is None else variant.model_dump()
+    task_id = new_task_id()
+    if not repository.claim_preprocessing(key, settings.task_time_limit + settings.visibility_timeout, hairstyle.id,
+                                          options, task_id):
         return False
-    queue.send_preprocess(hairstyle.id, None if variant is None else variant.model_dump())
+    try:
+        queue.send_preprocess(hairstyle.id, options, task_id)
+    except QueueUnavailable as error:
+        repository.release_preprocessing(key, task_id)
+        raise queue_unavailable(error) from None
     return True
 
 

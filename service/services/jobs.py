@@ -6,7 +6,7 @@ from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
 from hairport import solver
-from hairport.records import CANCELLED, QUEUED, SUCCEEDED, TERMINAL_STATES, BlobRef, JobRecord, now
+from hairport.records import CANCELLED, SUCCEEDED, TERMINAL_STATES, WAITING_STATES, BlobRef, JobRecord, now
 from hairport.repository import Repository
 from hairport.worker.queue import TaskQueue
 
@@ -21,13 +21,13 @@ UNLIMITED = solver.ReadLimits(2**62, 2**62, 2**62)
 
 
 def cancel_job(repository: Repository, queue: TaskQueue, job: JobRecord) -> JobRecord:
-    """Cancel a job: a queued one at once, a running one at its solver's next iteration."""
+    """Cancel a job: a queued (or stale) one at once, a running one at its solver's next iteration."""
     if job.state in TERMINAL_STATES:
         return job
 
     def change(current: JobRecord) -> JobRecord:
         current.cancel_requested = True
-        if current.state == QUEUED:
+        if current.state in WAITING_STATES:
             current.state, current.stage, current.finished_at = CANCELLED, "cancelled", now()
         return current
 

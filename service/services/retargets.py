@@ -16,13 +16,13 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
-from hairport.worker.queue import TaskQueue
+from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
 from ..deps import owned
 from ..errors import Problem
 from ..schemas import RetargetIn
 from ..uploads import input_problem
-from .hairstyles import start_preprocessing
+from .hairstyles import queue_unavailable, start_preprocessing
 
 #: longest Idempotency-Key accepted (characters)
 MAX_IDEMPOTENCY_KEY = 200
@@ -60,18 +60,28 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
         job = JobRecord(
             id=new_job_id(), owner=owner, hairstyle_id=hairstyle.id, target_character_id=target.id, options=options,
             hairline=body["hairline"], preprocess_options=variant, artifact_key=key,
-            output_format=request.output_format, created_at=now(), updated_at=now(),
+            output_format=request.output_format, created_at=now(), updated_at=now(), task_id=new_task_id(),
+            enqueued_at=now(),
         )
         repository.create_job(job)
         jobs.append(job)
     if replay_id is not None:
         repository.put(IdempotencyRecord(request=digest(body), jobs=[job.id for job in jobs], created_at=now()),
                        replay_id)
-    start_preprocessing(repository, queue, settings, hairstyle, None if key == hairstyle.artifact_key else variant, key)
-    sent = []
-    for job in jobs:
-        sent.append(repository.set_job(job.id, task_id=queue.send_retarget(job.id)) or job)
-    return sent
+    try:
+        start_preprocessing(repository, queue, settings, hairstyle, None if key == hairstyle.artifact_key else variant,
+                            key)
+        for job in jobs:
+            queue.send_retarget(job.id, job.task_id)
+    except QueueUnavailable as error:
+        # nothing of this request stays: a retry (with the same Idempotency-Key) starts afresh; a message
+        # already sent finds no record and does nothing
+        if replay_id is not None:
+            repository.storage.delete_record(IdempotencyRecord.KIND, replay_id)
+        for job in jobs:
+            repository.delete_job(job)
+        raise queue_unavailable(error) from None
+    return jobs
 
 
 def check_options(options: dict, variant: PreprocessSettings, hairline: dict | None) -> None:

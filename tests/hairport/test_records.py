@@ -5,6 +5,7 @@ import pytest
 from hairport.records import (
     JOB_STATES,
     TERMINAL_STATES,
+    WAITING_STATES,
     BlobRef,
     CharacterRecord,
     JobRecord,
@@ -23,8 +24,9 @@ def character(**changes) -> CharacterRecord:
 
 
 def test_states():
-    assert JOB_STATES == ("queued", "running", "succeeded", "failed", "cancelled")
+    assert JOB_STATES == ("queued", "running", "stale", "succeeded", "failed", "cancelled")
     assert TERMINAL_STATES == ("succeeded", "failed", "cancelled")
+    assert WAITING_STATES == ("queued", "stale")
 
 
 def test_digest_is_stable_and_key_order_free():

@@ -47,7 +47,7 @@ def test_jobs_are_listed_newest_first_with_totals_and_states(repository):
     assert all(job.state == "succeeded" for job in page)
     assert repository.list_jobs("kowner", state="cancelled") == ([], 0)
     assert repository.list_jobs("nobody") == ([], 0)
-    assert repository.job_counts() == {"queued": 7, "running": 1, "succeeded": 3, "failed": 0, "cancelled": 0}
+    assert repository.job_counts() == {"queued": 7, "running": 1, "stale": 0, "succeeded": 3, "failed": 0, "cancelled": 0}
     assert sorted(job.id for job in repository.jobs_in_state("succeeded")) == [f"{n:032x}" for n in (1, 4, 7)]
 
 

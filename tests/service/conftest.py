@@ -6,7 +6,7 @@ from fastapi.testclient import TestClient
 
 from hairport.service.app import create_app
 from hairport.settings import Settings
-from hairport.worker.app import MEMORY_BROKER, QUEUES, make_celery
+from hairport.worker.app import MEMORY_BROKER, make_celery, queue_names
 from hairport.worker.queue import TaskQueue
 
 KEY = "unit-key"
@@ -23,7 +23,7 @@ def client(settings) -> TestClient:
     celery = make_celery(settings, MEMORY_BROKER)
     # the in-memory transport is one per process: start every test with empty queues
     with celery.connection_for_write() as connection:
-        for name in QUEUES:
+        for name in queue_names(celery.hairport_deployment).values():
             connection.SimpleQueue(name).clear()
     app = create_app(settings, readiness=lambda: {"redis": True, "worker": False}, queue_depths=lambda: {"retarget": 3},
                      queue=TaskQueue(celery))

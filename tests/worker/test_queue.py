@@ -5,26 +5,32 @@ from hairport.worker.app import MEMORY_BROKER, PREPROCESS_QUEUE, RETARGET_QUEUE,
 from hairport.worker.queue import TaskQueue
 
 
-def received(celery, queue: str) -> list[tuple[str, list]]:
-    """The (task name, args) of the messages waiting on ``queue``."""
+def received(celery, queue: str) -> list[tuple[str, list, dict]]:
+    """The (task name, args, kwargs) of the messages waiting on ``queue``."""
     messages = []
     with celery.connection_for_read() as connection:
         simple = connection.SimpleQueue(queue)
         while simple.qsize():
             message = simple.get(timeout=1)
-            messages.append((message.headers["task"], message.payload[0]))
+            messages.append((message.headers["task"], message.payload[0], message.payload[1]))
             message.ack()
         simple.close()
     return messages
 
 
 def test_tasks_are_sent_by_name_to_their_queues():
-    celery = make_celery(Settings(), MEMORY_BROKER)
+    celery = make_celery(Settings(), MEMORY_BROKER, deployment="d1")
     queue = TaskQueue(celery)
     task_id = queue.send_retarget("a" * 32)
+    assert queue.send_retarget("e" * 32, "chosen-id") == "chosen-id"
     queue.send_preprocess("b" * 32, {"k": 5, "guides": 10})
     queue.send_preprocess("c" * 32)
     assert len(task_id) == 36
-    assert received(celery, RETARGET_QUEUE) == [(RETARGET_TASK, ["a" * 32])]
-    assert received(celery, PREPROCESS_QUEUE) == [("hairport.preprocess", ["b" * 32, {"k": 5, "guides": 10}]),
-                                                  ("hairport.preprocess", ["c" * 32, None])]
+    # every task names its deployment, on the deployment's own queues
+    mine = {"deployment": "d1"}
+    assert received(celery, "hairport.d1." + RETARGET_QUEUE) == [(RETARGET_TASK, ["a" * 32], mine),
+                                                                 (RETARGET_TASK, ["e" * 32], mine)]
+    assert received(celery, "hairport.d1." + PREPROCESS_QUEUE) == [
+        ("hairport.preprocess", ["b" * 32, {"k": 5, "guides": 10}], mine), ("hairport.preprocess", ["c" * 32, None], mine)]
+    assert received(celery, RETARGET_QUEUE) == []
+    assert queue.task_ids_in_broker() is None and queue.depths() == {} and queue.broker == "memory"

@@ -1,6 +1,9 @@
 """The job bodies, called as plain functions on a real storage with toy characters (no Celery)."""
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -23,7 +26,7 @@ from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import write_character
 from hairport.storage import LocalStorage
-from hairport.worker import runner
+from hairport.worker import runner, runs
 
 OWNER = "kowner"
 
@@ -306,3 +309,48 @@ def test_characters_without_a_rig_are_anchored_by_their_surface(world, tmp_path)
     assert job.state == "succeeded", job.error
     assert job.metrics["anchoring"] == "surface" and job.metrics["penetrating_particles"] == 0
     assert job.metrics["fallback_anchors"] == int((~world["hair"].is_root).sum())
+
+
+def test_only_the_current_message_starts_a_job_and_only_once(world):
+    """Task ids as attempt tokens: an older message, or a second delivery while a live run has the job,
+    changes nothing; a run on this host whose process is gone is taken over at once."""
+    repository, settings = world["repository"], world["settings"]
+    job = add_job(world, task_id="current")
+    runner.run_retarget(repository, settings, job.id, "w1", task_id="older")
+    assert repository.job(job.id).state == "queued" and repository.job(job.id).attempts == 0
+    live = {"state": "running", "attempts": 1, "run_token": "t1", "heartbeat_at": now(), "worker_host": runs.HOST,
+            "worker_pid": os.getpid(), "started_at": now()}
+    repository.set_job(job.id, **live)
+    runner.run_retarget(repository, settings, job.id, "w2", task_id="current")
+    assert repository.job(job.id).run_token == "t1" and repository.job(job.id).attempts == 1
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    repository.set_job(job.id, worker_pid=dead.pid)
+    runner.run_retarget(repository, settings, job.id, "w2", task_id="current")
+    done = repository.job(job.id)
+    assert done.state == "succeeded" and done.attempts == 2 and done.worker == "w2" and done.run_token != "t1"
+
+
+def test_a_job_whose_worker_died_max_attempts_times_fails_worker_lost(world):
+    repository, settings = world["repository"], world["settings"]
+    job = add_job(world, task_id="m", state="running", attempts=settings.max_attempts, run_token="t",
+                  heartbeat_at=now() - settings.stale_after_seconds - 1, worker="w9@elsewhere")
+    runner.run_retarget(repository, settings, job.id, "w1", task_id="m")
+    failed = repository.job(job.id)
+    assert failed.state == "failed" and failed.error.code == "worker_lost" and failed.attempts == 3
+    assert "died 3 times" in failed.error.message and "w9@elsewhere" in failed.error.message
+    assert failed.finished_at is not None and failed.outputs is None
+
+
+def test_a_taken_over_run_writes_nothing_more(world):
+    repository = world["repository"]
+    job = add_job(world, state="running", run_token="mine")
+    run = runner.OwnRun(lambda change: repository.change_job(job.id, change), "mine")
+    assert run.beat() and repository.job(job.id).heartbeat_at is not None
+    repository.set_job(job.id, run_token="theirs")
+    assert not run.write(state="succeeded") and repository.job(job.id).state == "running"
+
+
+def test_memory_error_is_over_memory_budget():
+    info = runner.error_info(MemoryError(), 10)
+    assert info.code == runner.OVER_MEMORY_BUDGET == "over_memory_budget" and "MEMORY_BUDGET" in info.message

@@ -8,7 +8,7 @@ from hairport.worker.app import MEMORY_BROKER, PREPROCESS_TASK, PURGE_TASK, RETA
 
 
 def test_tasks_are_registered_under_their_names_with_retries():
-    celery = make_celery(Settings(), MEMORY_BROKER)
+    celery = make_celery(Settings(), MEMORY_BROKER, deployment="d1")
     celery.loader.import_default_modules()
     registered = celery.tasks
     for name in (PREPROCESS_TASK, RETARGET_TASK, PURGE_TASK):

@@ -19,7 +19,7 @@ def files(tmp_path_factory):
 def waiting(client, queue: str) -> int:
     celery = client.app.state.queue.celery
     with celery.connection_for_read() as connection:
-        return connection.SimpleQueue(queue).qsize()
+        return connection.SimpleQueue(client.app.state.queue.names[queue]).qsize()
 
 
 def test_one_record_and_one_preprocessing_per_content(client, files):

@@ -1,0 +1,104 @@
+"""Who runs a job or a preprocessing: starting a run, its heartbeat, and telling a dead run from a live one.
+
+Every message sent for a record carries the record's ``task_id`` (chosen before sending); a
+message whose id is not the record's current one is obsolete and changes nothing (e.g. the
+unacknowledged message of a dead worker, handed out again by the broker an hour later, after
+the sweeper queued the job again under a new id). Every start writes a new ``run_token``, and
+every later write of that run checks it under the record's lock, so that two runs never both
+write: a run whose token was replaced stops at its next check.
+
+A run is gone when its heartbeat is older than ``Settings.stale_after_seconds``, or at once
+when it ran on this host in a process that no longer exists (a pool child the OOM killer or
+a crash took: the broker hands its message straight back).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import threading
+import uuid
+from collections.abc import Callable
+
+from hairport.records import WORKER_LOST, ErrorInfo, RunInfo, now
+from hairport.settings import Settings
+
+log = logging.getLogger(__name__)
+
+#: the name of this host, as runs record it
+HOST = socket.gethostname()
+
+
+def new_task_id() -> str:
+    """The id of a task to send: chosen before sending, so the record names its message before it exists."""
+    return str(uuid.uuid4())
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process of that id runs on this host (one of another user counts; a zombie, killed and
+    not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def silent(run: RunInfo, stale_after: float, moment: float, started: float | None = None) -> bool:
+    """Whether the run's last heartbeat (or its start) is older than ``stale_after`` seconds."""
+    last = run.heartbeat_at or started
+    return last is None or moment - last > stale_after
+
+
+def run_gone(run: RunInfo, stale_after: float, started: float | None = None) -> bool:
+    """Whether the run recorded in ``run`` is over: silent, or its process on this host is gone."""
+    if silent(run, stale_after, now(), started):
+        return True
+    return run.worker_host == HOST and run.worker_pid is not None and not pid_alive(run.worker_pid)
+
+
+def start_fields(run: RunInfo, worker: str) -> dict:
+    """The fields of a new run by this process (``attempts`` counts it)."""
+    return dict(attempts=run.attempts + 1, run_token=uuid.uuid4().hex, heartbeat_at=now(), worker=worker,
+                worker_host=HOST, worker_pid=os.getpid())
+
+
+def worker_lost(run: RunInfo, settings: Settings, what: str) -> ErrorInfo:
+    """Why a job or a preprocessing whose worker died ``max_attempts`` times is not run again."""
+    return ErrorInfo(code=WORKER_LOST, message=(
+        f"its worker died {run.attempts} times while running {what} (the last on {run.worker or 'a worker'}); "
+        f"it is not run again: it may need more memory than a worker has (the memory budget is "
+        f"{settings.memory_budget_bytes:,} bytes) or crash its worker"))
+
+
+class Heartbeat:
+    """A thread that calls ``beat()`` every ``interval`` seconds while a run lasts (``with Heartbeat(...)``);
+    it stops when ``beat`` returns False (the run is not the record's any more)."""
+
+    def __init__(self, beat: Callable[[], bool], interval: float):
+        self.beat, self.interval = beat, interval
+        self.stopped = threading.Event()
+        self.thread = threading.Thread(target=self._loop, name="hairport-heartbeat", daemon=True)
+
+    def __enter__(self) -> Heartbeat:
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stopped.set()
+        self.thread.join()
+
+    def _loop(self) -> None:
+        while not self.stopped.wait(self.interval):
+            try:
+                if not self.beat():
+                    return
+            except Exception:  # noqa: BLE001 - a failed beat (storage hiccup) is retried at the next
+                log.exception("heartbeat failed")
