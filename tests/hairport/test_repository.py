@@ -102,7 +102,7 @@ def test_stage_totals_sum_the_succeeded_jobs_only(repository):
     os.utime(record, (0, 0))
     repository.purge(older_than_seconds=3600.0)  # a purged succeeded job leaves it too
     assert repository.stage_totals()["job"] == (pytest.approx(2.0), 1)
-    assert repository.job_counts() == {"queued": 0, "running": 0, "succeeded": 1, "failed": 1, "cancelled": 0}
+    assert repository.job_counts() == {"queued": 0, "running": 0, "stale": 0, "succeeded": 1, "failed": 1, "cancelled": 0}
 
 
 def test_progress_writes_do_not_touch_the_index(repository, monkeypatch):
