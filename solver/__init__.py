@@ -41,6 +41,7 @@ _EXPORTS = {
     "MESH_EXTENSIONS": ("hairport.solver.io.character", "MESH_EXTENSIONS"),
     "METERS_PER_UNIT": ("hairport.solver.model.units", "METERS_PER_UNIT"),
     "METHODS": ("hairport.solver.options", "METHODS"),
+    "OPTION_RANGES": ("hairport.solver.options", "OPTION_RANGES"),
     "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
     "PenetrationRemaining": ("hairport.solver.model.errors", "PenetrationRemaining"),
     "PreprocessOptions": ("hairport.solver.options", "PreprocessOptions"),
