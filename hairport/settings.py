@@ -21,6 +21,7 @@ class Settings(BaseSettings):
     max_vertices: int = Field(5_000_000, description="Largest vertex count a character mesh may have.")
     max_faces: int = Field(10_000_000, description="Largest face count a character mesh may have.")
     max_file_bytes: int = Field(4 * 1024**3, description="Largest input file read from disk (bytes).")
+    memory_budget_bytes: int = Field(8 * 1024**3, description="Memory one job may use (bytes): inputs whose estimated need is larger are refused, and the worker child is limited to it.")
 
     # service and worker
     redis_url: str = Field("redis://127.0.0.1:6379/0", description="Redis: Celery broker and readiness check.")

@@ -41,6 +41,8 @@ _EXPORTS = {
     "MESH_EXTENSIONS": ("hairport.solver.io.character", "MESH_EXTENSIONS"),
     "METERS_PER_UNIT": ("hairport.solver.model.units", "METERS_PER_UNIT"),
     "METHODS": ("hairport.solver.options", "METHODS"),
+    "OVER_MEMORY_BUDGET": ("hairport.solver.budget", "OVER_MEMORY_BUDGET"),
+    "check_memory": ("hairport.solver.budget", "check_memory"),
     "OPTION_RANGES": ("hairport.solver.options", "OPTION_RANGES"),
     "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
     "PenetrationRemaining": ("hairport.solver.model.errors", "PenetrationRemaining"),

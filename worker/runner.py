@@ -91,7 +91,8 @@ def read_source(repository: Repository, settings: Settings, hairstyle: Hairstyle
         solver.recorded_hair_units(path) if hairstyle.format == "npz" else None)
     hair = solver.read_hair(path, units=units or "m", format=hairstyle.format,
                             limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
-                                                     settings.max_file_bytes))
+                                                     settings.max_file_bytes,
+                                                     memory_budget_bytes=settings.memory_budget_bytes))
     return solver.canonical_source(source, hair, source_units=source_units, hair_units=units,
                                    up=character.up_axis, front=character.front_axis)
 
@@ -208,6 +209,11 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
         repository.set_job(job_id, stage="waiting_for_preprocessing", progress=0.0)
         raise PreprocessingPending(key)
 
+    try:  # pre-flight: refuse what cannot fit before the artifact is loaded (the budget may have shrunk)
+        solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=job.preprocess_options.k)
+    except solver.InputError as error:
+        repository.set_job(job_id, state=FAILED, finished_at=now(), error=error_info(error, 0))
+        return
     repository.set_job(job_id, state=RUNNING, stage="loading", progress=0.0, attempts=job.attempts + 1,
                        started_at=now(), error=None, worker=worker, worker_pid=os.getpid())
     progress = JobProgress(repository, job_id)

@@ -135,7 +135,8 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
     """Source character and hair from --source/--hair, with the configured limits, in hairport's frame.
 
     Prints what was inferred (a progress line) and the warnings about the inputs (one line each)."""
-    limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
+    limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes,
+                               memory_budget_bytes=settings.memory_budget_bytes)
     progress("load", 0.0, "reading the source")
     source, source_units = solver.read_character(args.source, skeleton_path=args.source_skeleton,
                                                  units=mesh_units(args, args.source, args.source_skeleton),

@@ -57,7 +57,8 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
         stated = units if units != solver.AUTO else (solver.recorded_hair_units(blob.path) if suffix == ".npz" else None)
         loaded = await validated(
             solver.read_hair, "hair", blob.path, units=stated or "m",
-            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes),
+            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes,
+                                     memory_budget_bytes=settings.memory_budget_bytes),
         )
         await validated(check_fit, "hair", repository, settings, character, loaded, stated)
         record = HairstyleRecord(
