@@ -8,6 +8,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from hairport import solver
+from hairport.messages import safe_detail
 
 PROBLEM_TYPE_BASE = "https://hairport.dev/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -24,8 +25,9 @@ class Problem(Exception):
 
 
 def problem_response(status: int, code: str, detail: str, title: str | None = None, headers: dict | None = None):
+    # every detail is bounded and sanitised here (ids and file text are echoed; blob names hidden)
     body = {"type": PROBLEM_TYPE_BASE + code, "title": title or code.replace("_", " "), "status": status,
-            "detail": detail, "code": code}
+            "detail": safe_detail(detail), "code": code}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_MEDIA_TYPE, headers=headers)
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from celery.exceptions import SoftTimeLimitExceeded
 
 from hairport import solver
+from hairport.messages import safe_detail
 from hairport.outputs import json_default
 from hairport.records import (
     CANCELLED,
@@ -107,10 +108,10 @@ def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
     """What a failed job or preprocessing reports: the problem of bad input, else the exception."""
     if isinstance(error, solver.InputError):
         # the problem only: the source of a stored input is a storage path, meaningless to the caller
-        return ErrorInfo(code=error.code or "bad_input", message=error.problem)
+        return ErrorInfo(code=error.code or "bad_input", message=safe_detail(error.problem))
     if isinstance(error, SoftTimeLimitExceeded):
         return ErrorInfo(code="time_limit", message=f"the job ran over its time limit ({soft_time_limit:g} s)")
-    return ErrorInfo(code="internal", message=f"{type(error).__name__}: {error}")
+    return ErrorInfo(code="internal", message=safe_detail(f"{type(error).__name__}: {error}"))
 
 
 def stored(blob: Blob, suffix: str) -> BlobRef:
