@@ -7,6 +7,9 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from hairport import solver
+from hairport.messages import safe_detail
+
 PROBLEM_TYPE_BASE = "https://hairport.dev/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 
@@ -22,8 +25,9 @@ class Problem(Exception):
 
 
 def problem_response(status: int, code: str, detail: str, title: str | None = None, headers: dict | None = None):
+    # every detail is bounded and sanitised here (ids and file text are echoed; blob names hidden)
     body = {"type": PROBLEM_TYPE_BASE + code, "title": title or code.replace("_", " "), "status": status,
-            "detail": detail, "code": code}
+            "detail": safe_detail(detail), "code": code}
     return JSONResponse(body, status_code=status, media_type=PROBLEM_MEDIA_TYPE, headers=headers)
 
 
@@ -45,7 +49,10 @@ def install(app: FastAPI) -> None:
         for item in error.errors():
             where = ".".join(str(p) for p in item.get("loc", ()) if p not in ("body",))
             parts.append(f"{where}: {item.get('msg')}" if where else str(item.get("msg")))
-        return problem_response(422, "invalid_request", "; ".join(parts) or "invalid request")
+        # an option outside its range (the solver's OPTION_RANGES) has the solver's own code
+        fields = {str(item.get("loc", ("",))[-1]) for item in error.errors()}
+        code = "bad_option" if fields and fields <= set(solver.OPTION_RANGES) else "invalid_request"
+        return problem_response(422, code, "; ".join(parts) or "invalid request")
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, error: StarletteHTTPException):

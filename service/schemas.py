@@ -29,8 +29,6 @@ Anchoring = Literal[solver.ANCHORINGS]
 DEFAULT_OUTPUT_FORMAT = "data"
 #: most points of a drawn hairline accepted in a request
 MAX_CURVE_POINTS = 10_000
-#: the most outer iterations a request may ask for
-MAX_ITERATIONS_LIMIT = 1000
 _RETARGET = solver.RetargetOptions()
 _PREPROCESS = solver.PreprocessOptions()
 _HAIRLINE = solver.HairlineEdit(preset=solver.HAIRLINE_PRESETS[0])
@@ -99,6 +97,15 @@ class HairstyleOut(BaseModel):
         )
 
 
+def ranged(name: str, default=None):
+    """A ``Field`` whose bounds and description come from the solver's range of option ``name``
+    (:data:`hairport.solver.OPTION_RANGES`): values outside it are 422 at the door."""
+    spec = solver.OPTION_RANGES[name]
+    units = f" ({spec.units})" if spec.units else ""
+    return Field(default, ge=spec.minimum, le=spec.maximum, allow_inf_nan=False,
+                 description=f"{spec.description}{units}; {spec.text()}")
+
+
 class RetargetOptionsIn(BaseModel):
     """Solver options (Table 1, meters). ``guides`` and ``k`` default to the hairstyle's; other
     values preprocess the hairstyle again (once per combination, cached)."""
@@ -106,14 +113,14 @@ class RetargetOptionsIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     method: str = _RETARGET.method
-    guides: int | None = Field(None, ge=1, description="guide strands of the multi-scale solve")
-    k: int | None = Field(None, ge=1, description="inter-strand neighbours per particle (Eq. 8)")
-    alpha: float = _RETARGET.alpha
-    beta: float = _RETARGET.beta
-    eps_c: float = _RETARGET.eps_c
-    eps_s: float = _RETARGET.eps_s
-    max_iterations: int = Field(_RETARGET.max_iterations, ge=1, le=MAX_ITERATIONS_LIMIT)
-    step_tolerance: float = _RETARGET.step_tolerance
+    guides: int | None = ranged("guides")
+    k: int | None = ranged("k")
+    alpha: float = ranged("alpha", _RETARGET.alpha)
+    beta: float = ranged("beta", _RETARGET.beta)
+    eps_c: float = ranged("eps_c", _RETARGET.eps_c)
+    eps_s: float = ranged("eps_s", _RETARGET.eps_s)
+    max_iterations: int = ranged("max_iterations", _RETARGET.max_iterations)
+    step_tolerance: float = ranged("step_tolerance", _RETARGET.step_tolerance)
     qp_backend: Literal[solver.QP_BACKENDS] = _RETARGET.qp_backend
 
 

@@ -32,11 +32,16 @@ async def store_upload(storage: LocalStorage, upload: UploadFile, settings: Sett
                       f"{field}: upload larger than the limit of {error.limit:,} bytes") from None
 
 
+#: input codes answered 413: above a configured limit or the memory budget (the input is too
+#: big for this deployment, not malformed)
+OVERSIZE_CODES = ("too_large", solver.OVER_MEMORY_BUDGET)
+
+
 def input_problem(error: solver.InputError, field: str) -> Problem:
     """413 for inputs above the configured limits, 422 for every other bad input.
 
     The detail names the request field, never a storage path."""
-    status = 413 if error.code == "too_large" else 422
+    status = 413 if error.code in OVERSIZE_CODES else 422
     return Problem(status, error.code or "bad_input", f"{field}: {error.problem}")
 
 

@@ -33,6 +33,7 @@ from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
+from hairport.solver.model.json_input import parse_json
 from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import ANCHOR_BY_BONES, Anchors
 
@@ -137,8 +138,8 @@ def load_adaptable(path: str | os.PathLike):
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as error:
         raise InputError(f"not a readable adaptable hairstyle ({error})", str(path), "bad_artifact") from None
     try:
-        meta = json.loads(arrays.pop("meta").tobytes().decode())
-    except (KeyError, ValueError, UnicodeDecodeError):
+        meta = parse_json(arrays.pop("meta").tobytes(), str(path), "bad_artifact", "the meta record")
+    except KeyError:
         raise InputError("not an adaptable hairstyle: no readable meta record", str(path), "bad_artifact") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise InputError("not an adaptable hairstyle (unknown format)", str(path), "bad_artifact")

@@ -26,6 +26,69 @@ ENERGY_TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
+class OptionRange:
+    """The accepted values of one numeric option: ``minimum <= value <= maximum``, finite."""
+
+    minimum: float
+    maximum: float
+    integer: bool
+    units: str
+    description: str
+
+    def check(self, name: str, value) -> None:
+        """Refuse (``bad_option``) a value outside the range, NaN, infinite, or not a number."""
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise InputError(f"option {name} must be a number, got {value!r}", code="bad_option")
+        if self.integer and not float(value).is_integer():
+            raise InputError(f"option {name} must be an integer, got {value!r}", code="bad_option")
+        if not (np.isfinite(value) and self.minimum <= value <= self.maximum):
+            raise InputError(f"option {name} must be {self.text()}, got {value!r}", code="bad_option")
+
+    def text(self) -> str:
+        """``"in [1, 64] (neighbours)"``: the range in words, for messages."""
+        return f"in [{self.minimum:g}, {self.maximum:g}]" + (f" ({self.units})" if self.units else "")
+
+
+#: every numeric option of both stages: the one definition of its range, from which the API
+#: schema (Field ge/le), the command line (argparse types) and ``validate()`` are derived and
+#: the README's table is generated (:func:`option_table`). The upper bounds keep one job
+#: within a worker's means: k and guides size the kNN sets and the coupled QP, eps_c beyond a
+#: few cm leaves the distance grid's narrow band, iterations bound the time.
+OPTION_RANGES: dict[str, OptionRange] = {
+    "k": OptionRange(1, 64, True, "neighbours", "inter-strand neighbours per particle (Eq. 8)"),
+    "sigma": OptionRange(0, 1e6, False, "", "Eq. 2's penalty on rays along their bone"),
+    "guides": OptionRange(1, 20_000, True, "strands", "guide strands of the multi-scale solve"),
+    "guide_seed": OptionRange(0, 2**32 - 1, True, "", "seed of the guide selection"),
+    "alpha": OptionRange(0, 1e9, False, "", "inter-strand weight (Eq. 1)"),
+    "beta": OptionRange(0, 1e9, False, "", "hair-body weight (Eq. 1)"),
+    "eps_c": OptionRange(0, 0.02, False, "m", "clearance to the body (Eq. 13)"),
+    "eps_s": OptionRange(0, 100, False, "", "Laplacian discrepancy that marks a strand for smoothing (Eq. 6)"),
+    "max_iterations": OptionRange(1, 1000, True, "iterations", "cap on outer solver iterations"),
+    "step_tolerance": OptionRange(0, 0.01, False, "m", "converged when no particle moves more than this"),
+    "energy_tolerance": OptionRange(0, 1, False, "", "stop a strand whose Eq. 1 fell by less than this fraction"),
+    "workers": OptionRange(1, 256, True, "processes", "processes of the multi-scale fine level"),
+    "chunk_particles": OptionRange(1, 10**8, True, "particles", "particles per fine-level chunk"),
+}
+
+
+def check_ranges(options) -> None:
+    """Check every option of ``options`` (a dataclass) that has a range; ``None`` means default."""
+    for name, spec in OPTION_RANGES.items():
+        value = getattr(options, name, None)
+        if value is not None:
+            spec.check(name, value)
+
+
+def option_table(names=None) -> str:
+    """The README's table of option ranges (Markdown), generated from :data:`OPTION_RANGES`."""
+    rows = ["| option | min | max | units | what |", "|---|---|---|---|---|"]
+    for name, spec in OPTION_RANGES.items():
+        if names is None or name in names:
+            rows.append(f"| `{name}` | {spec.minimum:g} | {spec.maximum:g} | {spec.units or '-'} | {spec.description} |")
+    return "\n".join(rows)
+
+
+@dataclass(frozen=True)
 class PreprocessOptions:
     """Source-side parameters (Table 1, meters).
 
@@ -44,12 +107,7 @@ class PreprocessOptions:
         if self.anchoring not in ANCHORINGS:
             raise InputError(f"unknown anchoring {self.anchoring!r}; expected one of {', '.join(ANCHORINGS)}",
                              code="bad_option")
-        if self.k < 1:
-            raise InputError(f"option k must be >= 1, got {self.k}", code="bad_option")
-        if self.guides < 1:
-            raise InputError(f"option guides must be >= 1, got {self.guides}", code="bad_option")
-        if not np.isfinite(self.sigma) or self.sigma < 0:
-            raise InputError(f"option sigma must be a finite non-negative number, got {self.sigma}", code="bad_option")
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -87,20 +145,11 @@ class RetargetOptions:
                     "(a baseline may carry the suffix +pushout)",
                     code="unknown_method",
                 ) from None
-        for name in ("alpha", "beta", "eps_c", "eps_s", "step_tolerance", "energy_tolerance"):
-            value = getattr(self, name)
-            if not np.isfinite(value) or value < 0:
-                raise InputError(f"option {name} must be a finite non-negative number, got {value}", code="bad_option")
-        if self.max_iterations < 1:
-            raise InputError("option max_iterations must be >= 1", code="bad_option")
+        check_ranges(self)
         if self.qp_backend not in QP_BACKENDS:
             raise InputError(
                 f"unknown QP backend {self.qp_backend!r}; expected one of {', '.join(QP_BACKENDS)}", code="bad_option"
             )
-        if self.workers is not None and self.workers < 1:
-            raise InputError("option workers must be >= 1", code="bad_option")
-        if self.chunk_particles < 1:
-            raise InputError("option chunk_particles must be >= 1", code="bad_option")
         if self.hairline is not None:
             if self.method not in SOLVER_METHODS:
                 raise InputError(

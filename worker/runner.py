@@ -19,6 +19,7 @@ from pathlib import Path
 from celery.exceptions import SoftTimeLimitExceeded
 
 from hairport import solver
+from hairport.messages import safe_detail
 from hairport.outputs import json_default
 from hairport.records import (
     CANCELLED,
@@ -100,7 +101,8 @@ def read_source(repository: Repository, settings: Settings, hairstyle: Hairstyle
         solver.recorded_hair_units(path) if hairstyle.format == "npz" else None)
     hair = solver.read_hair(path, units=units or "m", format=hairstyle.format,
                             limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
-                                                     settings.max_file_bytes))
+                                                     settings.max_file_bytes,
+                                                     memory_budget_bytes=settings.memory_budget_bytes))
     return solver.canonical_source(source, hair, source_units=source_units, hair_units=units,
                                    up=character.up_axis, front=character.front_axis)
 
@@ -115,13 +117,13 @@ def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
     """What a failed job or preprocessing reports: the problem of bad input, else the exception."""
     if isinstance(error, solver.InputError):
         # the problem only: the source of a stored input is a storage path, meaningless to the caller
-        return ErrorInfo(code=error.code or "bad_input", message=error.problem)
+        return ErrorInfo(code=error.code or "bad_input", message=safe_detail(error.problem))
     if isinstance(error, SoftTimeLimitExceeded):
         return ErrorInfo(code="time_limit", message=f"the job ran over its time limit ({soft_time_limit:g} s)")
     if isinstance(error, MemoryError):
         return ErrorInfo(code=OVER_MEMORY_BUDGET, message="the job needed more memory than a job may use "
                                                           "(HAIRPORT_MEMORY_BUDGET_BYTES)")
-    return ErrorInfo(code="internal", message=f"{type(error).__name__}: {error}")
+    return ErrorInfo(code="internal", message=safe_detail(f"{type(error).__name__}: {error}"))
 
 
 def stored(blob: Blob, suffix: str) -> BlobRef:
@@ -317,6 +319,11 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
         repository.set_job(job_id, stage="waiting_for_preprocessing", progress=0.0)
         raise PreprocessingPending(key)
 
+    try:  # pre-flight: refuse what cannot fit before the artifact is loaded (the budget may have shrunk)
+        solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=job.preprocess_options.k)
+    except solver.InputError as error:
+        repository.set_job(job_id, state=FAILED, finished_at=now(), error=error_info(error, 0))
+        return
     run = start_run(lambda change: repository.change_job(job_id, change), settings, task_id, worker, "it",
                     WAITING_STATES, dict(stage="loading", progress=0.0, started_at=now()))
     if run is None:

@@ -20,8 +20,19 @@ from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress, print_warning
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "StageProgress", "build_parser", "main"]
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with hairport's error line: bad arguments (an option out of its range, an unknown
+    flag) print one ``hairport: error:`` line and exit 2, like every other bad input."""
+
+    def error(self, message: str):
+        command = self.prog.removeprefix("hairport").strip()
+        print(f"hairport: error: {command + ': ' if command else ''}{message} (see {self.prog} --help)",
+              file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="hairport", description="Retarget strand hairstyles between characters.")
+    parser = Parser(prog="hairport", description="Retarget strand hairstyles between characters.")
     sub = parser.add_subparsers(dest="command", required=True)
     solve.add_preprocess(sub)
     solve.add_retarget(sub)
@@ -44,7 +55,10 @@ def show_warning(message, category, filename, lineno, file=None, line=None) -> N
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help (0) or a bad argument (2): returned, as every other outcome
+        return stop.code if isinstance(stop.code, int) else EXIT_BAD_INPUT
     with warnings.catch_warnings():  # restores the caller's warning display when main returns
         warnings.showwarning = show_warning
         return _run(args)

@@ -33,15 +33,41 @@ class StageProgress:
         print(f"[{elapsed:7.2f}s] {stage:<17} {100 * fraction:5.1f}%  {message}", file=sys.stderr, flush=True)
 
 
+def option_type(name: str):
+    """An argparse ``type`` for option ``name``: parses it and checks the solver's range
+    (:data:`hairport.solver.OPTION_RANGES`); argparse exits 2 naming the option and its range."""
+    spec = solver.OPTION_RANGES[name]
+
+    def parse(text: str):
+        try:
+            value = int(text) if spec.integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{'an integer' if spec.integer else 'a number'} "
+                                             f"{spec.text()} expected, got {text!r}") from None
+        try:
+            spec.check(name, value)
+        except InputError as error:
+            raise argparse.ArgumentTypeError(error.problem) from None
+        return value
+
+    parse.__name__ = name  # argparse names the type in its messages
+    return parse
+
+
+def option_help(name: str, note: str = "") -> str:
+    spec = solver.OPTION_RANGES[name]
+    return f"{spec.description}, {spec.text()}" + (f"; {note}" if note else "")
+
+
 def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--source", required=required, help=f"source character mesh ({'/'.join(solver.MESH_EXTENSIONS)})")
     p.add_argument("--hair", required=required,
                    help=f"hair file of the source ({'/'.join('.' + name for name in solver.HAIR_FORMATS)})")
     p.add_argument("--source-skeleton", help="skeleton JSON of the source (default: <mesh>.skeleton.json, else glTF skin)")
-    p.add_argument("--guides", type=int, default=None,
-                   help="guide strands of the multi-scale solve (default 300, or every strand if fewer)")
-    p.add_argument("--k", type=int, default=solver.PreprocessOptions.k,
-                   help="inter-strand neighbours per particle (Eq. 8)")
+    p.add_argument("--guides", type=option_type("guides"), default=None,
+                   help=option_help("guides", "default 300, or every strand if fewer"))
+    p.add_argument("--k", type=option_type("k"), default=solver.PreprocessOptions.k,
+                   help=option_help("k"))
     p.add_argument("--anchoring", default=solver.PreprocessOptions.anchoring, choices=solver.ANCHORINGS,
                    help="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                         "when the source has a skeleton with skin weights, else the surface)")
@@ -109,7 +135,8 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
     """Source character and hair from --source/--hair, with the configured limits, in hairport's frame.
 
     Prints what was inferred (a progress line) and the warnings about the inputs (one line each)."""
-    limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes)
+    limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes,
+                               memory_budget_bytes=settings.memory_budget_bytes)
     progress("load", 0.0, "reading the source")
     source, source_units = solver.read_character(args.source, skeleton_path=args.source_skeleton,
                                                  units=mesh_units(args, args.source, args.source_skeleton),

@@ -18,6 +18,8 @@ from .common import (
     check_source_arguments,
     load_source,
     load_target,
+    option_help,
+    option_type,
     preprocess_options,
 )
 
@@ -46,11 +48,11 @@ def add_retarget(sub) -> None:
     p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
     p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
     add_units(p)
-    p.add_argument("--alpha", type=float, default=_DEFAULTS.alpha, help="inter-strand weight (Eq. 1)")
-    p.add_argument("--beta", type=float, default=_DEFAULTS.beta, help="hair-body weight (Eq. 1)")
-    p.add_argument("--eps-c", type=float, default=_DEFAULTS.eps_c, help="clearance to the body in meters (Eq. 13)")
-    p.add_argument("--max-iterations", type=int, default=_DEFAULTS.max_iterations, help="cap on outer solver iterations")
-    p.add_argument("--workers", type=int, default=None, help="processes for the multi-scale fine level (default: CPUs)")
+    p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
+    p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
+    p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))
+    p.add_argument("--max-iterations", type=option_type("max_iterations"), default=_DEFAULTS.max_iterations, help=option_help("max_iterations"))
+    p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: CPUs"))
     p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
     add_hairline_arguments(p)

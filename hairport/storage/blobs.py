@@ -11,7 +11,7 @@ import shutil
 import tempfile
 import threading
 from collections.abc import AsyncIterator, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from hairport.solver import fsync_folder
@@ -38,6 +38,9 @@ class Blob:
     sha256: str
     size: int
     path: Path
+    #: this save put the content in the store (it was not there before): only then may a caller
+    #: that refuses the content take it out again (:meth:`BlobStore.discard_new`)
+    created: bool = field(default=False, compare=False)
 
 
 async def iter_upload(upload, chunk_size: int = UPLOAD_CHUNK_BYTES) -> AsyncIterator[bytes]:
@@ -192,12 +195,22 @@ class BlobStore:
         digest = sink.hash.hexdigest()
         target = self.root / blob_relpath(digest, suffix)
         target.parent.mkdir(exist_ok=True)
+        created = False
         if self._touch(target):
             _unlink(sink.path)
         else:
             os.replace(sink.path, target)
             self._fsync_dir(target.parent)
-        return Blob(digest, sink.size, target)
+            created = True
+        return Blob(digest, sink.size, target, created)
+
+    def discard_new(self, *blobs: Blob | None) -> int:
+        """Remove the blobs this process's saves created (a refused upload keeps no file); a blob
+        that was already stored may be another record's and stays. How many were removed.
+
+        Blobs are shared by content: an identical upload accepted between this save and the
+        discard would lose its file; the window is the validation of one upload."""
+        return sum(1 for blob in blobs if blob is not None and blob.created and _unlink(blob.path))
 
     def _fsync_dir(self, path: Path) -> None:
         if self.durable:

@@ -14,6 +14,13 @@ from ..schemas import HAIR_FILE_DESCRIPTION, Anchoring, HairstyleOut
 from ..services import hairstyles
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
+
+
+def ranged_form(name: str, note: str = ""):
+    """A form field bounded by the solver's range of option ``name`` (422 outside it)."""
+    spec = solver.OPTION_RANGES[name]
+    return Form(ge=spec.minimum, le=spec.maximum,
+                description=f"{spec.description}; {spec.text()}" + (f" ({note})" if note else ""))
 _DEFAULTS = solver.PreprocessOptions()
 
 
@@ -27,8 +34,8 @@ async def create_hairstyle(
     source_character_id: Annotated[str, Form(description="the character the hairstyle was made for")],
     units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
                                            "inferred from where its roots sit on the source character)")] = "auto",
-    guides: Annotated[int | None, Form(description="guide strands of the multi-scale solve (default 300)")] = None,
-    k: Annotated[int, Form(description="inter-strand neighbours per particle (Eq. 8)")] = _DEFAULTS.k,
+    guides: Annotated[int | None, ranged_form("guides", f"default {solver.DEFAULT_GUIDES}")] = None,
+    k: Annotated[int, ranged_form("k")] = _DEFAULTS.k,
     anchoring: Annotated[Anchoring, Form(
         description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                     "when the source character has a skeleton, else the surface)")] = _DEFAULTS.anchoring,

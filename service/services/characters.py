@@ -33,17 +33,25 @@ async def create_character(repository: Repository, settings: Settings, owner: st
         extension_of(skeleton, (SKELETON_SUFFIX,), "skeleton")
     storage = repository.storage
     mesh_blob = await store_upload(storage, mesh, settings, suffix, "mesh")
-    skeleton_blob = await store_upload(storage, skeleton, settings, SKELETON_SUFFIX, "skeleton") if skeleton else None
+    try:
+        skeleton_blob = await store_upload(storage, skeleton, settings, SKELETON_SUFFIX, "skeleton") if skeleton else None
+    except Problem:
+        storage.discard_new(mesh_blob)
+        raise
     character_id = owned_id(owner, digest(
         "character", mesh_blob.sha256, suffix, skeleton_blob.sha256 if skeleton_blob else None, units, *axes))
     existing = repository.get(CharacterRecord, character_id)
     if existing is not None:
         return existing
-    character, stated = await validated(
-        solver.read_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
-        units=units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
-        max_bytes=settings.max_upload_bytes,
-    )
+    try:
+        character, stated = await validated(
+            solver.read_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
+            units=units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
+            max_bytes=settings.max_upload_bytes,
+        )
+    except Problem:
+        storage.discard_new(mesh_blob, skeleton_blob)  # a refused upload keeps no file
+        raise
     record = CharacterRecord(
         id=character_id, owner=owner, created_at=now(),
         mesh=BlobRef(sha256=mesh_blob.sha256, suffix=suffix, size=mesh_blob.size),

@@ -65,11 +65,16 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
     record = repository.get(HairstyleRecord, hairstyle_id)
     if record is None:
         stated = units if units != solver.AUTO else (solver.recorded_hair_units(blob.path) if suffix == ".npz" else None)
-        loaded = await validated(
-            solver.read_hair, "hair", blob.path, units=stated or "m",
-            limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes),
-        )
-        await validated(check_fit, "hair", repository, settings, character, loaded, stated)
+        try:
+            loaded = await validated(
+                solver.read_hair, "hair", blob.path, units=stated or "m",
+                limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes,
+                                         memory_budget_bytes=settings.memory_budget_bytes),
+            )
+            await validated(check_fit, "hair", repository, settings, character, loaded, stated)
+        except Problem:
+            repository.storage.discard_new(blob)  # a refused upload keeps no file
+            raise
         record = HairstyleRecord(
             id=hairstyle_id, owner=character.owner, created_at=now(), source_character_id=character.id,
             hair=BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size), format=suffix[1:],

@@ -53,6 +53,10 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
                                  guides=options.pop("guides") or hairstyle.options.guides,
                                  anchoring=hairstyle.options.anchoring)
     check_options(options, variant, body["hairline"])
+    try:
+        solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=variant.k)
+    except solver.InputError as error:
+        raise input_problem(error, "options") from None
     key = (hairstyle.artifact_key if variant == hairstyle.options
            else repository.variant_key(hairstyle, variant, solver.ARTIFACT_FORMAT_VERSION))
     jobs = []

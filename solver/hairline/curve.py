@@ -8,7 +8,6 @@ corners) matched to the corners of the current hairline (:mod:`.scalp`).
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 
@@ -17,6 +16,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from hairport.solver.mesh.polyline import polyline_arc_length
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.json_input import parse_json
 from hairport.solver.model.units import unit_scale
 
 #: a drawn hairline needs at least this many points
@@ -95,11 +95,8 @@ def read_hairline_curve(path: str | os.PathLike) -> HairlineCurve:
     size = os.path.getsize(source)
     if size > MAX_CURVE_FILE_BYTES:
         raise InputError(f"file has {size} bytes, more than the limit of {MAX_CURVE_FILE_BYTES}", source, "too_large")
-    try:
-        with open(source, encoding="utf-8") as handle:
-            document = json.load(handle)
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise InputError(f"not valid JSON ({error})", source, "bad_json") from None
+    with open(source, "rb") as handle:
+        document = parse_json(handle.read(), source, "bad_json")
     return parse_hairline_curve(document, source)
 
 

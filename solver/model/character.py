@@ -130,8 +130,8 @@ def check_same_topology(source: Character, target: Character) -> None:
     """Raise :class:`TopologyMismatch` unless both meshes have the same vertex count and faces."""
     if source.n_vertices != target.n_vertices:
         raise TopologyMismatch(
-            f"topology differs: source {source.name} has {source.n_vertices} vertices, "
-            f"target {target.name} has {target.n_vertices}",
+            # no file names in the problem (in the service they are storage names); the source says which
+            f"topology differs: the source has {source.n_vertices} vertices, the target has {target.n_vertices}",
             target.name,
         )
     if source.faces.shape != target.faces.shape or not np.array_equal(source.faces, target.faces):

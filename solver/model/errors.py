@@ -43,3 +43,14 @@ class PenetrationRemaining(InputError):
 
     def __init__(self, problem: str, source: str | None = None):
         super().__init__(problem, source, code="penetration_remaining")
+
+
+#: what a reader's arithmetic on hostile counts can raise beyond its own checks (an index
+#: past int64, a nesting past the recursion limit); the readers' entry points turn these into
+#: an InputError with code ``bad_file``, so no crafted file reaches a caller as an internal error
+PARSER_FAILURES = (OverflowError, RecursionError)
+
+
+def parser_failure(error: BaseException, source: str | None) -> InputError:
+    """The :class:`InputError` (code ``bad_file``) of a :data:`PARSER_FAILURES` exception."""
+    return InputError(f"the file cannot be read: {type(error).__name__}", source, "bad_file")

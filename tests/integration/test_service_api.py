@@ -309,7 +309,7 @@ def test_other_guide_count_preprocesses_a_cached_variant(service, uploaded):
         "succeeded"
     assert len(list((storage / "blobs").rglob("*.hpa"))) == before + 1
     assert_problem(client.post("/v1/retargets", headers=AUTH, json={**request, "options": {"guides": 0}}), 422,
-                   "invalid_request")
+                   "bad_option")
 
 
 def test_idempotency_key_replays_and_refuses_changes(service, uploaded):

@@ -47,3 +47,48 @@ def test_preprocess_refusals(change):
     with pytest.raises(InputError) as refused:
         PreprocessOptions(**change).validate()
     assert refused.value.code == "bad_option"
+
+
+@pytest.mark.parametrize("options", [
+    {"k": 10**9}, {"guides": 10**9}, {"k": 0}, {"sigma": float("nan")}, {"guides": 2.5},
+])
+def test_preprocess_options_out_of_range_are_refused(options):
+    from hairport.solver import InputError, PreprocessOptions
+
+    name = next(iter(options))
+    with pytest.raises(InputError, match=f"option {name} must be") as error:
+        PreprocessOptions(**options).validate()
+    assert error.value.code == "bad_option"
+
+
+@pytest.mark.parametrize("options", [
+    {"eps_c": 1e308}, {"alpha": -1.0}, {"alpha": float("nan")}, {"beta": float("inf")},
+    {"max_iterations": 10**9}, {"workers": 0}, {"step_tolerance": -1e-9}, {"alpha": "3"},
+])
+def test_retarget_options_out_of_range_are_refused(options):
+    from hairport.solver import OPTION_RANGES, InputError, RetargetOptions
+
+    name = next(iter(options))
+    with pytest.raises(InputError) as error:
+        RetargetOptions(**options).validate()
+    assert error.value.code == "bad_option"
+    assert name in error.value.problem
+    if not isinstance(options[name], str):
+        assert f"[{OPTION_RANGES[name].minimum:g}, {OPTION_RANGES[name].maximum:g}]" in error.value.problem
+
+
+def test_every_default_is_in_its_range():
+    from hairport.solver import PreprocessOptions, RetargetOptions
+
+    PreprocessOptions().validate()
+    RetargetOptions().validate()
+    RetargetOptions(workers=1).validate()
+
+
+def test_the_readme_table_is_the_one_generated_from_the_ranges():
+    from pathlib import Path
+
+    from hairport.solver.options import option_table
+
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    assert option_table() in readme

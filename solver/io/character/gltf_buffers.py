@@ -11,13 +11,13 @@ are the GLB chunk, ``data:`` URIs, or files beside the document (relative paths 
 from __future__ import annotations
 
 import base64
-import json
 from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
 
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.json_input import parse_json
 
 #: the first four bytes of a GLB file
 GLB_MAGIC = b"glTF"
@@ -56,10 +56,7 @@ def read_gltf_container(path: Path) -> tuple[dict, bytes | None]:
         binary = next((chunk for kind, chunk in chunks[1:] if kind == GLB_BIN_CHUNK), None)
     else:
         json_bytes = data
-    try:
-        document = json.loads(json_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputError(f"glTF JSON is not readable: {error}", source, "bad_mesh") from None
+    document = parse_json(json_bytes, source, "bad_mesh", "glTF JSON")
     if not isinstance(document, dict):
         raise InputError("glTF JSON is not an object", source, "bad_mesh")
     return document, binary

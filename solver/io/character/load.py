@@ -28,7 +28,7 @@ from hairport.solver.io.character.obj import READERS as OBJ_READERS
 from hairport.solver.io.character.ply import READERS as PLY_READERS
 from hairport.solver.io.character.skeleton_json import read_skeleton_json, resolve_skeleton_path
 from hairport.solver.model.character import Character
-from hairport.solver.model.errors import InputError
+from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.units import unit_scale
 
 #: the reader of every mesh format :func:`load_character` reads, by lower-case file extension
@@ -132,7 +132,10 @@ def read_character(
             source,
             "unknown_format",
         )
-    mesh = reader(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name)
+    try:
+        mesh = reader(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name)
+    except PARSER_FAILURES as error:
+        raise parser_failure(error, source) from None
     vertices, faces, skin = mesh.vertices, mesh.faces, mesh.skin
     check_mesh_arrays(vertices, faces, source, max_vertices, max_faces)
 

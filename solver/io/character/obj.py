@@ -89,8 +89,9 @@ def read_obj(
         )
     try:
         corners = np.array(" ".join(face_lines).split(), dtype=np.int64)
-    except ValueError:
-        raise InputError("a face has a corner that is not an integer vertex index", source, "bad_faces") from None
+    except (ValueError, OverflowError):  # OverflowError: an index beyond int64 (2^63)
+        raise InputError("a face has a corner that is not an integer vertex index in range", source,
+                         "bad_faces") from None
     if (corners == 0).any():
         raise InputError("a face refers to vertex 0 (OBJ indices start at 1)", source, "bad_faces")
     negative = corners < 0

@@ -35,6 +35,7 @@ from hairport.solver.io.character.mesh_file import DEFAULT_MAX_FILE_BYTES, MALFO
 from hairport.solver.model.character import Skeleton
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write_bytes
+from hairport.solver.model.json_input import parse_json
 from hairport.solver.model.units import unit_scale
 
 #: suffix of the skeleton sidecar that replaces the mesh file's extension
@@ -179,10 +180,7 @@ def _parse_skeleton_json(
 ) -> tuple[Skeleton, sp.csr_matrix | None, str]:
     source = str(path)
     check_file(path, max_bytes)
-    try:
-        document = json.loads(path.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise InputError(f"skeleton file is not valid JSON: {error}", source, "bad_skeleton") from None
+    document = parse_json(path.read_bytes(), source, "bad_skeleton", "skeleton file")
     if not isinstance(document, dict):
         raise InputError("skeleton JSON must be an object with 'bones'", source, "bad_skeleton")
     units = document.get("units")  # absent: meters for the joints, unknown for the mesh beside it

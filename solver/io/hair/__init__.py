@@ -66,7 +66,7 @@ from hairport.solver.io.hair.npz import FORMAT as NPZ
 from hairport.solver.io.hair.obj import FORMAT as OBJ
 from hairport.solver.io.hair.ply import FORMAT as PLY
 from hairport.solver.io.hair.yuksel import FORMAT as YUKSEL_HAIR
-from hairport.solver.model.errors import InputError
+from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.files import atomic_write
 from hairport.solver.model.hair import Hair
 from hairport.solver.model.units import unit_scale
@@ -283,7 +283,10 @@ def _read_file(source: str, limits: ReadLimits) -> bytes:
 
 
 def _parse(buf: bytes | memoryview, fmt: str, ctx: ReadContext) -> ReadReport:
-    return finish_read(FORMATS[fmt].read(buf, ctx), fmt, ctx)
+    try:
+        return finish_read(FORMATS[fmt].read(buf, ctx), fmt, ctx)
+    except PARSER_FAILURES as error:
+        raise parser_failure(error, ctx.source) from None
 
 
 def _emit_warnings(report: ReadReport) -> None:

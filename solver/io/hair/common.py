@@ -17,6 +17,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from hairport.solver.budget import check_memory
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import MIN_PARTICLES_PER_STRAND, Hair, require_hair
 from hairport.solver.model.units import unit_scale
@@ -36,7 +37,13 @@ ERROR_CODES: dict[str, str] = {
     "units_mismatch": "an npz archive recorded in other units than the ones asked for",
     "empty_hair": "no strand of two or more points, or every strand of zero length: nothing to retarget",
     "not_text": "a text format (obj) holds bytes that are not text: a binary or damaged file",
+    "over_memory_budget": "the declared particle count needs more memory than ReadLimits.memory_budget_bytes",
+    "bad_file": "a count or index past what the reader's arithmetic holds (past int64)",
 }
+
+#: most points one strand may have: real strands have 10^2-10^3; one strand of millions of
+#: points (a few KB of a compressed .npz) would keep a worker busy for minutes on one QP
+MAX_PARTICLES_PER_STRAND = 10_000
 
 # Largest counts the binary formats' integer fields hold.
 UINT16_MAX = int(np.iinfo(np.uint16).max)
@@ -58,12 +65,20 @@ class ReadLimits:
     max_particles : int
         Points the file may declare (points of short strands included).
     max_bytes : int or None
-        File size; ``None`` for no limit.
+        File size, and the decompressed size of a compressed file's content (``.npz``
+        members); ``None`` for no limit.
+    max_strand_particles : int
+        Points one strand may have (``too_large``).
+    memory_budget_bytes : int or None
+        The declared particle count is refused (``over_memory_budget``) when a retarget of
+        it is estimated to need more (:func:`hairport.solver.budget.estimate_bytes`).
     """
 
     max_strands: int = 5_000_000
     max_particles: int = 50_000_000
     max_bytes: int | None = None
+    max_strand_particles: int = MAX_PARTICLES_PER_STRAND
+    memory_budget_bytes: int | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,6 +164,8 @@ class ReadContext:
                 f"(ReadLimits.max_{what})",
                 "too_large",
             )
+        if what == "particles":
+            check_memory(count, self.limits.memory_budget_bytes, source=self.source)
 
 
 @dataclass(frozen=True)
@@ -218,6 +235,14 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         two points is left, or every strand has zero length.
     """
     counts = np.asarray(raw.counts, dtype=np.int64)
+    check_memory(int(counts.sum()), ctx.limits.memory_budget_bytes, source=ctx.source)
+    if len(counts) and counts.max() > ctx.limits.max_strand_particles:
+        bad = int(np.argmax(counts))
+        raise ctx.error(
+            f"strand {bad} has {int(counts[bad]):,} points, above the limit of "
+            f"{ctx.limits.max_strand_particles:,} per strand (ReadLimits.max_strand_particles)",
+            "too_large",
+        )
     check_finite(raw.points, counts, "coordinate", ctx)
     if raw.thickness is not None:
         check_finite(raw.thickness, counts, "thickness", ctx)

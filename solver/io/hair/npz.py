@@ -73,6 +73,8 @@ def read_npz(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
             raise ctx.error(
                 f"not a hairport hair archive: no array(s) {', '.join(missing)}", "bad_header"
             )
+        _check_unpacked_size(archive, [members[key] for key in (*NPZ_REQUIRED, *NPZ_OPTIONAL) if key in members],
+                             ctx)
         headers = {
             key: _member_header(archive, members[key], key, ctx)
             for key in (*NPZ_REQUIRED, *NPZ_OPTIONAL)
@@ -99,6 +101,20 @@ def read_npz(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
         notes,
         strict=True,
     )
+
+
+def _check_unpacked_size(archive: zipfile.ZipFile, names: list[str], ctx: ReadContext) -> None:
+    """Refuse (``too_large``) members whose declared uncompressed sizes add up to more than
+    ``max_bytes``: a few MB of deflated zeros can unpack to GBs. The reads that follow stay
+    within the declared sizes (``zipfile`` stops a member at its ``file_size`` and checks its
+    CRC, and every array is checked to fit in it), so a header that lies is caught there."""
+    limit = ctx.limits.max_bytes
+    unpacked = sum(archive.getinfo(name).file_size for name in names)
+    if limit is not None and unpacked > limit:
+        raise ctx.error(
+            f"the archive unpacks to {unpacked:,} bytes, above the limit of {limit:,} (ReadLimits.max_bytes)",
+            "too_large",
+        )
 
 
 def _member_header(archive: zipfile.ZipFile, member: str, key: str, ctx: ReadContext) -> _Header:

@@ -52,7 +52,7 @@ def test_idempotency(client, ids):
 @pytest.mark.parametrize("change, code", [
     ({"options": {"method": "teleport"}}, "unknown_method"),
     ({"options": {"beta": -1}}, "bad_option"),
-    ({"options": {"max_iterations": 0}}, "invalid_request"),
+    ({"options": {"max_iterations": 0}}, "bad_option"),
     ({"options": {"method": "rbf-warp"}, "hairline": {"preset": "round"}}, "bad_option"),
     ({"hairline": {"preset": "round", "amount": 2}}, "invalid_request"),
     ({"target_character_ids": ["0" * 32]}, "not_found"),

@@ -91,5 +91,5 @@ def test_topology_mismatch_is_refused(source):
         prepare_target(source, flipped)
     assert error.value.code == "topology_mismatch" and "face 0 differs" in error.value.problem
     fewer = Character(source.source.vertices[:-1], source.source.faces[:-24], name="fewer")
-    with pytest.raises(TopologyMismatch, match="source source has 722 vertices, target fewer has 721"):
+    with pytest.raises(TopologyMismatch, match="the source has 722 vertices, the target has 721"):
         prepare_target(source, fewer)

@@ -165,7 +165,7 @@ def glb(json_bytes: bytes, chunk_type: int = GLB_JSON_CHUNK, version: int = 2) -
         (glb(b'{"asset": {}}', version=1), "bad_mesh", "version 1"),
         (glb(b'{"asset": {}}', chunk_type=GLB_BIN_CHUNK), "bad_mesh", "JSON chunk"),
         (glb(b"[1, 2]    "), "bad_mesh", "not an object"),
-        (b"{not json", "bad_mesh", "not readable"),
+        (b"{not json", "bad_mesh", "not valid JSON"),
     ],
 )
 def test_bad_containers(tmp_path, data, code, words):
