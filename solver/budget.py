@@ -40,6 +40,6 @@ def check_memory(particles: int, budget_bytes: int | None, k: int = MEASURED_K, 
         raise InputError(
             f"{particles:,} particles need about {need / 1024**3:.1f} GiB "
             f"({estimate_bytes(1, k):,} B per particle), above this deployment's memory budget of "
-            f"{budget_bytes / 1024**3:.1f} GiB (memory_budget_bytes)",
+            f"{budget_bytes / 1024**3:.1f} GiB (raise it with HAIRPORT_MEMORY_BUDGET_BYTES)",
             source, OVER_MEMORY_BUDGET,
         )
