@@ -10,23 +10,26 @@ from hairport import solver
 
 from ..auth import Owner
 from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
-from ..schemas import HAIR_FILE_DESCRIPTION, Anchoring, HairstyleOut
+from ..errors import problem_responses
+from ..schemas import HAIR_FILE_DESCRIPTION, UNITS_ENUM, Anchoring, HairstyleOut
 from ..services import hairstyles
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
 _DEFAULTS = solver.PreprocessOptions()
 
 
-@router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle")
+@router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle",
+             responses=problem_responses(400, 401, 404, 413, 415, 422, 503))
 async def create_hairstyle(
     owner: Owner,
     settings: SettingsDep,
     repository: RepositoryDep,
     queue: QueueDep,
     hair: Annotated[UploadFile, File(description=HAIR_FILE_DESCRIPTION)],
-    source_character_id: Annotated[str, Form(description="the character the hairstyle was made for")],
+    source_character_id: Annotated[str, Form(description="the character the hairstyle was made for", min_length=1)],
     units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
-                                           "inferred from where its roots sit on the source character)")] = "auto",
+                                           "inferred from where its roots sit on the source character)",
+                                           json_schema_extra=UNITS_ENUM)] = "auto",
     guides: Annotated[int | None, Form(description="guide strands of the multi-scale solve (default 300)")] = None,
     k: Annotated[int, Form(description="inter-strand neighbours per particle (Eq. 8)")] = _DEFAULTS.k,
     anchoring: Annotated[Anchoring, Form(
@@ -38,6 +41,7 @@ async def create_hairstyle(
     return hairstyles.hairstyle_out(repository, record)
 
 
-@router.get("/{hairstyle_id}", response_model=HairstyleOut, summary="A hairstyle and its preprocessing state")
+@router.get("/{hairstyle_id}", response_model=HairstyleOut, summary="A hairstyle and its preprocessing state",
+            responses=problem_responses(401, 404, 422))
 def get_hairstyle(repository: RepositoryDep, hairstyle: OwnedHairstyle) -> HairstyleOut:
     return hairstyles.hairstyle_out(repository, hairstyle)
