@@ -23,7 +23,8 @@ DESCRIPTION = """Retarget strand hairstyles between characters of one mesh topol
 Upload characters and hairstyles, start retargets (one job per target), poll jobs, download
 results. Every error is `application/problem+json` (the `Problem` schema) with a stable `code`;
 each operation lists the statuses it can answer and their codes. A form field sent empty counts
-as not given. A file whose name has no extension is recognised by its content. Authenticate with
+as not given. A file whose name has no extension is recognised by its content, and a file field may
+also be sent as a plain field holding the file's text (`curl -F 'mesh=<body.obj'`). Authenticate with
 `Authorization: Bearer <key>` or `X-API-Key: <key>`; what a key creates is invisible to other keys.
 """
 

@@ -37,6 +37,7 @@ def kept(document: dict) -> dict:
         form = operation.get("requestBody", {}).get("content", {}).get(MULTIPART)
         if form is not None:
             without_null(resolve(document, form["schema"]))
+            files_as_files(resolve(document, form["schema"]))
             empty_is_not_given(resolve(document, form["schema"]))
     if not any(f"/{name}" in str(document["paths"]) for name in FASTAPI_VALIDATION_SCHEMAS):
         for name in FASTAPI_VALIDATION_SCHEMAS:
@@ -85,6 +86,16 @@ def empty_is_not_given(form: dict) -> None:
 NOT_GIVEN = {"type": "string", "maxLength": 0, "description": "sent empty: not given"}
 
 
+def files_as_files(form: dict) -> None:
+    """A file field is documented as a file (Swagger UI then offers a file picker), though the API also
+    reads a part sent without a file name as the file's text (``FilePart`` in service/uploads.py)."""
+    for field in form.get("properties", {}).values():
+        files = [branch for branch in field.get("anyOf", ()) if is_file(branch)]
+        if files:
+            del field["anyOf"]
+            field.update(files[0])
+
+
 def without_null(form: dict) -> None:
     """A multipart field is given or not: it cannot be null. FastAPI writes an optional field as
     ``anyOf [X, null]``, which makes a client (or a fuzzer) send the text ``null``; keep ``X``."""
@@ -96,3 +107,5 @@ def without_null(form: dict) -> None:
         if len(kept_branches) == 1:
             del field["anyOf"]
             field.update(kept_branches[0])
+        else:
+            field["anyOf"] = kept_branches

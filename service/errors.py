@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
-from starlette.routing import Match
 
 PROBLEM_TYPE_BASE = "https://hairport.dev/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -52,19 +53,22 @@ def install(app: FastAPI) -> None:
     async def _http(request: Request, error: StarletteHTTPException):
         code = _HTTP_CODES.get(error.status_code, f"http_{error.status_code}")
         headers = getattr(error, "headers", None)
-        if error.status_code == 405:
-            headers = {**(headers or {}), "Allow": ", ".join(allowed_methods(request))}
+        allowed = allowed_methods(request) if error.status_code == 405 else None
+        if allowed:
+            headers = {**(headers or {}), "Allow": ", ".join(allowed)}
         return problem_response(error.status_code, code, str(error.detail), headers=headers)
 
 
 def allowed_methods(request: Request) -> list[str]:
-    """Every method the request's path takes, over all its routes (Starlette's own 405 names only the
-    first route's: GET /v1/jobs/{id} and DELETE /v1/jobs/{id} are two routes)."""
+    """Every method the OpenAPI document gives the request's path, over all its routes (the router's own
+    405 names only the first route's: GET /v1/jobs/{id} and DELETE /v1/jobs/{id} are two routes); HEAD
+    with GET, as the router answers it."""
     methods = set()
-    for route in request.app.router.routes:
-        if getattr(route, "methods", None) and route.matches(request.scope)[0] != Match.NONE:
-            methods |= route.methods
-    return sorted(methods)
+    for template, operations in request.app.openapi()["paths"].items():
+        pattern = "[^/]+".join(re.escape(part) for part in re.split(r"\{[^/}]+\}", template))
+        if re.fullmatch(pattern, request.url.path):
+            methods |= {method.upper() for method in operations}
+    return sorted(methods | {"HEAD"} if "GET" in methods else methods)
 
 
 #: every status the API answers with a problem: what it means, and the codes it carries (those of the

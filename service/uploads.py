@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import PurePosixPath
 
 from fastapi import UploadFile
@@ -14,6 +15,18 @@ from hairport.storage import LocalStorage, UploadTooLarge, iter_upload
 from .errors import Problem
 from .formats import SNIFF_BYTES, sniffed_suffix
 from .schemas import AXIS_FORM_CHOICES, UNITS_CHOICES
+
+#: what a file field takes: a file part, or a part without a file name (``curl -F 'mesh=<body.obj'``),
+#: which the form parser hands over as text; both are the file's content (the contract shows a file)
+FilePart = UploadFile | str
+
+
+def as_upload(part: FilePart | None) -> UploadFile | None:
+    """The upload of a file field, whichever way it was sent (a text part has no name: its format is
+    recognised by its content)."""
+    if isinstance(part, str):
+        return UploadFile(io.BytesIO(part.encode()))
+    return part
 
 
 def extension_of(upload: UploadFile, allowed: tuple[str, ...], field: str) -> str:

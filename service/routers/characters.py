@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, UploadFile
+from fastapi import APIRouter, File, Form
 
 from ..auth import Owner
 from ..deps import OwnedCharacter, RepositoryDep, SettingsDep
 from ..errors import problem_responses
 from ..schemas import AXIS_ENUM, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut
 from ..services import characters
+from ..uploads import FilePart, as_upload
 
 router = APIRouter(prefix="/v1/characters", tags=["characters"])
 
@@ -21,8 +22,8 @@ async def create_character(
     owner: Owner,
     settings: SettingsDep,
     repository: RepositoryDep,
-    mesh: Annotated[UploadFile, File(description=MESH_FILE_DESCRIPTION)],
-    skeleton: Annotated[UploadFile | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
+    mesh: Annotated[FilePart, File(description=MESH_FILE_DESCRIPTION)],
+    skeleton: Annotated[FilePart | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
     units: Annotated[str | None, Form(description="units of a mesh without a skeleton JSON (default auto: glTF's "
                                                   "meters, else inferred from sizes)",
                                                   json_schema_extra=UNITS_ENUM)] = None,
@@ -31,7 +32,8 @@ async def create_character(
     front_axis: Annotated[str | None, Form(description="the axis the face looks along (default auto: inferred)",
                                            json_schema_extra=AXIS_ENUM)] = None,
 ) -> CharacterOut:
-    return CharacterOut.of(await characters.create_character(repository, settings, owner, mesh, skeleton, units,
+    return CharacterOut.of(await characters.create_character(repository, settings, owner, as_upload(mesh),
+                                                             as_upload(skeleton), units,
                                                              up_axis, front_axis))
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, UploadFile
+from fastapi import APIRouter, File, Form
 
 from hairport import solver
 
@@ -13,6 +13,7 @@ from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
 from ..errors import problem_responses
 from ..schemas import HAIR_FILE_DESCRIPTION, UNITS_ENUM, Anchoring, HairstyleOut
 from ..services import hairstyles
+from ..uploads import FilePart, as_upload
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
 _DEFAULTS = solver.PreprocessOptions()
@@ -25,7 +26,7 @@ async def create_hairstyle(
     settings: SettingsDep,
     repository: RepositoryDep,
     queue: QueueDep,
-    hair: Annotated[UploadFile, File(description=HAIR_FILE_DESCRIPTION)],
+    hair: Annotated[FilePart, File(description=HAIR_FILE_DESCRIPTION)],
     source_character_id: Annotated[str, Form(description="the character the hairstyle was made for", min_length=1)],
     units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
                                            "inferred from where its roots sit on the source character)",
@@ -36,7 +37,8 @@ async def create_hairstyle(
         description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                     "when the source character has a skeleton, else the surface)")] = _DEFAULTS.anchoring,
 ) -> HairstyleOut:
-    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, hair, units, k,
+    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, as_upload(hair),
+                                               units, k,
                                                guides, anchoring)
     return hairstyles.hairstyle_out(repository, record)
 
