@@ -31,6 +31,13 @@ def files(tmp_path_factory):
     return write_inputs(tmp_path_factory.mktemp("contract"))
 
 
+def test_the_readme_lists_every_status_and_code():
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    for status, (_, codes) in errors.PROBLEM_STATUSES.items():
+        row = next(line for line in readme.splitlines() if line.startswith(f"| {status} |"))
+        assert all(f"`{code}`" in row for code in codes), status
+
+
 def test_every_error_response_is_a_problem(client):
     document = client.get("/openapi.json").json()
     assert "HTTPValidationError" not in document["components"]["schemas"]
