@@ -30,8 +30,8 @@ def problem_response(status: int, code: str, detail: str, title: str | None = No
 
 
 #: codes of the HTTP errors raised by the framework itself
-_HTTP_CODES = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "upload_too_large",
-               415: "unsupported_media_type"}
+_HTTP_CODES = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed",
+               413: "upload_too_large", 415: "unsupported_media_type"}
 
 
 def install(app: FastAPI) -> None:

@@ -18,7 +18,8 @@ RAISED = re.compile(r"""(?:Problem|problem_response)\(\s*(\d{3}),\s*"([a-z_]+)\"
 
 
 def test_every_problem_the_service_raises_is_documented_with_its_code():
-    raised = {(int(status), code) for path in SERVICE.rglob("*.py") for status, code in RAISED.findall(path.read_text())}
+    raised = {(int(status), code) for path in SERVICE.rglob("*.py")
+              for status, code in RAISED.findall(path.read_text())}
     assert len(raised) >= 12
     raised |= {(status, code) for status, code in errors._HTTP_CODES.items()}
     undocumented = {(status, code) for status, code in raised
