@@ -19,7 +19,7 @@ ASSETS_DIR = files("fastapi_offline") / "static"
 SWAGGER_JS, SWAGGER_CSS, REDOC_JS, FAVICON = ("swagger-ui-bundle.js", "swagger-ui.css", "redoc.standalone.js",
                                               "favicon.png")
 #: Swagger UI's defaults, without its online validator badge (it would send the document to a third party)
-SWAGGER_PARAMETERS = {**swagger_ui_default_parameters, "validatorUrl": None, "persistAuthorization": True}
+SWAGGER_PARAMETERS = {**swagger_ui_default_parameters, "validatorUrl": None}
 
 
 def install(app: FastAPI, docs_url: str = "/docs", redoc_url: str = "/redoc") -> None:

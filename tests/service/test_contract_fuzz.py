@@ -86,11 +86,12 @@ def seed(client: TestClient, folder) -> dict[str, list[str]]:
     assert jobs.status_code == 202, jobs.text
     queued, done = [job["id"] for job in jobs.json()["jobs"]]
     succeed(client.app.state.repository, done, folder)
-    solver.write_hair(folder / "groom.ply", solver.read_hair(folder / "groom.data"), format="ply")
+    solver.write_hair(folder / "groom.obj", solver.read_hair(folder / "groom.data"), format="obj")
+    # files as text (a binary value would make schemathesis judge the case schema-violating), sent without a
+    # file name: their format is recognised by their content
     return {"character_id": characters, "hairstyle_id": [hairstyle.json()["id"]], "job_id": [queued, done],
-            # file contents, sent without a file name: the format is sniffed
-            "mesh": [files["target.obj"]], "skeleton": [files["target.skeleton.json"]],
-            "hair": [(folder / "groom.ply").read_bytes()]}
+            "mesh": [files["target.obj"].decode()], "skeleton": [files["target.skeleton.json"].decode()],
+            "hair": [(folder / "groom.obj").read_text()]}
 
 
 def succeed(repository, job_id: str, folder) -> None:
@@ -107,8 +108,18 @@ def succeed(repository, job_id: str, folder) -> None:
         for (name, blob), suffix in zip(outputs.items(), (".npz", ".png", ".json"))})
 
 
-def or_real(value, real: list[str]):
-    return st.sampled_from([value, *real])
+def swapped(values, swaps: dict[str, list]):
+    """``values`` (path parameters or a body) with each swappable one kept or replaced by a real one."""
+    if not isinstance(values, dict):
+        return st.just(values)
+    return st.fixed_dictionaries({name: st.sampled_from([value, *swaps[name]]) if name in swaps else st.just(value)
+                                  for name, value in values.items()})
+
+
+def with_parts(case, path_parameters, body):
+    """The case with its swaps (schemathesis re-judges its mode: a swap keeps a valid case valid)."""
+    case.path_parameters, case.body = path_parameters, body
+    return case
 
 
 @pytest.fixture(scope="module")
@@ -117,22 +128,16 @@ def api_schema(redis_url, tmp_path_factory):
     real = seed(TestClient(app), tmp_path_factory.mktemp("inputs"))
     loaded = schemathesis.openapi.from_asgi("/openapi.json", app, config=SchemathesisConfig.from_dict(CONFIG))
 
-    @loaded.hook
-    def flatmap_path_parameters(context, path_parameters):
-        if not isinstance(path_parameters, dict):
-            return st.just(path_parameters)
-        return st.fixed_dictionaries({name: or_real(value, real.get(name, [])) for name, value in
-                                      path_parameters.items()})
+    swaps = {**real, "source_character_id": real["character_id"][:1],
+             "target_character_ids": [real["character_id"], real["character_id"][:1]]}
 
     @loaded.hook
-    def flatmap_body(context, body):
-        if not isinstance(body, dict):
-            return st.just(body)
-        swaps = {"source_character_id": real["character_id"][:1], "hairstyle_id": real["hairstyle_id"],
-                 "target_character_ids": [real["character_id"], real["character_id"][:1]],
-                 **{name: real[name] for name in ("mesh", "skeleton", "hair")}}
-        return st.fixed_dictionaries({name: or_real(value, swaps[name]) if name in swaps else st.just(value)
-                                      for name, value in body.items()})
+    def flatmap_case(context, case):
+        """Schema-valid cases only: a swap would turn a schema-violating value into a valid one."""
+        if case.meta is None or not case.meta.generation.mode.is_positive:
+            return st.just(case)
+        return st.tuples(swapped(case.path_parameters, swaps), swapped(case.body, swaps)).map(
+            lambda parts: with_parts(case, *parts))
 
     return loaded
 
