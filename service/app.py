@@ -14,14 +14,17 @@ from hairport.settings import Settings, get_settings
 from hairport.storage import LocalStorage, deployment_id
 from hairport.worker.queue import TaskQueue, connect
 
-from . import errors
+from . import contract, docs, errors
 from .auth import check_configuration
 from .routers import characters, hairstyles, health, jobs, retargets
 
 DESCRIPTION = """Retarget strand hairstyles between characters of one mesh topology.
 
 Upload characters and hairstyles, start retargets (one job per target), poll jobs, download
-results. Every error is `application/problem+json` with a stable `code`. Authenticate with
+results. Every error is `application/problem+json` (the `Problem` schema) with a stable `code`;
+each operation lists the statuses it can answer and their codes. A form field sent empty counts
+as not given. A file whose name has no extension is recognised by its content, and a file field may
+also be sent as a plain field holding the file's text (`curl -F 'mesh=<body.obj'`). Authenticate with
 `Authorization: Bearer <key>` or `X-API-Key: <key>`; what a key creates is invisible to other keys.
 """
 
@@ -81,7 +84,7 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     ``queue_depths`` default to checks against that Redis."""
     settings = settings or get_settings()
     check_configuration(settings)
-    app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION)
+    app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION, docs_url=None, redoc_url=None)
     app.state.settings = settings
     app.state.storage = LocalStorage(settings.storage_dir)
     app.state.repository = Repository(app.state.storage)
@@ -102,4 +105,6 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
                            allow_headers=["*"], expose_headers=["Location"])
     for router in (characters.router, hairstyles.router, retargets.router, jobs.router, health.router):
         app.include_router(router)
+    contract.install(app)
+    docs.install(app)
     return app

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -32,8 +34,8 @@ def problem_response(status: int, code: str, detail: str, title: str | None = No
 
 
 #: codes of the HTTP errors raised by the framework itself
-_HTTP_CODES = {401: "unauthorized", 404: "not_found", 405: "method_not_allowed", 413: "upload_too_large",
-               415: "unsupported_media_type"}
+_HTTP_CODES = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "method_not_allowed",
+               413: "upload_too_large", 415: "unsupported_media_type"}
 
 
 def install(app: FastAPI) -> None:
@@ -57,4 +59,63 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, error: StarletteHTTPException):
         code = _HTTP_CODES.get(error.status_code, f"http_{error.status_code}")
-        return problem_response(error.status_code, code, str(error.detail), headers=getattr(error, "headers", None))
+        headers = getattr(error, "headers", None)
+        allowed = allowed_methods(request) if error.status_code == 405 else None
+        if allowed:
+            headers = {**(headers or {}), "Allow": ", ".join(allowed)}
+        return problem_response(error.status_code, code, str(error.detail), headers=headers)
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method the OpenAPI document gives the request's path, over all its routes (the router's own
+    405 names only the first route's: GET /v1/jobs/{id} and DELETE /v1/jobs/{id} are two routes); HEAD
+    with GET, as the router answers it."""
+    methods = set()
+    for template, operations in request.app.openapi()["paths"].items():
+        pattern = "[^/]+".join(re.escape(part) for part in re.split(r"\{[^/}]+\}", template))
+        if re.fullmatch(pattern, request.url.path):
+            methods |= {method.upper() for method in operations}
+    return sorted(methods | {"HEAD"} if "GET" in methods else methods)
+
+
+#: every status the API answers with a problem: what it means, and the codes it carries (those of the
+#: service; 413 and 422 also carry the codes of the file and option checks, listed as examples)
+PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
+    400: ("the body could not be parsed (malformed multipart, or a JSON body that is not UTF-8)", ("bad_request",)),
+    401: ("no API key, or an unknown one (`WWW-Authenticate: Bearer`)", ("unauthorized",)),
+    404: ("no such resource for this key: what another key created is not found either", ("not_found",)),
+    405: ("the path does not take this method (`Allow` lists those it takes)", ("method_not_allowed",)),
+    409: ("the job has not succeeded (yet): it has no outputs", ("job_not_succeeded",)),
+    410: ("the output was removed by the retention policy", ("gone",)),
+    413: ("the body, an upload, a count in it or its estimated memory is above this deployment's limits",
+          ("upload_too_large", "too_large", "over_memory_budget")),
+    415: ("no accepted format: the file name's extension is not one this field reads, or the name has none and "
+          "the content is not recognised", ("unknown_format", "unsupported_media_type")),
+    422: ("the request is invalid: a field fails the schema (`invalid_request`), or a value, file or option fails "
+          "its check", ("invalid_request", "bad_units", "bad_axis", "bad_option", "no_skeleton", "too_many_targets",
+                        "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
+                        "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite")),
+    503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds",
+          ("queue_unavailable",)),
+}
+#: the Problem schema in the OpenAPI document (service/contract.py puts it there)
+PROBLEM_SCHEMA_REF = "#/components/schemas/Problem"
+#: headers a problem of a status carries
+PROBLEM_HEADERS: dict[int, dict[str, dict]] = {
+    401: {"WWW-Authenticate": {"description": "the scheme to authenticate with", "schema": {"type": "string"}}},
+    503: {"Retry-After": {"description": "seconds to wait before trying again", "schema": {"type": "integer"}}},
+}
+
+
+def problem_responses(*statuses: int) -> dict[int, dict]:
+    """The ``responses=`` of a route answering ``statuses`` with problems: the Problem schema under
+    ``application/problem+json``, the meaning and known codes of each status, and its headers."""
+    responses = {}
+    for status in statuses:
+        meaning, codes = PROBLEM_STATUSES[status]
+        response = {"content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": PROBLEM_SCHEMA_REF}}},
+                    "description": f"{meaning}. Codes: {', '.join(f'`{code}`' for code in codes)}."}
+        if status in PROBLEM_HEADERS:
+            response["headers"] = PROBLEM_HEADERS[status]
+        responses[status] = response
+    return responses

@@ -202,3 +202,38 @@ class JobPage(BaseModel):
     limit: int
     offset: int
     next_offset: int | None = None
+
+
+class Problem(BaseModel):
+    """An error (RFC 9457 problem details, ``application/problem+json``) with a stable ``code``."""
+
+    type: str = Field(description="a URI naming the kind of error: the problem base followed by the code")
+    title: str = Field(description="a short human summary of the kind of error")
+    status: int = Field(description="the HTTP status code")
+    detail: str = Field(description="what went wrong in this request, for people")
+    code: str = Field(description="stable machine-readable code; each response's description lists the known "
+                                  "codes of its status")
+
+
+#: media type of a result file per hair format: the result route answers with it and the contract lists it
+#: (OBJ has a registered type; the other formats have none and are plain binary files)
+RESULT_MEDIA_TYPES: dict[str, str] = {name: "application/octet-stream" for name in solver.HAIR_FORMATS} | {
+    "obj": "model/obj"}
+
+
+def result_content() -> dict:
+    """The OpenAPI ``content`` of a result: each media type of :data:`RESULT_MEDIA_TYPES`, once."""
+    return {media_type: {"schema": {"type": "string", "format": "binary"}}
+            for media_type in dict.fromkeys(RESULT_MEDIA_TYPES.values())}
+
+
+RESULT_DESCRIPTION = "The result file, by `format`: " + ", ".join(
+    f"{name} `{media_type}`" for name, media_type in RESULT_MEDIA_TYPES.items()) + "."
+
+
+#: the values a form's units field takes (``auto``: the file's, else inferred)
+UNITS_CHOICES = (solver.AUTO, *solver.UNITS)
+#: the values a form's axis field takes (``auto``: inferred; case and surrounding spaces are ignored)
+AXIS_FORM_CHOICES = (solver.AUTO, *solver.AXIS_CHOICES)
+UNITS_ENUM = {"enum": list(UNITS_CHOICES)}
+AXIS_ENUM = {"enum": list(AXIS_FORM_CHOICES)}

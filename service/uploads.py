@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import PurePosixPath
 
 from fastapi import UploadFile
@@ -12,15 +13,37 @@ from hairport.settings import Settings
 from hairport.storage import LocalStorage, UploadTooLarge, iter_upload
 
 from .errors import Problem
+from .formats import SNIFF_BYTES, sniffed_suffix
+from .schemas import AXIS_FORM_CHOICES, UNITS_CHOICES
+
+#: what a file field takes: a file part, or a part without a file name (``curl -F 'mesh=<body.obj'``),
+#: which the form parser hands over as text; both are the file's content (the contract shows a file)
+FilePart = UploadFile | str
+
+
+def as_upload(part: FilePart | None) -> UploadFile | None:
+    """The upload of a file field, whichever way it was sent (a text part has no name: its format is
+    recognised by its content)."""
+    if isinstance(part, str):
+        return UploadFile(io.BytesIO(part.encode()))
+    return part
 
 
 def extension_of(upload: UploadFile, allowed: tuple[str, ...], field: str) -> str:
-    """The lower-case extension of the upload's file name, if allowed (the name is used for nothing else)."""
+    """The lower-case extension of the upload's file name, if allowed; for a name without one, the
+    extension its content shows (the name is used for nothing else). 415 ``unknown_format`` otherwise."""
     suffix = PurePosixPath(upload.filename or "").suffix.lower()
-    if suffix not in allowed:
-        raise Problem(415, "unknown_format",
-                      f"{field}: file name must end in one of {', '.join(allowed)} (got {suffix or 'no extension'!r})")
-    return suffix
+    if suffix in allowed:
+        return suffix
+    if not suffix:
+        head = upload.file.read(SNIFF_BYTES)
+        upload.file.seek(0)
+        sniffed = sniffed_suffix(head, allowed)
+        if sniffed is not None:
+            return sniffed
+        raise Problem(415, "unknown_format", f"{field}: the file name has no extension and the content is none of "
+                                             f"{', '.join(allowed)}: name the file with its extension")
+    raise Problem(415, "unknown_format", f"{field}: file name must end in one of {', '.join(allowed)} (got {suffix!r})")
 
 
 async def store_upload(storage: LocalStorage, upload: UploadFile, settings: Settings, suffix: str, field: str):
@@ -55,8 +78,8 @@ async def validated(call, field: str, *args, **kwargs):
 
 def check_units(units: str | None) -> None:
     """422 ``bad_units`` for units the readers do not know (``None`` or ``auto``: the file's, else inferred)."""
-    if units is not None and units not in (solver.AUTO, *solver.UNITS):
-        raise Problem(422, "bad_units", f"units must be one of {', '.join((solver.AUTO, *solver.UNITS))}")
+    if units is not None and units not in UNITS_CHOICES:
+        raise Problem(422, "bad_units", f"units must be one of {', '.join(UNITS_CHOICES)}")
 
 
 def check_axis(axis: str | None, field: str) -> str | None:
@@ -68,4 +91,4 @@ def check_axis(axis: str | None, field: str) -> str | None:
         return solver.parse_axis(axis)
     except solver.InputError:
         raise Problem(422, "bad_axis",
-                      f"{field} must be one of {', '.join((solver.AUTO, *solver.AXIS_CHOICES))}") from None
+                      f"{field} must be one of {', '.join(AXIS_FORM_CHOICES)}") from None

@@ -4,33 +4,40 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, UploadFile
+from fastapi import APIRouter, File, Form
 
 from ..auth import Owner
 from ..deps import OwnedCharacter, RepositoryDep, SettingsDep
-from ..schemas import MESH_FILE_DESCRIPTION, CharacterOut
+from ..errors import problem_responses
+from ..schemas import AXIS_ENUM, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut
 from ..services import characters
+from ..uploads import FilePart, as_upload
 
 router = APIRouter(prefix="/v1/characters", tags=["characters"])
 
 
-@router.post("", status_code=201, response_model=CharacterOut, summary="Upload a character")
+@router.post("", status_code=201, response_model=CharacterOut, summary="Upload a character",
+             responses=problem_responses(400, 401, 413, 415, 422))
 async def create_character(
     owner: Owner,
     settings: SettingsDep,
     repository: RepositoryDep,
-    mesh: Annotated[UploadFile, File(description=MESH_FILE_DESCRIPTION)],
-    skeleton: Annotated[UploadFile | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
+    mesh: Annotated[FilePart, File(description=MESH_FILE_DESCRIPTION)],
+    skeleton: Annotated[FilePart | None, File(description="skeleton JSON (or use the glTF skin)")] = None,
     units: Annotated[str | None, Form(description="units of a mesh without a skeleton JSON (default auto: glTF's "
-                                                  "meters, else inferred from sizes)")] = None,
+                                                  "meters, else inferred from sizes)",
+                                                  json_schema_extra=UNITS_ENUM)] = None,
     up_axis: Annotated[str | None, Form(description="the mesh's up axis: x, y, z, -x, -y, -z "
-                                                    "(default auto: inferred)")] = None,
-    front_axis: Annotated[str | None, Form(description="the axis the face looks along (default auto: inferred)")] = None,
+                                                    "(default auto: inferred)", json_schema_extra=AXIS_ENUM)] = None,
+    front_axis: Annotated[str | None, Form(description="the axis the face looks along (default auto: inferred)",
+                                           json_schema_extra=AXIS_ENUM)] = None,
 ) -> CharacterOut:
-    return CharacterOut.of(await characters.create_character(repository, settings, owner, mesh, skeleton, units,
+    return CharacterOut.of(await characters.create_character(repository, settings, owner, as_upload(mesh),
+                                                             as_upload(skeleton), units,
                                                              up_axis, front_axis))
 
 
-@router.get("/{character_id}", response_model=CharacterOut, summary="A character")
+@router.get("/{character_id}", response_model=CharacterOut, summary="A character",
+            responses=problem_responses(401, 404, 422))
 def get_character(character: OwnedCharacter) -> CharacterOut:
     return CharacterOut.of(character)

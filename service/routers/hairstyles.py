@@ -4,14 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, UploadFile
+from fastapi import APIRouter, File, Form
 
 from hairport import solver
 
 from ..auth import Owner
 from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
-from ..schemas import HAIR_FILE_DESCRIPTION, Anchoring, HairstyleOut
+from ..errors import problem_responses
+from ..schemas import HAIR_FILE_DESCRIPTION, UNITS_ENUM, Anchoring, HairstyleOut
 from ..services import hairstyles
+from ..uploads import FilePart, as_upload
 
 router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
 
@@ -24,27 +26,31 @@ def ranged_form(name: str, note: str = ""):
 _DEFAULTS = solver.PreprocessOptions()
 
 
-@router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle")
+@router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle",
+             responses=problem_responses(400, 401, 404, 413, 415, 422, 503))
 async def create_hairstyle(
     owner: Owner,
     settings: SettingsDep,
     repository: RepositoryDep,
     queue: QueueDep,
-    hair: Annotated[UploadFile, File(description=HAIR_FILE_DESCRIPTION)],
-    source_character_id: Annotated[str, Form(description="the character the hairstyle was made for")],
+    hair: Annotated[FilePart, File(description=HAIR_FILE_DESCRIPTION)],
+    source_character_id: Annotated[str, Form(description="the character the hairstyle was made for", min_length=1)],
     units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
-                                           "inferred from where its roots sit on the source character)")] = "auto",
+                                           "inferred from where its roots sit on the source character)",
+                                           json_schema_extra=UNITS_ENUM)] = "auto",
     guides: Annotated[int | None, ranged_form("guides", f"default {solver.DEFAULT_GUIDES}")] = None,
     k: Annotated[int, ranged_form("k")] = _DEFAULTS.k,
     anchoring: Annotated[Anchoring, Form(
         description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                     "when the source character has a skeleton, else the surface)")] = _DEFAULTS.anchoring,
 ) -> HairstyleOut:
-    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, hair, units, k,
+    record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, as_upload(hair),
+                                               units, k,
                                                guides, anchoring)
     return hairstyles.hairstyle_out(repository, record)
 
 
-@router.get("/{hairstyle_id}", response_model=HairstyleOut, summary="A hairstyle and its preprocessing state")
+@router.get("/{hairstyle_id}", response_model=HairstyleOut, summary="A hairstyle and its preprocessing state",
+            responses=problem_responses(401, 404, 422))
 def get_hairstyle(repository: RepositoryDep, hairstyle: OwnedHairstyle) -> HairstyleOut:
     return hairstyles.hairstyle_out(repository, hairstyle)

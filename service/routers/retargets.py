@@ -8,13 +8,16 @@ from fastapi import APIRouter, Header, Response
 
 from ..auth import Owner
 from ..deps import QueueDep, RepositoryDep, SettingsDep
+from ..errors import problem_responses
 from ..schemas import JobOut, JobsCreated, RetargetIn
 from ..services import retargets
+from ..services.retargets import MAX_IDEMPOTENCY_KEY
 
 router = APIRouter(prefix="/v1/retargets", tags=["retargets"])
 
 
-@router.post("", status_code=202, response_model=JobsCreated, summary="Retarget a hairstyle onto targets")
+@router.post("", status_code=202, response_model=JobsCreated, summary="Retarget a hairstyle onto targets",
+             responses=problem_responses(400, 401, 404, 413, 422, 503))
 def create_retargets(
     owner: Owner,
     settings: SettingsDep,
@@ -22,7 +25,8 @@ def create_retargets(
     queue: QueueDep,
     request: RetargetIn,
     response: Response,
-    idempotency_key: Annotated[str | None, Header(description="repeat a request safely")] = None,
+    idempotency_key: Annotated[str | None, Header(description="repeat a request safely", min_length=1,
+                                                  max_length=MAX_IDEMPOTENCY_KEY)] = None,
 ) -> JobsCreated:
     jobs = retargets.create_retargets(repository, queue, settings, owner, request, idempotency_key)
     response.headers["Location"] = f"/v1/jobs/{jobs[0].id}"

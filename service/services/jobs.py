@@ -11,9 +11,8 @@ from hairport.repository import Repository
 from hairport.worker.queue import TaskQueue
 
 from ..errors import Problem
+from ..schemas import RESULT_MEDIA_TYPES
 
-#: media type of each result format
-MEDIA_TYPES = {name: "application/octet-stream" for name in solver.HAIR_FORMATS} | {"obj": "text/plain"}
 #: what a lossless copy of every result is kept as (other formats are converted from it)
 LOSSLESS_FORMAT = "npz"
 #: a stored result is read back whole, whatever the configured input limits
@@ -57,7 +56,7 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
     outputs = outputs_of(job)
     fmt = fmt or job.output_format
     if fmt in outputs:
-        return blob_response(repository, outputs[fmt], MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
+        return blob_response(repository, outputs[fmt], RESULT_MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
     lossless = outputs[LOSSLESS_FORMAT]
     source = repository.storage.blob(lossless.sha256, lossless.suffix)
     if source is None:
@@ -72,5 +71,5 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
     except BaseException:
         work.__exit__(None, None, None)
         raise
-    return FileResponse(path, media_type=MEDIA_TYPES[fmt], filename=f"{job.id}.{fmt}",
+    return FileResponse(path, media_type=RESULT_MEDIA_TYPES[fmt], filename=f"{job.id}.{fmt}",
                         background=BackgroundTask(work.__exit__, None, None, None))

@@ -64,7 +64,7 @@ def test_results_in_any_format_and_gone_outputs(client, tmp_path):
     stored = client.get(f"/v1/jobs/{job_id}/result", headers=AUTH, params={"format": "npz"})
     assert stored.status_code == 200 and stored.content == (tmp_path / "r.npz").read_bytes()
     converted = client.get(f"/v1/jobs/{job_id}/result", headers=AUTH, params={"format": "obj"})
-    assert converted.status_code == 200 and converted.headers["content-type"].startswith("text/plain")
+    assert converted.status_code == 200 and converted.headers["content-type"] == "model/obj"
     np.testing.assert_allclose(solver.read_hair(write(tmp_path / "c.obj", converted.content)).points, hair.points,
                                atol=1e-7)
     assert list((repository.storage.root / "work").iterdir()) == []  # the scratch folder went with the response
