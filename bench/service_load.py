@@ -10,9 +10,11 @@ are queued or running) while it measures:
 * ``GET /v1/jobs/{id}``: ``--pollers`` concurrent pollers (asyncio + httpx, one connection each),
   two load models: *closed loop* (each poller sends its next request as soon as the last one
   answered: the server's saturation, latency ~ pollers / throughput) and *paced* (each poller waits
-  ``--think`` seconds between the answer and its next request, as a client polling a job does);
+  about ``--think`` seconds (+-50 %, from a random phase) between the answer and its next request, as
+  independent clients polling a job do);
 * ``GET /v1/jobs?limit=50``, ``GET /v1/jobs?state=succeeded&limit=50`` and ``GET /metrics`` with
-  the records kept: ``--list-clients`` closed-loop clients each.
+  the records kept: ``--list-clients`` closed-loop clients each; the page of 50 also with one client
+  and with ``--list-clients`` paced at ``--list-think`` seconds (dashboards refreshing).
 
 Every window runs ``--seconds`` seconds; each figure is the median over ``--runs`` runs. With
 ``--baseline-ref REV`` the same measurements run first against the code of that git revision (its
@@ -31,6 +33,7 @@ import contextlib
 import datetime
 import os
 import platform
+import random
 import shutil
 import socket
 import statistics
@@ -49,6 +52,8 @@ START_SECONDS = 60.0
 BUSY_JOBS = 2
 #: groom of the retarget jobs: strands x particles (a job of a few seconds on one core)
 GROOM = (400, 16)
+#: a paced client's think time varies by this fraction either way (uniformly)
+THINK_JITTER = 0.5
 #: seconds between the feeder's checks
 FEED_SECONDS = 0.5
 
@@ -258,7 +263,12 @@ async def load(client, paths: list[str], clients: int, seconds: float, think: fl
         nonlocal errors
         turn = offset
         connection = RawConnection(raw_url) if raw_url else None
+        # independent clients: paced ones start at a random phase of their period and vary it by
+        # THINK_JITTER, else they stay in step and arrive as one burst of `clients` requests
+        pace = random.Random(offset)
         try:
+            if think:
+                await asyncio.sleep(pace.uniform(0.0, think))
             while time.monotonic() < end:
                 began = time.perf_counter()
                 if connection is not None:
@@ -269,7 +279,7 @@ async def load(client, paths: list[str], clients: int, seconds: float, think: fl
                 errors += status != 200
                 turn += 1
                 if think:
-                    await asyncio.sleep(think)
+                    await asyncio.sleep(think * pace.uniform(1.0 - THINK_JITTER, 1.0 + THINK_JITTER))
         finally:
             if connection is not None:
                 connection.close()
@@ -305,6 +315,8 @@ async def measure(url: str, ids: dict, args) -> dict:
         windows = {
             "poll, closed loop": ("poll", args.pollers, 0.0),
             f"poll, {args.think:g} s think": ("poll", args.pollers, args.think),
+            "list 50, one client": (["/v1/jobs?limit=50"], 1, 0.0),
+            f"list 50, {args.list_think:g} s think": (["/v1/jobs?limit=50"], args.list_clients, args.list_think),
             "list 50": (["/v1/jobs?limit=50"], args.list_clients, 0.0),
             "list 50, state": (["/v1/jobs?state=succeeded&limit=50"], args.list_clients, 0.0),
             "metrics": (["/metrics"], args.list_clients, 0.0),
@@ -346,8 +358,9 @@ def run(ref: str | None, args) -> dict:
 def table(results: dict[str, dict], args) -> str:
     lines = [f"hairport service load - {datetime.date.today()} - {platform.node()} ({os.cpu_count()} cores, "
              f"{platform.processor() or platform.machine()}, Python {platform.python_version()})",
-             f"load: {args.pollers} pollers on the jobs being run (closed loop, and with {args.think:g} s think time); "
-             f"listings and /metrics: {args.list_clients} closed-loop clients, {args.records} jobs kept; "
+             f"load: {args.pollers} pollers on the jobs being run (closed loop, and paced: {args.think:g} s think time "
+             f"+-{THINK_JITTER:.0%}, random phase); listings and /metrics: {args.list_clients} closed-loop clients "
+             f"(also one client, and {args.list_clients} paced at {args.list_think:g} s), {args.records} jobs kept; "
              f"{args.seconds:g} s windows, median of {args.runs} runs; one worker busy with retargets throughout; "
              f"client: {args.client} (one process on the same machine); load average at the end "
              f"{os.getloadavg()[0]:.1f} (other work on the machine counts)",
@@ -371,6 +384,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--records", type=int, default=10_000, help="job records kept")
     parser.add_argument("--pollers", type=int, default=100, help="concurrent pollers of GET /v1/jobs/{id}")
     parser.add_argument("--think", type=float, default=0.5, help="seconds a paced poller waits between polls")
+    parser.add_argument("--list-think", type=float, default=1.0,
+                        help="seconds a paced listing client (a dashboard refreshing) waits between listings")
     parser.add_argument("--list-clients", type=int, default=10, help="concurrent clients of the listings")
     parser.add_argument("--seconds", type=float, default=8.0, help="length of one measurement window")
     parser.add_argument("--runs", type=int, default=3, help="runs of every window (the median is reported)")

@@ -65,8 +65,10 @@ class Repository:
     # ---------------------------------------------------------------- any record
 
     def get(self, model: type[R], record_id: str) -> R | None:
-        document = self.storage.get_record(model.KIND, record_id)
-        return None if document is None else model.model_validate(document)
+        # pydantic parses the JSON text itself: several times faster than json.loads then validation,
+        # which matters on polls and listings (a job's metrics are a few kB)
+        text = self.storage.get_record_text(model.KIND, record_id)
+        return None if text is None else model.model_validate_json(text)
 
     def exists(self, model: type[Record], record_id: str) -> bool:
         return self.storage.has_record(model.KIND, record_id)

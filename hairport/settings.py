@@ -29,6 +29,7 @@ class Settings(BaseSettings):
     max_faces: int = Field(10_000_000, description="Largest face count a character mesh may have.")
     max_file_bytes: int = Field(4 * 1024**3, description="Largest input file read from disk (bytes).")
     memory_budget_bytes: int = Field(8 * 1024**3, description="Memory one job may use (bytes): inputs whose estimated need is larger are refused, and the worker child is limited to it.")
+    worker_niceness: int = Field(10, ge=0, le=19, description="Scheduling niceness of the worker children that run jobs: on a host shared with the API, requests are served before the solver.")
 
     # service and worker
     redis_url: str = Field("redis://127.0.0.1:6379/0", description="Redis: Celery broker and readiness check.")

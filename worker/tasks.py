@@ -10,6 +10,7 @@ preprocessing is retried after a pause. The worker's signals limit each pool chi
 from __future__ import annotations
 
 import logging
+import os
 from functools import lru_cache
 
 from celery import shared_task
@@ -93,12 +94,14 @@ def purge_task() -> int:
 
 
 @worker_process_init.connect
-def _limit_child_memory(**_) -> None:
+def _limit_child(**_) -> None:
     # in each pool child (not in the embedded worker, which shares the API's process)
-    budget = get_settings().memory_budget_bytes
+    settings = get_settings()
     used = data_bytes()
-    limit_memory(budget)
-    log.info("memory budget of this worker child: %s bytes (%s in use at start)", f"{budget:,}", f"{used:,}")
+    limit_memory(settings.memory_budget_bytes)
+    os.nice(settings.worker_niceness)
+    log.info("worker child: memory budget %s bytes (%s in use at start), niceness +%d",
+             f"{settings.memory_budget_bytes:,}", f"{used:,}", settings.worker_niceness)
 
 
 _sweepers: dict[int, Sweeper] = {}

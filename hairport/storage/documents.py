@@ -40,6 +40,10 @@ class DocumentStore:
         """The record, or None if it does not exist."""
         return _read_json(self._record_path(kind, record_id))
 
+    def get_record_text(self, kind: str, record_id: str) -> str | None:
+        """The record's JSON text, or None if it does not exist (for parsers faster than ``json``)."""
+        return _read_text(self._record_path(kind, record_id))
+
     def update_record(self, kind: str, record_id: str, change: Callable[[dict], dict | None],
                       written: Written | None = None) -> dict | None:
         """Read-modify-write of a record under its exclusive lock (between threads, processes and hosts).

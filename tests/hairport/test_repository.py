@@ -55,8 +55,8 @@ def test_a_page_reads_only_its_own_records(repository, monkeypatch):
     for number in range(50):
         repository.create_job(make_job(number))
     reads = []
-    original = repository.storage.get_record
-    monkeypatch.setattr(repository.storage, "get_record", lambda kind, rid: reads.append(rid) or original(kind, rid))
+    original = repository.storage.get_record_text
+    monkeypatch.setattr(repository.storage, "get_record_text", lambda kind, rid: reads.append(rid) or original(kind, rid))
     page, total = repository.list_jobs("kowner", limit=2, offset=10)
     assert total == 50 and len(page) == 2 and len(reads) == 2
 

@@ -25,3 +25,20 @@ def test_an_allocation_over_the_budget_is_a_memory_error():
     done = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["MemoryError"]
+
+
+PREPARED_CHILD = """
+import os, resource
+os.environ["HAIRPORT_MEMORY_BUDGET_BYTES"] = str(6 * 1024**3)
+os.environ["HAIRPORT_WORKER_NICENESS"] = "7"
+from hairport.worker import tasks
+before = os.getpriority(os.PRIO_PROCESS, 0)
+tasks._limit_child()
+print(os.getpriority(os.PRIO_PROCESS, 0) - before, resource.getrlimit(resource.RLIMIT_DATA)[0])
+"""
+
+
+def test_a_worker_child_gets_the_memory_budget_and_the_niceness():
+    done = subprocess.run([sys.executable, "-c", PREPARED_CHILD], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["7", str(6 * 1024**3)]

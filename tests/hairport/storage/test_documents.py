@@ -1,5 +1,6 @@
 """JSON records: put, get, list, delete, read-modify-write under a lock shared by processes."""
 
+import json
 import multiprocessing
 
 from hairport.storage import LocalStorage
@@ -16,7 +17,9 @@ def test_records_put_get_list_delete(tmp_path):
     assert [r["id"] for r in storage.list_records("jobs")] == ["j1", "j2"]
     storage.put_record("jobs", "j1", {"id": "j1", "state": "succeeded"})
     assert storage.get_record("jobs", "j1") == {"id": "j1", "state": "succeeded"}
+    assert json.loads(storage.get_record_text("jobs", "j1")) == {"id": "j1", "state": "succeeded"}
     storage.delete_record("jobs", "j1")
+    assert storage.get_record_text("jobs", "j1") is None
     storage.delete_record("jobs", "never-existed")
     assert storage.get_record("jobs", "j1") is None
     assert [r["id"] for r in storage.list_records("jobs")] == ["j2"]
