@@ -139,23 +139,18 @@ class OwnRun:
 
     def write(self, **fields) -> bool:
         """Set ``fields`` if the run is still the record's; whether it was."""
-        applied = False
-
-        def apply(current):
-            nonlocal applied
-            if current.run_token != self.token or current.state != RUNNING:
-                return None
-            applied = True
-            return current.model_validate({**current.model_dump(), **fields})
-
-        self.change(apply)
-        return applied
+        return self._if_ours(lambda current: current.model_validate({**current.model_dump(), **fields}))
 
     def beat(self) -> bool:
         return self.write(heartbeat_at=now())
 
     def release(self) -> bool:
         """Hand the record back to the queue (a transient error: the task is retried, the run did not die)."""
+        return self._if_ours(lambda current: current.model_copy(update=dict(
+            state=QUEUED, run_token=None, heartbeat_at=None, attempts=max(current.attempts - 1, 0))))
+
+    def _if_ours(self, update) -> bool:
+        """Apply ``update`` (record -> new record) if the record still runs under this run's token; whether it did."""
         applied = False
 
         def apply(current):
@@ -163,8 +158,7 @@ class OwnRun:
             if current.run_token != self.token or current.state != RUNNING:
                 return None
             applied = True
-            return current.model_copy(update=dict(state=QUEUED, run_token=None, heartbeat_at=None,
-                                                  attempts=max(current.attempts - 1, 0)))
+            return update(current)
 
         self.change(apply)
         return applied
