@@ -295,6 +295,8 @@ def test_retarget_onto_two_targets(service, files, uploaded):
 
 def test_other_guide_count_preprocesses_a_cached_variant(service, uploaded):
     client, storage = service["client"], service["storage"]
+    # the hairstyle's own artifact first, so that the count below sees only the variant's
+    wait_for(client, f"/v1/hairstyles/{uploaded['hairstyle']}", lambda b: b["preprocessing"]["state"] == "ready")
     before = len(list((storage / "blobs").rglob("*.hpa")))
     request = {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": [uploaded["target"]],
                "options": {"guides": 10, "max_iterations": 3}}
