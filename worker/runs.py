@@ -1,4 +1,5 @@
-"""Who runs a job or a preprocessing: starting a run, its heartbeat, and telling a dead run from a live one.
+"""Who runs a job or a preprocessing: starting a run (:func:`start_run`), its guarded writes
+(:class:`OwnRun`), its heartbeat, and telling a dead run from a live one.
 
 Every message sent for a record carries the record's ``task_id`` (chosen before sending); a
 message whose id is not the record's current one is obsolete and changes nothing (e.g. the
@@ -21,7 +22,7 @@ import threading
 import uuid
 from collections.abc import Callable
 
-from hairport.records import WORKER_LOST, ErrorInfo, RunInfo, now
+from hairport.records import CANCELLED, FAILED, QUEUED, RUNNING, WORKER_LOST, ErrorInfo, RunInfo, now
 from hairport.settings import Settings
 
 log = logging.getLogger(__name__)
@@ -102,3 +103,72 @@ class Heartbeat:
                     return
             except Exception:  # noqa: BLE001 - a failed beat (storage hiccup) is retried at the next
                 log.exception("heartbeat failed")
+
+
+class OwnRun:
+    """The writes of one run of a record (a job or a preprocessing), each applied only while the record is
+    still running under this run's token (see :mod:`.runs`)."""
+
+    def __init__(self, change, token: str):
+        self.change, self.token = change, token
+
+    def write(self, **fields) -> bool:
+        """Set ``fields`` if the run is still the record's; whether it was."""
+        return self._if_ours(lambda current: current.model_validate({**current.model_dump(), **fields}))
+
+    def beat(self) -> bool:
+        return self.write(heartbeat_at=now())
+
+    def release(self) -> bool:
+        """Hand the record back to the queue (a transient error: the task is retried, the run did not die)."""
+        return self._if_ours(lambda current: current.model_copy(update=dict(
+            state=QUEUED, run_token=None, heartbeat_at=None, attempts=max(current.attempts - 1, 0))))
+
+    def _if_ours(self, update) -> bool:
+        """Apply ``update`` (record -> new record) if the record still runs under this run's token; whether it did."""
+        applied = False
+
+        def apply(current):
+            nonlocal applied
+            if current.run_token != self.token or current.state != RUNNING:
+                return None
+            applied = True
+            return update(current)
+
+        self.change(apply)
+        return applied
+
+
+def start_run(change, settings: Settings, task_id: str | None, worker: str, what: str,
+              waiting: tuple[str, ...], fields: dict | None = None) -> OwnRun | None:
+    """Start a run of a record through ``change`` (its read-modify-write under the lock): the run, or None
+    when this message must not run it (obsolete, finished, running elsewhere, or failed now with
+    ``worker_lost`` after ``max_attempts`` starts)."""
+    token = None
+
+    def apply(current):
+        nonlocal token
+        if task_id is not None and current.task_id not in (None, task_id):
+            return None  # an older message: the record was queued again since
+        if current.state not in waiting and current.state != RUNNING:
+            return None
+        if current.state == RUNNING and not run_gone(current, settings.stale_after_seconds,
+                                                     getattr(current, "started_at", None) or current.updated_at):
+            return None  # its run is alive: this is a duplicate delivery
+        if getattr(current, "cancel_requested", False):
+            return current.model_copy(update=dict(state=CANCELLED, stage="cancelled", run_token=None,
+                                                  **_finished(current)))
+        if current.attempts >= settings.max_attempts:
+            return current.model_copy(update=dict(state=FAILED, error=worker_lost(current, settings, what),
+                                                  run_token=None, **_finished(current)))
+        started = start_fields(current, worker)
+        token = started["run_token"]
+        return current.model_validate({**current.model_dump(), "state": RUNNING, "error": None, **started,
+                                       **(fields or {})})
+
+    change(apply)
+    return None if token is None else OwnRun(change, token)
+
+
+def _finished(record) -> dict:
+    return {"finished_at": now()} if hasattr(record, "finished_at") else {}

@@ -345,7 +345,7 @@ def test_a_job_whose_worker_died_max_attempts_times_fails_worker_lost(world):
 def test_a_taken_over_run_writes_nothing_more(world):
     repository = world["repository"]
     job = add_job(world, state="running", run_token="mine")
-    run = runner.OwnRun(lambda change: repository.change_job(job.id, change), "mine")
+    run = runs.OwnRun(lambda change: repository.change_job(job.id, change), "mine")
     assert run.beat() and repository.job(job.id).heartbeat_at is not None
     repository.set_job(job.id, run_token="theirs")
     assert not run.write(state="succeeded") and repository.job(job.id).state == "running"
