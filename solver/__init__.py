@@ -43,6 +43,7 @@ _EXPORTS = {
     "METHODS": ("hairport.solver.options", "METHODS"),
     "OVER_MEMORY_BUDGET": ("hairport.solver.budget", "OVER_MEMORY_BUDGET"),
     "check_memory": ("hairport.solver.budget", "check_memory"),
+    "warm_up": ("hairport.solver.jit", "warm_up"),
     "OPTION_RANGES": ("hairport.solver.options", "OPTION_RANGES"),
     "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
     "PenetrationRemaining": ("hairport.solver.model.errors", "PenetrationRemaining"),
