@@ -39,8 +39,14 @@ RUN mkdir -p /data && chown 10001:10001 /data
 ENV HAIRPORT_STORAGE_DIR=/data
 VOLUME /data
 
+# The solver's compiled kernels, compiled once here (as the user that runs them: numba only
+# uses a cache folder it can write) instead of by each container's first job.
+ENV NUMBA_CACHE_DIR=/var/cache/hairport-kernels
+RUN mkdir -p /var/cache/hairport-kernels && chown 10001:10001 /var/cache/hairport-kernels
+
 USER 10001:10001
 WORKDIR /home/hairport
+RUN hairport warmup
 
 EXPOSE 8000
 

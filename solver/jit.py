@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numba
 
@@ -27,19 +28,33 @@ import numba
 KERNEL_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 _WARMERS: dict[str, Callable[[], None]] = {}
+#: every dispatcher declared through :func:`kernel` or :func:`parallel_kernel`
+_KERNELS: list = []
+
+
+def _declare(options: dict, function):
+    def decorate(python_function):
+        dispatcher = numba.njit(**options)(python_function)
+        _KERNELS.append(dispatcher)
+        return dispatcher
+
+    return decorate if function is None else decorate(function)
 
 
 def kernel(function=None, **options):
     """``numba.njit`` with :data:`KERNEL_OPTIONS` (serial)."""
-    decorate = numba.njit(**{**KERNEL_OPTIONS, **options})
-    return decorate if function is None else decorate(function)
+    return _declare({**KERNEL_OPTIONS, **options}, function)
 
 
 def parallel_kernel(function=None, **options):
     """``numba.njit(parallel=True)`` with :data:`KERNEL_OPTIONS`: loops written with
-    :data:`prange` run on numba's threads (:func:`set_threads`)."""
-    decorate = numba.njit(**{**KERNEL_OPTIONS, "parallel": True, **options})
-    return decorate if function is None else decorate(function)
+    :data:`prange` run on numba's threads (:func:`set_threads`).
+
+    A process that has run a parallel kernel must not ``fork()`` without ``exec`` (GNU
+    OpenMP, numba's threading layer where it is installed, terminates such a child):
+    Celery's prefork parent never solves, and the worker warms the kernels in each child.
+    """
+    return _declare({**KERNEL_OPTIONS, "parallel": True, **options}, function)
 
 
 prange = numba.prange
@@ -67,21 +82,44 @@ def _import_kernel_modules() -> None:
 KERNEL_MODULES: tuple[str, ...] = ()
 
 
-def warm_up() -> dict[str, float]:
-    """Compile (or load from the on-disk cache) every registered kernel.
+@dataclass(frozen=True)
+class WarmUp:
+    """What :func:`warm_up` did.
 
-    Returns
-    -------
+    Attributes
+    ----------
     seconds : dict of str -> float
         Wall-clock seconds per registered module.
+    kernels : int
+        Kernels declared.
+    compiled, loaded : int
+        Kernel signatures compiled in this process, and loaded from the on-disk cache.
     """
+
+    seconds: dict[str, float]
+    kernels: int
+    compiled: int
+    loaded: int
+
+
+def _cache_counts() -> tuple[int, int]:
+    compiled = loaded = 0
+    for dispatcher in _KERNELS:
+        compiled += sum(dispatcher.stats.cache_misses.values())
+        loaded += sum(dispatcher.stats.cache_hits.values())
+    return compiled, loaded
+
+
+def warm_up() -> WarmUp:
+    """Compile (or load from the on-disk cache) every registered kernel."""
     _import_kernel_modules()
     seconds = {}
     for name, function in sorted(_WARMERS.items()):
         began = time.perf_counter()
         function()
         seconds[name] = time.perf_counter() - began
-    return seconds
+    compiled, loaded = _cache_counts()
+    return WarmUp(seconds, len(_KERNELS), compiled, loaded)
 
 
 def threads() -> int:

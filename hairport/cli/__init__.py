@@ -1,7 +1,7 @@
 """The ``hairport`` command line: the parser and ``main``.
 
 Commands live by topic: :mod:`.solve` (preprocess, retarget, hairline), :mod:`.demo`, and
-:mod:`.ops` (serve, worker, purge, reindex, openapi, assets). They import the solver, the service and
+:mod:`.ops` (serve, worker, warmup, purge, reindex, openapi, assets). They import the solver, the service and
 the worker inside their functions on purpose: ``hairport --help`` and the light commands then
 start without loading the numerical stack or the web framework.
 """
@@ -40,6 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     ops.add_assets(sub)
     ops.add_serve(sub)
     ops.add_worker(sub)
+    ops.add_warmup(sub)
     ops.add_purge(sub)
     ops.add_reindex(sub)
     ops.add_openapi(sub)

@@ -1,4 +1,4 @@
-"""Operations commands: ``serve``, ``worker``, ``purge``, ``reindex``, ``openapi`` and ``assets fetch``.
+"""Operations commands: ``serve``, ``worker``, ``warmup``, ``purge``, ``reindex``, ``openapi`` and ``assets fetch``.
 
 The web framework, Celery and the asset downloader are imported inside the commands that
 use them, so that the other commands start without them.
@@ -7,6 +7,7 @@ use them, so that the other commands start without them.
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -86,12 +87,37 @@ def cmd_serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_warmup(sub) -> None:
+    p = sub.add_parser("warmup", help="compile the solver's kernels into numba's on-disk cache (or check they load)")
+    p.set_defaults(run=cmd_warmup)
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    from hairport import solver
+
+    done = solver.warm_up()
+    for name, seconds in sorted(done.seconds.items()):
+        print(f"{name}: {seconds:.2f} s")
+    print(f"{done.kernels} kernels: {done.compiled} signatures compiled, {done.loaded} loaded from the cache, "
+          f"in {sum(done.seconds.values()):.1f} s")
+    return 0
+
+
+def start_warmup() -> subprocess.Popen:
+    """``hairport warmup`` in a process of its own, not waited for: it fills the kernel cache
+    while the caller starts up. Not in the caller's process: one that ran the parallel
+    kernels must not fork (:mod:`hairport.solver.jit`), and a worker forks its pool."""
+    return subprocess.Popen([sys.executable, "-m", "hairport.cli", "warmup"], stdout=subprocess.DEVNULL)
+
+
 def add_worker(sub) -> None:
     p = sub.add_parser("worker", help="run a Celery worker against HAIRPORT_REDIS_URL")
     p.add_argument("--queues", default="preprocess,retarget", help="comma-separated queues to consume")
     p.add_argument("--concurrency", type=int, default=1, help="jobs run at once (processes)")
     p.add_argument("--loglevel", default="INFO")
     p.add_argument("--hostname", default="hairport@%h", help="worker name (%%h: host name)")
+    p.add_argument("--no-warmup", action="store_true",
+                   help="do not compile the solver's kernels at start (the first job compiles what is not cached)")
     p.set_defaults(run=cmd_worker)
 
 
@@ -112,6 +138,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return EXIT_BAD_INPUT
     celery = configured_celery()
+    if not args.no_warmup:
+        start_warmup()
     names = queue_names(celery.hairport_deployment)
     celery.worker_main(["worker", "-Q", ",".join(names[name] for name in wanted), "-c", str(args.concurrency),
                         "--loglevel", args.loglevel, "-n", args.hostname])
