@@ -96,7 +96,9 @@ def knn_other_strands(
     # only after missing neighbours in the first round does a particle go to the exact search
     long_strand = own + k > KNN_MAX_ROUND_CANDIDATES
     todo = np.arange(len(queries))
-    ask = k + KNN_EXTRA_CANDIDATES
+    # candidates beyond k only to skip the query's own strand: none where no query's strand is in
+    # the pool (Eq. 14: normal particles and guide particles)
+    ask = k + min(KNN_EXTRA_CANDIDATES, int(own.max()))
     exact: list[np.ndarray] = []
     first_round = True
     while len(todo):
@@ -115,10 +117,11 @@ def knn_other_strands(
     hard = np.concatenate(exact)
     if len(hard):
         index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
-    valid = np.isfinite(distance)
-    inverse = np.where(valid, 1.0 / np.maximum(distance, MIN_NEIGHBOUR_DISTANCE), 0.0)
-    total = inverse.sum(axis=1, keepdims=True)
-    weight = np.divide(inverse, total, out=np.zeros_like(inverse), where=total > 0)
+    # Eq. 9 in place (no (Q, k) temporaries): the padding's inf distance gets weight 1/inf = 0
+    weight = np.maximum(distance, MIN_NEIGHBOUR_DISTANCE, out=distance)
+    np.divide(1.0, weight, out=weight)
+    total = weight.sum(axis=1, keepdims=True)
+    np.divide(weight, total, out=weight, where=total > 0)
     return Neighbours(index, weight)
 
 
