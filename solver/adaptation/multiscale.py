@@ -29,7 +29,7 @@ from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
 from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
+from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator, neighbour_average
 from hairport.solver.adaptation.options import SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.mesh.distance_grid import DistanceGrid
@@ -124,7 +124,8 @@ def fine_source(hair: Hair, model: MultiscaleModel) -> FineSource:
     _, unit = unit_rows(hair.points[np.minimum(particles + 1, hair.n_particles - 1)] - hair.points[particles])
     nb = model.fine_neighbours
     pull_weight = nb.weight.sum(axis=1)
-    features = pull_weight[:, None] * hair.points[particles] - np.einsum("nk,nkd->nd", nb.weight, hair.points[nb.index])
+    features = neighbour_average(nb, hair.points)
+    np.subtract(pull_weight[:, None] * hair.points[particles], features, out=features)
     return FineSource(strands, particles, unit, pull_weight, features)
 
 
@@ -271,7 +272,7 @@ def solve_multiscale(
     began = time.perf_counter()
     if len(fine.strands):
         nb = model.fine_neighbours
-        pull_target = np.einsum("nk,nkd->nd", nb.weight, points[nb.index]) + fine.source_features
+        pull_target = neighbour_average(nb, points) + fine.source_features
         is_root = hair.is_root[fine.particles]
         counts = hair.counts[fine.strands]
         offsets = np.concatenate([[0], np.cumsum(counts)])
