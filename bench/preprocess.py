@@ -11,7 +11,7 @@ solver:
 * the retarget without the solve, as ``solver.retarget`` runs it: prepare the target,
   initial transfer (Eq. 3-6), the distance grid of the multi-scale solve, the penetration
   check and the metrics (of the initial transfer, standing in for a result; the metrics'
-  full kNN model is its own row, ``shape_model``).
+  kNN over all strands is its own row, ``metrics_knn``).
 
 With ``--solve`` the retarget is ``solver.retarget`` itself, shape solve included (its
 stages as reported through its progress callback; the distance grid is then inside
@@ -52,9 +52,6 @@ SMALL_GROOM = 200_000
 STYLE = "long"
 SOURCE, TARGET = "average-female", "heavy-male"
 GUIDES = 300
-#: the preprocessing stages, in the order they run (those ``solver.preprocess`` reports, then the lazy ones)
-PREPROCESS_STAGES = ("anchors", "guides", "guide_neighbours", "fine_neighbours", "coarse_model", "fine_source",
-                     "strand_laplacian")
 
 
 def groom_shape(particles: int) -> tuple[int, int]:
@@ -121,8 +118,7 @@ class StageMeter:
 
 
 class _PreprocessStages:
-    """Progress of ``solver.preprocess`` renamed to the stages of :data:`PREPROCESS_STAGES`
-    (messages name the stage when the preprocessing reports no finer one)."""
+    """Progress of ``solver.preprocess``: its stages as it names them, until it reports ``preprocess`` (done)."""
 
     def __init__(self, meter: StageMeter) -> None:
         self.meter = meter
@@ -188,12 +184,12 @@ def measure_size(size: str, solve: bool, workers: int | None) -> dict:
 
 def _retarget_without_solve(adaptable, target, meter: StageMeter, np) -> int:
     """``solver.retarget``'s stages outside the shape solve, on the initial transfer."""
+    from hairport.solver import metrics as solver_metrics
     from hairport.solver.body.target import prepare_target
     from hairport.solver.mesh.collision import collision_query
     from hairport.solver.mesh.distance_grid import DistanceGrid
     from hairport.solver.mesh.penetration import resolve_penetration
     from hairport.solver.mesh.query import MeshQuery
-    from hairport.solver.metrics import hairstyle_metrics
     from hairport.solver.options import RetargetOptions
     from hairport.solver.pipeline import GRID_REGION_MARGIN, initial_transfer
     from hairport.solver.transfer.anchors import root_targets
@@ -212,11 +208,16 @@ def _retarget_without_solve(adaptable, target, meter: StageMeter, np) -> int:
         DistanceGrid.build(target_query, region=reach)
     with meter.stage("penetration_check"):
         points, _ = resolve_penetration(initial, hair.is_root, body, options.eps_c, target.name)
-    with meter.stage("shape_model"):
-        adaptable.shape_model  # noqa: B018 - the metrics' full kNN model, lazy
+    with meter.stage("metrics_knn"):
+        # lazy: the metrics' kNN over all strands (Eq. 8-9; the full ShapeModel before it took its place)
+        adaptable.neighbours if hasattr(solver_metrics, "interstrand_residual") else adaptable.shape_model  # noqa: B018
     with meter.stage("metrics"):
-        metrics = hairstyle_metrics(points, hair.points, initial, hair.is_root, roots, adaptable.shape_model,
-                                    target_query, options.eps_c, body=body)
+        if hasattr(solver_metrics, "interstrand_residual"):
+            metrics = solver_metrics.hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query,
+                                                       options.eps_c, body=body)
+        else:  # the signature before it (a baseline interpreter with an older checkout)
+            metrics = solver_metrics.hairstyle_metrics(points, hair.points, initial, hair.is_root, roots,
+                                                       adaptable.shape_model, target_query, options.eps_c, body=body)
     return metrics["penetrating_particles"]
 
 

@@ -209,8 +209,8 @@ def retarget(
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
-        metrics = hairstyle_metrics(points, hair.points, initial, hair.is_root, roots, adaptable.shape_model,
-                                    target_query, options.eps_c, weights, body=body)
+        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query, options.eps_c,
+                                    weights, body=body)
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved

@@ -40,13 +40,18 @@ KNN_CANDIDATE_BUDGET = KNN_QUERY_CHUNK * (5 + KNN_EXTRA_CANDIDATES)
 KNN_MAX_ROUND_CANDIDATES = 512
 
 
+#: storage of the neighbour indices: particle counts stay far below 2^31 (the readers cap them
+#: at tens of millions), and the index array is the largest one a hairstyle keeps
+NEIGHBOUR_INDEX_DTYPE = np.int32
+
+
 @dataclass(frozen=True, eq=False)
 class Neighbours:
     """kNN sets and weights of Eq. 8-9.
 
     Attributes
     ----------
-    index : (N, k) int64
+    index : (N, k) int32
         Neighbour particle indices; a row's padding repeats the particle itself with weight 0.
     weight : (N, k) float64
         Normalised inverse-distance weights; rows sum to 1 (0 for a particle with no neighbour).
@@ -54,6 +59,10 @@ class Neighbours:
 
     index: np.ndarray
     weight: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "index", np.asarray(self.index, dtype=NEIGHBOUR_INDEX_DTYPE))
+        object.__setattr__(self, "weight", np.asarray(self.weight, dtype=np.float64))
 
 
 def knn_other_strands(
@@ -89,7 +98,7 @@ def knn_other_strands(
     strand_of = np.asarray(strand_of, dtype=np.int64)
     queries = np.arange(n, dtype=np.int64) if queries is None else np.asarray(queries, dtype=np.int64)
     pool = np.arange(n, dtype=np.int64) if candidates is None else np.flatnonzero(candidates)
-    index = np.repeat(queries[:, None], k, axis=1)
+    index = np.repeat(queries[:, None].astype(NEIGHBOUR_INDEX_DTYPE), k, axis=1)
     distance = np.full((len(queries), k), np.inf)
     if len(pool) == 0 or k == 0 or len(queries) == 0:
         return Neighbours(index, np.zeros((len(queries), k)))

@@ -74,22 +74,28 @@ ANCHOR_BONE_DEPTH = 0.02
 BONE_DEPTH_SAMPLES = 64
 
 
+#: storage of the anchors' bone and face indices (a skeleton has far fewer than 2^15 bones, a
+#: body far fewer than 2^31 faces): indices only index, the math is float64
+BONE_INDEX_DTYPE = np.int16
+FACE_INDEX_DTYPE = np.int32
+
+
 @dataclass(frozen=True, eq=False)
 class Anchors:
     """Per-particle local coordinates relative to the body (Eq. 2-3).
 
     Attributes
     ----------
-    bone : (N,) int64
+    bone : (N,) int16
         Anchor bone (skeleton index); ``-1`` for roots and fallback particles.
-    face : (N,) int64
+    face : (N,) int32
         Face hit by the ray (roots and fallbacks: face of the closest point).
     barycentric : (N, 3) float64
     eta : (N,) float64
         Signed distance from the hit point to the particle along the ray (m).
-    frame_offset : (N, 3) float64
-        For fallback particles: offset to the closest point in the face frame
-        (normal, edge, binormal); zeros elsewhere.
+    frame_offset : (F, 3) float64
+        One row per fallback particle, in particle order (``F = fallback.sum()``): its offset
+        to the closest point in the face frame (normal, edge, binormal).
     fallback : (N,) bool
     """
 
@@ -99,6 +105,15 @@ class Anchors:
     eta: np.ndarray
     frame_offset: np.ndarray
     fallback: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "bone", np.asarray(self.bone, dtype=BONE_INDEX_DTYPE))
+        object.__setattr__(self, "face", np.asarray(self.face, dtype=FACE_INDEX_DTYPE))
+        object.__setattr__(self, "fallback", np.asarray(self.fallback, dtype=bool))
+        offsets = np.asarray(self.frame_offset, dtype=np.float64).reshape(-1, 3)
+        if len(offsets) != int(self.fallback.sum()):
+            raise ValueError(f"frame_offset has {len(offsets)} rows for {int(self.fallback.sum())} fallback particles")
+        object.__setattr__(self, "frame_offset", offsets)
 
 
 def hair_bone_indices(character: Character) -> np.ndarray:
@@ -271,8 +286,8 @@ def compute_anchors(
     is_root = np.asarray(is_root, dtype=bool)
     n = len(points)
     best = {
-        "bone": np.full(n, -1, np.int64),
-        "face": np.full(n, -1, np.int64),
+        "bone": np.full(n, -1, BONE_INDEX_DTYPE),
+        "face": np.full(n, -1, FACE_INDEX_DTYPE),
         "barycentric": np.zeros((n, 3)),
         "eta": np.zeros(n),
     }
@@ -295,9 +310,8 @@ def compute_anchors(
         kept.append(start + rows)
         kept_surface.append(surface.take(rows))
     idx = np.concatenate(kept) if kept else np.zeros(0, np.int64)
-    frame_offset = np.zeros((n, 3))
     if len(idx) == 0:
-        return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
+        return Anchors(frame_offset=np.zeros((0, 3)), fallback=fallback, **best)
     surface = SignedDistance(*(np.concatenate([getattr(s, name) for s in kept_surface])
                                for name in ("distance", "closest", "normal", "faces")))
     # roots closer to an eye, a lash or a stray face than to the skin are anchored on the skin
@@ -306,10 +320,12 @@ def compute_anchors(
     best["face"][idx] = faces
     best["barycentric"][idx] = barycentric
     best["bone"][idx] = -1
+    # the frame offsets of the fallback particles (the roots lie on their faces: none)
+    moved = fallback[idx]
+    faces, idx = faces[moved], idx[moved]
     frames, _ = face_frames(source.vertices, source.faces, faces)
     offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
-    frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
-    frame_offset[np.flatnonzero(is_root)] = 0.0
+    frame_offset = np.einsum("nji,nj->ni", frames, offsets)
     return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
 
 
@@ -330,7 +346,8 @@ def _closest_on_bones(points: np.ndarray, heads: np.ndarray, tails: np.ndarray) 
     return heads + np.clip(t, 0.0, 1.0)[:, None] * axis
 
 
-def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None = None) -> np.ndarray:
+def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None = None,
+                  chunk: int = ANCHOR_CHUNK) -> np.ndarray:
     """Apply the local coordinates on the target (Eq. 3).
 
     Parameters
@@ -341,31 +358,45 @@ def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None =
         particle is anchored by a bone.
     query : MeshQuery, optional
         Prebuilt query structure of the target mesh.
+    chunk : int
+        Particles placed at a time (bounds the temporaries; the result does not depend on it).
 
     Returns
     -------
     points : (N, 3) float64
         The anchored particles ``p~``.
     """
-    q = interpolate_barycentric(target.vertices, target.faces, anchors.face, anchors.barycentric)
-    points = q.copy()
-    ray_based = anchors.bone >= 0
-    if ray_based.any():
+    n = len(anchors.face)
+    points = np.empty((n, 3))
+    used = np.unique(anchors.bone[anchors.bone >= 0])
+    if len(used):
         skeleton = target.skeleton
         if skeleton is None:
             raise InputError("the hairstyle is anchored by bones, and the target has no skeleton",
                              target.name, "no_skeleton")
-        bone = anchors.bone[ray_based]
         query = query or MeshQuery(target.vertices, target.faces)
-        used = np.unique(bone)
         inner_heads = np.zeros((skeleton.n_bones, 3))
         inner_tails = np.zeros((skeleton.n_bones, 3))
         inner_heads[used], inner_tails[used] = inner_bone_segments(skeleton.heads[used], skeleton.tails[used], query)
-        origin = _closest_on_bones(q[ray_based], inner_heads[bone], inner_tails[bone])
-        direction = q[ray_based] - origin
-        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
-        points[ray_based] += anchors.eta[ray_based, None] * direction
-    if anchors.fallback.any():
-        frames, _ = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
-        points[anchors.fallback] += np.einsum("nij,nj->ni", frames, anchors.frame_offset[anchors.fallback])
+    fallback_row = 0
+    step = max(1, int(chunk))
+    for start in range(0, n, step):
+        part = slice(start, min(n, start + step))
+        face, bone, fallback = anchors.face[part], anchors.bone[part], anchors.fallback[part]
+        q = interpolate_barycentric(target.vertices, target.faces, face, anchors.barycentric[part])
+        placed = points[part]
+        placed[:] = q
+        ray_based = np.flatnonzero(bone >= 0)
+        if len(ray_based):
+            on = bone[ray_based]
+            origin = _closest_on_bones(q[ray_based], inner_heads[on], inner_tails[on])
+            direction = q[ray_based] - origin
+            direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
+            placed[ray_based] += anchors.eta[part][ray_based, None] * direction
+        rows = np.flatnonzero(fallback)
+        if len(rows):
+            frames, _ = face_frames(target.vertices, target.faces, face[rows])
+            offsets = anchors.frame_offset[fallback_row : fallback_row + len(rows)]
+            placed[rows] += np.einsum("nij,nj->ni", frames, offsets)
+            fallback_row += len(rows)
     return points
