@@ -77,7 +77,11 @@ class MultiscaleModel:
 
 def build_multiscale_model(hair: Hair, n_guides: int, k: int, seed: int = 0) -> MultiscaleModel:
     """Select guides and find the coarse and fine kNN sets on the source hairstyle."""
-    guides = select_guides(hair, n_guides, seed=seed)
+    return multiscale_model(hair, select_guides(hair, n_guides, seed=seed), k)
+
+
+def multiscale_model(hair: Hair, guides: np.ndarray, k: int) -> MultiscaleModel:
+    """The coarse and fine kNN sets of the source hairstyle with these guides ``(G,) int64``."""
     guide_hair = hair.subset(guides)
     guide_neighbours = knn_other_strands(guide_hair.points, guide_hair.strand_of, k)
     is_guide_particle = np.repeat(np.isin(np.arange(hair.n_strands), guides), hair.counts)
