@@ -63,8 +63,11 @@ def penetration(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, eps_c
         more than :data:`CLEARANCE_REPORT_TOLERANCE`),
         ``min_distance`` (m), and ``distance`` ((N_free,) array, not for JSON).
     """
-    free = ~is_root
-    distance = query.signed_distance(points[free]).distance if free.any() else np.zeros(0)
+    free = np.flatnonzero(~np.asarray(is_root, dtype=bool))
+    distance = np.empty(len(free))
+    for start in range(0, len(free), METRICS_CHUNK):  # bounds the query's temporaries
+        rows = free[start : start + METRICS_CHUNK]
+        distance[start : start + len(rows)] = query.signed_distance(points[rows]).distance
     return {
         "inside": int(np.sum(distance < 0.0)),
         "below_clearance": int(np.sum(distance < eps_c - CLEARANCE_REPORT_TOLERANCE)),
