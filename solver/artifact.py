@@ -38,8 +38,12 @@ from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import ANCHOR_BY_BONES, Anchors
 
 FORMAT_NAME = "hairport-adaptable-hairstyle"
-#: bump when the arrays or their meaning change; older artifacts are then refused
-FORMAT_VERSION = 1
+#: bump when the arrays or their meaning change. Version 2: compact indices (int16 anchor bones,
+#: int32 anchor faces and neighbour indices) and the frame offsets of the fallback particles only
+FORMAT_VERSION = 2
+#: versions this hairport reads: version 1 (int64 indices, a frame offset row per particle) is
+#: converted on load; others are refused
+READABLE_VERSIONS = (1, 2)
 EXTENSION = ".hpa"
 
 
@@ -143,10 +147,10 @@ def load_adaptable(path: str | os.PathLike):
         raise InputError("not an adaptable hairstyle: no readable meta record", str(path), "bad_artifact") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
         raise InputError("not an adaptable hairstyle (unknown format)", str(path), "bad_artifact")
-    if meta.get("format_version") != FORMAT_VERSION:
+    if meta.get("format_version") not in READABLE_VERSIONS:
         raise InputError(
-            f"adaptable hairstyle of format version {meta.get('format_version')}, this hairport reads version "
-            f"{FORMAT_VERSION}; run `hairport preprocess` again",
+            f"adaptable hairstyle of format version {meta.get('format_version')}, this hairport reads versions "
+            f"{', '.join(map(str, READABLE_VERSIONS))}; run `hairport preprocess` again",
             str(path),
             "artifact_version",
         )
@@ -167,9 +171,14 @@ def load_adaptable(path: str | os.PathLike):
         hair = Hair(
             arrays["hair_points"], arrays["hair_offsets"], arrays.get("hair_thickness"), arrays.get("hair_color")
         )
+        frame_offset = arrays["anchor_frame_offset"]
+        if meta["format_version"] == 1:  # a row per particle, zeros but for the fallback particles
+            if len(frame_offset) != len(arrays["anchor_fallback"]):
+                raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")
+            frame_offset = frame_offset[arrays["anchor_fallback"].astype(bool)]
         anchors = Anchors(
             arrays["anchor_bone"], arrays["anchor_face"], arrays["anchor_barycentric"], arrays["anchor_eta"],
-            arrays["anchor_frame_offset"], arrays["anchor_fallback"],
+            frame_offset, arrays["anchor_fallback"],
         )
         multiscale = MultiscaleModel(
             arrays["guides"],
@@ -181,6 +190,8 @@ def load_adaptable(path: str | os.PathLike):
         frame = InputFrame.from_dict(meta.get("input_frame"))
     except KeyError as error:
         raise InputError(f"adaptable hairstyle lacks {error}", str(path), "bad_artifact") from None
+    except ValueError as error:  # arrays of inconsistent shapes
+        raise InputError(f"adaptable hairstyle arrays disagree ({error})", str(path), "bad_artifact") from None
     n = hair.n_particles
     if any(len(a) != n for a in (anchors.bone, anchors.face, anchors.barycentric, anchors.eta, anchors.fallback)):
         raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")

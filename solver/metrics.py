@@ -6,14 +6,20 @@ particle share one CSR layout.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, energy_terms
+from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, unit_rows
+from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.model.hair import Hair
 
 #: a particle counts as closer than eps_c only when it is short by more than this (m): the
 #: solver meets the clearance to its QP tolerance, and 1 um is far below anything visible
 CLEARANCE_REPORT_TOLERANCE = 1e-6
+#: particles per block of the segment figures (bounds their temporaries to a few tens of MB)
+METRICS_CHUNK = 1 << 18
 
 
 def mean_particle_distance(points: np.ndarray, reference: np.ndarray) -> float:
@@ -57,8 +63,11 @@ def penetration(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, eps_c
         more than :data:`CLEARANCE_REPORT_TOLERANCE`),
         ``min_distance`` (m), and ``distance`` ((N_free,) array, not for JSON).
     """
-    free = ~is_root
-    distance = query.signed_distance(points[free]).distance if free.any() else np.zeros(0)
+    free = np.flatnonzero(~np.asarray(is_root, dtype=bool))
+    distance = np.empty(len(free))
+    for start in range(0, len(free), METRICS_CHUNK):  # bounds the query's temporaries
+        rows = free[start : start + METRICS_CHUNK]
+        distance[start : start + len(rows)] = query.signed_distance(points[rows]).distance
     return {
         "inside": int(np.sum(distance < 0.0)),
         "below_clearance": int(np.sum(distance < eps_c - CLEARANCE_REPORT_TOLERANCE)),
@@ -79,18 +88,82 @@ def root_errors(root_points: np.ndarray, root_targets: np.ndarray, query: MeshQu
     }
 
 
-def interstrand_error(model: ShapeModel, points: np.ndarray) -> float:
+def interstrand_residual(neighbours: Neighbours, points: np.ndarray, source_points: np.ndarray) -> np.ndarray:
+    """Eq. 10's residual ``(K p)_i - L-bar_i`` of every particle, without the operator ``K``.
+
+    ``K`` is linear, so the residual is ``K (p - p-bar)``, i.e. per particle
+    ``sum_j w_ij (d_i - d_j)`` with ``d = p - p-bar`` (:func:`.neighbours.neighbour_average`).
+
+    Parameters
+    ----------
+    neighbours : Neighbours
+        Eq. 8-9 over all strands, one row per particle.
+    points, source_points : (N, 3) float64
+
+    Returns
+    -------
+    residual : (N, 3) float64
+    """
+    displacement = points - source_points
+    residual = neighbour_average(neighbours, displacement)
+    np.subtract(neighbours.weight.sum(axis=1)[:, None] * displacement, residual, out=residual)
+    return residual
+
+
+def interstrand_error(neighbours: Neighbours, points: np.ndarray, source_points: np.ndarray) -> float:
     """Mean ``|| L_i(p) - L-bar_i ||`` over particles (m): how much neighbourhoods changed."""
-    return float(np.mean(np.linalg.norm(model.K @ points - model.source_features, axis=1)))
+    residual = interstrand_residual(neighbours, points, source_points)
+    return float(np.mean(np.sqrt(np.einsum("ij,ij->i", residual, residual)))) if len(residual) else 0.0
+
+
+@dataclass(frozen=True)
+class SegmentFigures:
+    """Eq. 7 and the segment angles of a result against its source, over all segments."""
+
+    count: int
+    angle_sum: float
+    angle_max: float
+    strand_shape: float
+
+
+def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarray,
+                    chunk: int = METRICS_CHUNK) -> SegmentFigures:
+    """Segment angles (as :func:`segment_angles`) and Eq. 7's value (as
+    :func:`~.adaptation.energies.energy_terms`) of every segment, a block of particles at a time.
+
+    Parameters
+    ----------
+    points, source_points : (N, 3) float64
+    offsets : (S+1,) int64
+    chunk : int
+        Particles per block (bounds the temporaries).
+    """
+    n = len(points)
+    is_tip = np.zeros(n, dtype=bool)
+    is_tip[np.asarray(offsets)[1:] - 1] = True
+    count, angle_sum, angle_max, shape = 0, 0.0, 0.0, 0.0
+    step = max(1, int(chunk))
+    for start in range(0, n - 1, step):
+        stop = min(n - 1, start + step)  # segments (i, i + 1) for i in [start, stop)
+        starts = ~is_tip[start:stop]
+        a = np.diff(points[start : stop + 1], axis=0)[starts]
+        b = np.diff(source_points[start : stop + 1], axis=0)[starts]
+        angles = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+        _, unit = unit_rows(a)
+        _, source_unit = unit_rows(b)
+        count += len(angles)
+        angle_sum += float(angles.sum())
+        angle_max = max(angle_max, float(angles.max(initial=0.0)))
+        shape += float(np.sum((unit - source_unit) ** 2))
+    return SegmentFigures(count, angle_sum, angle_max, shape)
 
 
 def hairstyle_metrics(
     points: np.ndarray,
-    source_points: np.ndarray,
+    source: Hair,
     initial: np.ndarray,
-    is_root: np.ndarray,
     root_targets: np.ndarray,
-    model: ShapeModel,
+    neighbours: Neighbours,
     query: MeshQuery,
     eps_c: float,
     weights: EnergyWeights = EnergyWeights(),
@@ -102,13 +175,13 @@ def hairstyle_metrics(
     ----------
     points : (N, 3) float64
         The result.
-    source_points : (N, 3) float64
-        The source hairstyle (segment angles are measured against it).
+    source : Hair
+        The source hairstyle (segment angles and Eq. 7/10 are measured against it).
     initial : (N, 3) float64
         The initial transfer ``p-hat`` (hair-body reference).
-    is_root : (N,) bool
     root_targets : (S, 3) float64
-    model : ShapeModel
+    neighbours : Neighbours
+        Eq. 8-9 over all strands of the source, one row per particle (Eq. 10's term).
     query : MeshQuery
         The target body (the roots' distance to its surface).
     eps_c : float
@@ -118,15 +191,22 @@ def hairstyle_metrics(
         penetration figures; ``query`` by default.
     """
     n = len(points)
+    is_root = source.is_root
     pen = penetration(points, is_root, query if body is None else body, eps_c)
-    terms = energy_terms(model, points, initial)
-    angles = segment_angles(points, source_points, model.segments)
+    segments = segment_figures(points, source.points, source.offsets)
+    residual = interstrand_residual(neighbours, points, source.points)
+    residual_norm = np.sqrt(np.einsum("ij,ij->i", residual, residual))
+    del residual
+    offset = points - initial
+    hair_body = float(np.einsum("ij,ij->", offset, offset))
+    del offset
+    terms = EnergyTerms(segments.strand_shape, float(np.sum(residual_norm**2)), hair_body)
     metrics = {
         "particles": n,
-        "mean_segment_angle_rad": float(angles.mean()) if len(angles) else 0.0,
-        "max_segment_angle_rad": float(angles.max(initial=0.0)),
+        "mean_segment_angle_rad": segments.angle_sum / segments.count if segments.count else 0.0,
+        "max_segment_angle_rad": segments.angle_max,
         "mean_distance_to_initial_m": mean_particle_distance(points, initial),
-        "interstrand_error_m": interstrand_error(model, points),
+        "interstrand_error_m": float(np.mean(residual_norm)) if n else 0.0,
         "penetrating_particles": pen["inside"],
         "particles_below_clearance": pen["below_clearance"],
         "min_signed_distance_m": pen["min_distance"],

@@ -22,12 +22,8 @@ import numpy as np
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
-from hairport.solver.adaptation.multiscale import (
-    MultiscaleReport,
-    build_multiscale_model,
-    default_workers,
-    solve_multiscale,
-)
+from hairport.solver.adaptation.guides import select_guides
+from hairport.solver.adaptation.multiscale import MultiscaleReport, default_workers, multiscale_model, solve_multiscale
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
@@ -114,8 +110,11 @@ def preprocess(
         query = MeshQuery(source.vertices, source.faces)
         anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma, options.anchoring)
     with timed(timings, "guides"):
-        progress("guides", 0.5, "selecting guides and inter-strand neighbours")
-        multiscale = build_multiscale_model(hair, options.guides, options.k, options.guide_seed)
+        progress("guides", 0.5, "selecting guides")
+        guides = select_guides(hair, options.guides, seed=options.guide_seed)
+    with timed(timings, "neighbours"):
+        progress("neighbours", 0.7, "finding the inter-strand neighbours")
+        multiscale = multiscale_model(hair, guides, options.k)
     progress("preprocess", 1.0, "done")
     bone_names = source.skeleton.names if source.skeleton is not None else ()
     return AdaptableHairstyle(source, hair, anchors, multiscale, options, bone_names, timings,
@@ -209,8 +208,8 @@ def retarget(
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
-        metrics = hairstyle_metrics(points, hair.points, initial, hair.is_root, roots, adaptable.shape_model,
-                                    target_query, options.eps_c, weights, body=body)
+        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query, options.eps_c,
+                                    weights, body=body)
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved

@@ -29,7 +29,7 @@ from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
 from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator
+from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator, neighbour_average
 from hairport.solver.adaptation.options import SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.mesh.distance_grid import DistanceGrid
@@ -77,7 +77,11 @@ class MultiscaleModel:
 
 def build_multiscale_model(hair: Hair, n_guides: int, k: int, seed: int = 0) -> MultiscaleModel:
     """Select guides and find the coarse and fine kNN sets on the source hairstyle."""
-    guides = select_guides(hair, n_guides, seed=seed)
+    return multiscale_model(hair, select_guides(hair, n_guides, seed=seed), k)
+
+
+def multiscale_model(hair: Hair, guides: np.ndarray, k: int) -> MultiscaleModel:
+    """The coarse and fine kNN sets of the source hairstyle with these guides ``(G,) int64``."""
     guide_hair = hair.subset(guides)
     guide_neighbours = knn_other_strands(guide_hair.points, guide_hair.strand_of, k)
     is_guide_particle = np.repeat(np.isin(np.arange(hair.n_strands), guides), hair.counts)
@@ -124,7 +128,8 @@ def fine_source(hair: Hair, model: MultiscaleModel) -> FineSource:
     _, unit = unit_rows(hair.points[np.minimum(particles + 1, hair.n_particles - 1)] - hair.points[particles])
     nb = model.fine_neighbours
     pull_weight = nb.weight.sum(axis=1)
-    features = pull_weight[:, None] * hair.points[particles] - np.einsum("nk,nkd->nd", nb.weight, hair.points[nb.index])
+    features = neighbour_average(nb, hair.points)
+    np.subtract(pull_weight[:, None] * hair.points[particles], features, out=features)
     return FineSource(strands, particles, unit, pull_weight, features)
 
 
@@ -271,7 +276,7 @@ def solve_multiscale(
     began = time.perf_counter()
     if len(fine.strands):
         nb = model.fine_neighbours
-        pull_target = np.einsum("nk,nkd->nd", nb.weight, points[nb.index]) + fine.source_features
+        pull_target = neighbour_average(nb, points) + fine.source_features
         is_root = hair.is_root[fine.particles]
         counts = hair.counts[fine.strands]
         offsets = np.concatenate([[0], np.cumsum(counts)])

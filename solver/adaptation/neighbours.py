@@ -22,6 +22,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from hairport.solver.jit import parallel_kernel, prange, warms
+
 #: neighbour distances are clamped to this (m) before inverting (Eq. 9)
 MIN_NEIGHBOUR_DISTANCE = 1e-9
 #: extra candidates asked of the k-d tree in the first round, to skip particles of the same strand
@@ -38,13 +40,18 @@ KNN_CANDIDATE_BUDGET = KNN_QUERY_CHUNK * (5 + KNN_EXTRA_CANDIDATES)
 KNN_MAX_ROUND_CANDIDATES = 512
 
 
+#: storage of the neighbour indices: particle counts stay far below 2^31 (the readers cap them
+#: at tens of millions), and the index array is the largest one a hairstyle keeps
+NEIGHBOUR_INDEX_DTYPE = np.int32
+
+
 @dataclass(frozen=True, eq=False)
 class Neighbours:
     """kNN sets and weights of Eq. 8-9.
 
     Attributes
     ----------
-    index : (N, k) int64
+    index : (N, k) int32
         Neighbour particle indices; a row's padding repeats the particle itself with weight 0.
     weight : (N, k) float64
         Normalised inverse-distance weights; rows sum to 1 (0 for a particle with no neighbour).
@@ -52,6 +59,10 @@ class Neighbours:
 
     index: np.ndarray
     weight: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "index", np.asarray(self.index, dtype=NEIGHBOUR_INDEX_DTYPE))
+        object.__setattr__(self, "weight", np.asarray(self.weight, dtype=np.float64))
 
 
 def knn_other_strands(
@@ -87,13 +98,16 @@ def knn_other_strands(
     strand_of = np.asarray(strand_of, dtype=np.int64)
     queries = np.arange(n, dtype=np.int64) if queries is None else np.asarray(queries, dtype=np.int64)
     pool = np.arange(n, dtype=np.int64) if candidates is None else np.flatnonzero(candidates)
-    index = np.repeat(queries[:, None], k, axis=1)
+    index = np.repeat(queries[:, None].astype(NEIGHBOUR_INDEX_DTYPE), k, axis=1)
     distance = np.full((len(queries), k), np.inf)
     if len(pool) == 0 or k == 0 or len(queries) == 0:
         return Neighbours(index, np.zeros((len(queries), k)))
     tree = cKDTree(points[pool])
     own = np.bincount(strand_of[pool], minlength=int(strand_of.max()) + 1)[strand_of[queries]]
     # only after missing neighbours in the first round does a particle go to the exact search
+    if not own.any():  # no query's strand in the pool (Eq. 14: normal particles, guide particles)
+        _nearest_in_pool(points, tree, pool, queries, k, workers, index, distance)
+        return Neighbours(index, _inverse_distance_weights(distance))
     long_strand = own + k > KNN_MAX_ROUND_CANDIDATES
     todo = np.arange(len(queries))
     ask = k + KNN_EXTRA_CANDIDATES
@@ -115,11 +129,37 @@ def knn_other_strands(
     hard = np.concatenate(exact)
     if len(hard):
         index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
-    valid = np.isfinite(distance)
-    inverse = np.where(valid, 1.0 / np.maximum(distance, MIN_NEIGHBOUR_DISTANCE), 0.0)
-    total = inverse.sum(axis=1, keepdims=True)
-    weight = np.divide(inverse, total, out=np.zeros_like(inverse), where=total > 0)
-    return Neighbours(index, weight)
+    return Neighbours(index, _inverse_distance_weights(distance))
+
+
+def _inverse_distance_weights(distance: np.ndarray) -> np.ndarray:
+    """Eq. 9 from ``(Q, k)`` neighbour distances (``inf``: padding), in place (no ``(Q, k)`` temporaries).
+
+    Returns
+    -------
+    weight : (Q, k) float64
+        ``distance``'s memory: normalised inverse distances, 0 for the padding (1/inf) and
+        for a row without any neighbour.
+    """
+    weight = np.maximum(distance, MIN_NEIGHBOUR_DISTANCE, out=distance)
+    np.divide(1.0, weight, out=weight)
+    total = weight.sum(axis=1, keepdims=True)
+    np.divide(weight, total, out=weight, where=total > 0)
+    return weight
+
+
+def _nearest_in_pool(points: np.ndarray, tree: cKDTree, pool: np.ndarray, queries: np.ndarray, k: int, workers: int,
+                     index: np.ndarray, distance: np.ndarray) -> None:
+    """The ``k`` nearest pool particles of every query, none of whose strands is in the pool
+    (so all are of other strands): fills ``index`` and ``distance`` (``(Q, k)``, in place);
+    the columns beyond the pool's size keep their padding."""
+    ask = min(k, len(pool))
+    rows_per_call = max(1, KNN_CANDIDATE_BUDGET // ask)
+    for first in range(0, len(queries), rows_per_call):
+        rows = slice(first, first + rows_per_call)
+        dist, local = tree.query(points[queries[rows]], k=ask, workers=workers)
+        index[rows, :ask] = pool[local.reshape(-1, ask)]
+        distance[rows, :ask] = dist.reshape(-1, ask)
 
 
 def _round(
@@ -220,6 +260,50 @@ def _other_strand_search(
         stack.append((lo, mid, left))
         stack.append((mid, hi, right))
     return best_index, best_distance
+
+
+def neighbour_average(neighbours: Neighbours, points: np.ndarray) -> np.ndarray:
+    """Each row's weighted sum of its neighbours' positions, ``sum_j w_ij p_j`` (Eq. 10/14),
+    without the ``(Q, k, 3)`` gather (compiled; :func:`neighbour_average_reference`).
+
+    Parameters
+    ----------
+    neighbours : Neighbours
+        ``Q`` rows.
+    points : (N, 3) float64
+        Positions the indices point into.
+
+    Returns
+    -------
+    average : (Q, 3) float64
+    """
+    out = np.empty((len(neighbours.index), 3))
+    _neighbour_average_kernel(np.ascontiguousarray(neighbours.index), np.ascontiguousarray(neighbours.weight),
+                              np.ascontiguousarray(points, dtype=np.float64), out)
+    return out
+
+
+def neighbour_average_reference(neighbours: Neighbours, points: np.ndarray) -> np.ndarray:
+    """:func:`neighbour_average` in numpy (gathers ``(Q, k, 3)``): the tested reference."""
+    return np.einsum("nk,nkd->nd", neighbours.weight, points[neighbours.index])
+
+
+@parallel_kernel
+def _neighbour_average_kernel(index, weight, points, out):
+    for i in prange(index.shape[0]):
+        x = y = z = 0.0
+        for j in range(index.shape[1]):
+            w, p = weight[i, j], index[i, j]
+            x += w * points[p, 0]
+            y += w * points[p, 1]
+            z += w * points[p, 2]
+        out[i, 0], out[i, 1], out[i, 2] = x, y, z
+
+
+@warms("adaptation.neighbours")
+def _warm() -> None:
+    for dtype in (np.int32, np.int64):
+        _neighbour_average_kernel(np.zeros((1, 2), dtype), np.ones((1, 2)), np.ones((1, 3)), np.empty((1, 3)))
 
 
 def laplacian_operator(neighbours: Neighbours, rows: np.ndarray, n: int) -> sp.csr_matrix:

@@ -19,7 +19,7 @@ Deviations from the paper's text, on purpose:
 * A particle whose rays all miss or leave every valid region keeps its offset to its
   closest surface point in that face's tangent frame (``fallback``); counted in reports.
 * Besides the valid region, Eq. 2's indicator also asks that the hit lie within reach of
-  the particle (:data:`ANCHOR_REACH_FACTOR`); a particle no bone reaches falls back to its
+  the particle (:data:`.bone_rays.ANCHOR_REACH_FACTOR`); a particle no bone reaches falls back to its
   closest surface point.
 * On the target, the ray origin ``o_b`` is the point of the (inner part of the) bone
   closest to the mapped hit ``q_b``, not the point at the source's bone parameter: on the
@@ -45,12 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.mesh.polyline import closest_points_on_segments
 from hairport.solver.mesh.query import MeshQuery, SignedDistance
 from hairport.solver.mesh.triangles import barycentric_coordinates, face_frames, interpolate_barycentric
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import AUTO
+from hairport.solver.transfer.bone_rays import MIN_RAY_LENGTH, BoneRays, anchor_by_bones, bone_rays
 from hairport.solver.transfer.root_shell import snap_roots_to_skin
 
 #: bones hair can rest on, in the MakeHuman game-engine rig's names
@@ -66,19 +66,18 @@ ANCHOR_SIGMA = 100.0
 #: a face belongs to the valid region of a bone where its mean skin weight exceeds this
 VALID_REGION_WEIGHT = 0.05
 
-
-#: a bone whose ray meets the body much farther from the particle than the body's nearest point
-#: (|eta| > factor * distance + slack) is not a candidate: a ray from a clavicle can hit its
-#: valid shoulder region and travel 10+ cm on to a strand under the chin, and a lever that
-#: long turns small body changes into large hair motion
-ANCHOR_REACH_FACTOR = 2.0
-ANCHOR_REACH_SLACK = 0.01
+#: particles anchored at a time by :func:`compute_anchors` (bounds its temporaries to ~100 MB)
+ANCHOR_CHUNK = 1 << 17
 #: ray origins stay on the part of a bone at least this deep (m) inside the body
 ANCHOR_BONE_DEPTH = 0.02
 #: samples along a bone when finding that part
 BONE_DEPTH_SAMPLES = 64
-#: rays shorter than this (m) have no direction
-MIN_RAY_LENGTH = 1e-9
+
+
+#: storage of the anchors' bone and face indices (a skeleton has far fewer than 2^15 bones, a
+#: body far fewer than 2^31 faces): indices only index, the math is float64
+BONE_INDEX_DTYPE = np.int16
+FACE_INDEX_DTYPE = np.int32
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,16 +86,16 @@ class Anchors:
 
     Attributes
     ----------
-    bone : (N,) int64
+    bone : (N,) int16
         Anchor bone (skeleton index); ``-1`` for roots and fallback particles.
-    face : (N,) int64
+    face : (N,) int32
         Face hit by the ray (roots and fallbacks: face of the closest point).
     barycentric : (N, 3) float64
     eta : (N,) float64
         Signed distance from the hit point to the particle along the ray (m).
-    frame_offset : (N, 3) float64
-        For fallback particles: offset to the closest point in the face frame
-        (normal, edge, binormal); zeros elsewhere.
+    frame_offset : (F, 3) float64
+        One row per fallback particle, in particle order (``F = fallback.sum()``): its offset
+        to the closest point in the face frame (normal, edge, binormal).
     fallback : (N,) bool
     """
 
@@ -106,6 +105,15 @@ class Anchors:
     eta: np.ndarray
     frame_offset: np.ndarray
     fallback: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "bone", np.asarray(self.bone, dtype=BONE_INDEX_DTYPE))
+        object.__setattr__(self, "face", np.asarray(self.face, dtype=FACE_INDEX_DTYPE))
+        object.__setattr__(self, "fallback", np.asarray(self.fallback, dtype=bool))
+        offsets = np.asarray(self.frame_offset, dtype=np.float64).reshape(-1, 3)
+        if len(offsets) != int(self.fallback.sum()):
+            raise ValueError(f"frame_offset has {len(offsets)} rows for {int(self.fallback.sum())} fallback particles")
+        object.__setattr__(self, "frame_offset", offsets)
 
 
 def hair_bone_indices(character: Character) -> np.ndarray:
@@ -245,6 +253,7 @@ def compute_anchors(
     query: MeshQuery | None = None,
     sigma: float = ANCHOR_SIGMA,
     anchoring: str = ANCHOR_BY_BONES,
+    chunk: int = ANCHOR_CHUNK,
 ) -> Anchors:
     """Choose an anchor bone per particle and record its local coordinates (Eq. 2).
 
@@ -263,88 +272,71 @@ def compute_anchors(
         :data:`ANCHOR_BY_BONES` (Eq. 2, closest surface point where no bone reaches) or
         :data:`ANCHOR_BY_SURFACE` (every particle by its closest surface point: ``fallback``
         everywhere but the roots).
+    chunk : int
+        Particles anchored at a time (bounds the temporaries; the result does not depend on it).
 
     Returns
     -------
     anchors : Anchors
     """
+    if anchoring not in (ANCHOR_BY_BONES, ANCHOR_BY_SURFACE):
+        raise InputError(f"unknown anchoring {anchoring!r}; expected {ANCHOR_BY_BONES} or {ANCHOR_BY_SURFACE}",
+                         code="bad_option")
     query = query or MeshQuery(source.vertices, source.faces)
+    is_root = np.asarray(is_root, dtype=bool)
     n = len(points)
     best = {
-        "bone": np.full(n, -1, np.int64),
-        "face": np.full(n, -1, np.int64),
+        "bone": np.full(n, -1, BONE_INDEX_DTYPE),
+        "face": np.full(n, -1, FACE_INDEX_DTYPE),
         "barycentric": np.zeros((n, 3)),
         "eta": np.zeros(n),
     }
-    # one closest-point query serves the reach test of every particle and the anchors of
-    # roots and fallback particles
-    surface = query.signed_distance(points)
-    if anchoring == ANCHOR_BY_SURFACE:
-        reached = np.zeros(n, dtype=bool)
-    elif anchoring == ANCHOR_BY_BONES:
-        reached = _anchor_by_bones(source, points, is_root, query, sigma, surface, best)
-    else:
-        raise InputError(f"unknown anchoring {anchoring!r}; expected {ANCHOR_BY_BONES} or {ANCHOR_BY_SURFACE}",
-                         code="bad_option")
-
+    rays = _source_bone_rays(source, query) if anchoring == ANCHOR_BY_BONES else None
+    fallback = np.zeros(n, dtype=bool)
+    # one closest-point query per particle serves the reach test of the bones and the anchors
+    # of roots and fallback particles: only those rows of it are kept
+    kept: list[np.ndarray] = []
+    kept_surface: list[SignedDistance] = []
+    for start in range(0, n, max(1, int(chunk))):
+        part = slice(start, min(n, start + max(1, int(chunk))))
+        surface = query.signed_distance(points[part])
+        if rays is None:
+            reached = np.zeros(part.stop - start, dtype=bool)
+        else:
+            reached = anchor_by_bones(rays, query, points[part], is_root[part], surface.distance, sigma,
+                                      {name: values[part] for name, values in best.items()})
+        fallback[part] = ~is_root[part] & ~reached
+        rows = np.flatnonzero(is_root[part] | fallback[part])
+        kept.append(start + rows)
+        kept_surface.append(surface.take(rows))
+    idx = np.concatenate(kept) if kept else np.zeros(0, np.int64)
+    if len(idx) == 0:
+        return Anchors(frame_offset=np.zeros((0, 3)), fallback=fallback, **best)
+    surface = SignedDistance(*(np.concatenate([getattr(s, name) for s in kept_surface])
+                               for name in ("distance", "closest", "normal", "faces")))
     # roots closer to an eye, a lash or a stray face than to the skin are anchored on the skin
-    surface, _ = snap_roots_to_skin(query, points, surface, is_root)
-    fallback = ~is_root & ~reached
-    closest_needed = is_root | fallback
-    frame_offset = np.zeros((n, 3))
-    if closest_needed.any():
-        idx = np.flatnonzero(closest_needed)
-        faces, barycentric = surface_anchors(query, surface.take(idx))
-        best["face"][idx] = faces
-        best["barycentric"][idx] = barycentric
-        best["bone"][idx] = -1
-        frames, _ = face_frames(source.vertices, source.faces, faces)
-        offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
-        frame_offset[idx] = np.einsum("nji,nj->ni", frames, offsets)
-        frame_offset[np.flatnonzero(is_root)] = 0.0
+    surface, _ = snap_roots_to_skin(query, points[idx], surface, is_root[idx])
+    faces, barycentric = surface_anchors(query, surface)
+    best["face"][idx] = faces
+    best["barycentric"][idx] = barycentric
+    best["bone"][idx] = -1
+    # the frame offsets of the fallback particles (the roots lie on their faces: none)
+    moved = fallback[idx]
+    faces, idx = faces[moved], idx[moved]
+    frames, _ = face_frames(source.vertices, source.faces, faces)
+    offsets = points[idx] - interpolate_barycentric(source.vertices, source.faces, faces, best["barycentric"][idx])
+    frame_offset = np.einsum("nji,nj->ni", frames, offsets)
     return Anchors(frame_offset=frame_offset, fallback=fallback, **best)
 
 
-def _anchor_by_bones(source: Character, points: np.ndarray, is_root: np.ndarray, query: MeshQuery, sigma: float,
-                     surface: SignedDistance, best: dict[str, np.ndarray]) -> np.ndarray:
-    """Eq. 2 over the hair bones: writes the best bone, face, barycentric and ``eta`` into
-    ``best`` and returns ``(N,) bool``, the particles some bone reaches."""
+def _source_bone_rays(source: Character, query: MeshQuery) -> BoneRays:
+    """:class:`~.bone_rays.BoneRays` of the source's hair bones."""
     skeleton = source.skeleton
     bones = hair_bone_indices(source)
     valid = valid_face_mask(source, bones)
-    corners = source.vertices[source.faces]
-    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    best_score = np.full(len(points), np.inf)
-    free = np.flatnonzero(~is_root)
-    reach_of = ANCHOR_REACH_FACTOR * np.abs(surface.distance) + ANCHOR_REACH_SLACK
     inner_heads, inner_tails = inner_bone_segments(skeleton.heads[bones], skeleton.tails[bones], query)
-    _, o_all = closest_points_on_segments(points[free], inner_heads, inner_tails)
-    axes = skeleton.tails[bones] - skeleton.heads[bones]
-    axes /= np.maximum(np.linalg.norm(axes, axis=1, keepdims=True), MIN_RAY_LENGTH)
-    for j, bone in enumerate(bones):  # a handful of bones; each iteration is vectorised over particles
-        ray = points[free] - o_all[:, j]
-        length = np.linalg.norm(ray, axis=1)
-        usable = length > MIN_RAY_LENGTH
-        hits = query.first_hits(o_all[usable, j], ray[usable])
-        index = free[usable]
-        hit_faces = np.where(hits.hit, hits.faces, 0)
-        leaving = np.einsum("ij,ij->i", face_normals[hit_faces], ray[usable]) > 0.0
-        ok = hits.hit & valid[hit_faces, j] & leaving
-        unit = ray[usable] / length[usable, None]
-        eta = np.einsum("ij,ij->i", points[index] - hits.points, unit)
-        cosine = unit @ axes[j]
-        score = np.where(ok, np.abs(eta) * np.exp(sigma * cosine**2), np.inf)
-        score = np.where(np.abs(eta) <= reach_of[index], score, np.inf)
-        better = score < best_score[index]
-        take = index[better]
-        best_score[take] = score[better]
-        best["bone"][take] = bone
-        best["face"][take] = hits.faces[better]
-        best["barycentric"][take] = hits.barycentric[better]
-        best["eta"][take] = eta[better]
-    return np.isfinite(best_score)
-
-
+    return bone_rays(source.vertices, source.faces, bones, valid, skeleton.heads[bones], skeleton.tails[bones],
+                     inner_heads, inner_tails)
 
 
 def _closest_on_bones(points: np.ndarray, heads: np.ndarray, tails: np.ndarray) -> np.ndarray:
@@ -354,7 +346,8 @@ def _closest_on_bones(points: np.ndarray, heads: np.ndarray, tails: np.ndarray) 
     return heads + np.clip(t, 0.0, 1.0)[:, None] * axis
 
 
-def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None = None) -> np.ndarray:
+def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None = None,
+                  chunk: int = ANCHOR_CHUNK) -> np.ndarray:
     """Apply the local coordinates on the target (Eq. 3).
 
     Parameters
@@ -365,31 +358,45 @@ def place_anchors(anchors: Anchors, target: Character, query: MeshQuery | None =
         particle is anchored by a bone.
     query : MeshQuery, optional
         Prebuilt query structure of the target mesh.
+    chunk : int
+        Particles placed at a time (bounds the temporaries; the result does not depend on it).
 
     Returns
     -------
     points : (N, 3) float64
         The anchored particles ``p~``.
     """
-    q = interpolate_barycentric(target.vertices, target.faces, anchors.face, anchors.barycentric)
-    points = q.copy()
-    ray_based = anchors.bone >= 0
-    if ray_based.any():
+    n = len(anchors.face)
+    points = np.empty((n, 3))
+    used = np.unique(anchors.bone[anchors.bone >= 0])
+    if len(used):
         skeleton = target.skeleton
         if skeleton is None:
             raise InputError("the hairstyle is anchored by bones, and the target has no skeleton",
                              target.name, "no_skeleton")
-        bone = anchors.bone[ray_based]
         query = query or MeshQuery(target.vertices, target.faces)
-        used = np.unique(bone)
         inner_heads = np.zeros((skeleton.n_bones, 3))
         inner_tails = np.zeros((skeleton.n_bones, 3))
         inner_heads[used], inner_tails[used] = inner_bone_segments(skeleton.heads[used], skeleton.tails[used], query)
-        origin = _closest_on_bones(q[ray_based], inner_heads[bone], inner_tails[bone])
-        direction = q[ray_based] - origin
-        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
-        points[ray_based] += anchors.eta[ray_based, None] * direction
-    if anchors.fallback.any():
-        frames, _ = face_frames(target.vertices, target.faces, anchors.face[anchors.fallback])
-        points[anchors.fallback] += np.einsum("nij,nj->ni", frames, anchors.frame_offset[anchors.fallback])
+    fallback_row = 0
+    step = max(1, int(chunk))
+    for start in range(0, n, step):
+        part = slice(start, min(n, start + step))
+        face, bone, fallback = anchors.face[part], anchors.bone[part], anchors.fallback[part]
+        q = interpolate_barycentric(target.vertices, target.faces, face, anchors.barycentric[part])
+        placed = points[part]
+        placed[:] = q
+        ray_based = np.flatnonzero(bone >= 0)
+        if len(ray_based):
+            on = bone[ray_based]
+            origin = _closest_on_bones(q[ray_based], inner_heads[on], inner_tails[on])
+            direction = q[ray_based] - origin
+            direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), MIN_RAY_LENGTH)
+            placed[ray_based] += anchors.eta[part][ray_based, None] * direction
+        rows = np.flatnonzero(fallback)
+        if len(rows):
+            frames, _ = face_frames(target.vertices, target.faces, face[rows])
+            offsets = anchors.frame_offset[fallback_row : fallback_row + len(rows)]
+            placed[rows] += np.einsum("nij,nj->ni", frames, offsets)
+            fallback_row += len(rows)
     return points

@@ -12,6 +12,8 @@ from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 SMOOTHING_EPS = 0.3
 #: rounds of re-evaluating the unsmooth set on the smoothed strands
 SMOOTHING_ROUNDS = 5
+#: particles per block when the unsmooth set is evaluated (bounds its temporaries)
+SMOOTHING_CHUNK = 1 << 18
 
 
 def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
@@ -83,7 +85,12 @@ def smooth_strands(
     has_row = np.diff(L.indptr) > 0
 
     def discrepancy(p: np.ndarray) -> np.ndarray:
-        return has_row & (np.linalg.norm(L @ p - source_features, axis=1) > eps_s)
+        # a block of rows at a time: the same sums, without (N, 3) temporaries
+        far = np.empty(len(p), dtype=bool)
+        for start in range(0, len(p), SMOOTHING_CHUNK):
+            rows = slice(start, start + SMOOTHING_CHUNK)
+            far[rows] = np.linalg.norm(L[rows] @ p - source_features[rows], axis=1) > eps_s
+        return has_row & far
 
     unsmooth = discrepancy(anchored)
     smoothed = anchored

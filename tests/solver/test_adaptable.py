@@ -29,4 +29,5 @@ def test_operator_sizes(adaptable):
     assert len(guides) == 6 and adaptable.coarse_model.K.shape[0] == int(hair.counts[guides].sum())
     assert len(adaptable.fine_source.strands) == hair.n_strands - 6
     assert np.intersect1d(adaptable.fine_source.strands, guides).size == 0
-    assert adaptable.bone_names == adaptable.source.skeleton.names and set(adaptable.timings) == {"anchors", "guides"}
+    assert adaptable.bone_names == adaptable.source.skeleton.names
+    assert set(adaptable.timings) == {"anchors", "guides", "neighbours"}

@@ -61,9 +61,47 @@ def rewrite_meta(src, dst, change):
 def test_other_format_version_is_refused(saved, tmp_path):
     other = tmp_path / "old.hpa"
     rewrite_meta(saved, other, lambda meta, arrays: meta.update(format_version=artifact.FORMAT_VERSION + 1))
-    with pytest.raises(InputError, match="format version 2.*reads version 1") as caught:
+    with pytest.raises(InputError, match="format version 3.*reads versions 1, 2") as caught:
         artifact.load_adaptable(other)
     assert caught.value.code == "artifact_version"
+
+
+def as_version_1(meta, arrays):
+    """The arrays as format version 1 wrote them: int64 indices, a frame offset row per particle."""
+    for name in ("anchor_bone", "anchor_face", "guide_neighbour_index", "fine_neighbour_index"):
+        arrays[name] = arrays[name].astype(np.int64)
+    fallback = arrays["anchor_fallback"]
+    full = np.zeros((len(fallback), 3))
+    full[fallback] = arrays["anchor_frame_offset"]
+    arrays["anchor_frame_offset"] = full
+    meta["format_version"] = 1
+    meta["digest"] = artifact._digest({name: value for name, value in arrays.items() if name != "meta"})
+
+
+def test_version_1_artifacts_are_read_and_retarget_bit_for_bit_like_version_2(case, saved, tmp_path):
+    _, target, _, adaptable = case
+    old = tmp_path / "v1.hpa"
+    rewrite_meta(saved, old, as_version_1)
+    with np.load(old) as archive:
+        assert archive["anchor_face"].dtype == np.int64 and archive["anchor_frame_offset"].shape == (
+            adaptable.hair.n_particles, 3)
+    loaded, current = artifact.load_adaptable(old), artifact.load_adaptable(saved)
+    for name in ("bone", "face", "barycentric", "eta", "frame_offset", "fallback"):
+        assert np.array_equal(getattr(loaded.anchors, name), getattr(current.anchors, name)), name
+        assert getattr(loaded.anchors, name).dtype == getattr(current.anchors, name).dtype, name
+    assert loaded.multiscale.fine_neighbours.index.dtype == np.int32
+    options = pipeline.RetargetOptions(max_iterations=8, workers=1)
+    assert np.array_equal(pipeline.retarget(loaded, target, options).hair.points,
+                          pipeline.retarget(adaptable, target, options).hair.points)
+
+
+def test_version_2_stores_compact_indices_and_only_the_fallback_frame_offsets(case, saved):
+    adaptable = case[3]
+    with np.load(saved) as archive:
+        assert archive["anchor_bone"].dtype == np.int16 and archive["anchor_face"].dtype == np.int32
+        assert archive["fine_neighbour_index"].dtype == archive["guide_neighbour_index"].dtype == np.int32
+        assert archive["anchor_frame_offset"].shape == (int(adaptable.anchors.fallback.sum()), 3)
+        assert json.loads(archive["meta"].tobytes())["format_version"] == 2
 
 
 def test_altered_arrays_are_refused(saved, tmp_path):

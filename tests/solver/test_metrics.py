@@ -5,15 +5,18 @@ import pytest
 import trimesh
 
 from hairport.solver.adaptation.energies import EnergyWeights, energy_terms
+from hairport.solver.adaptation.neighbours import knn_other_strands
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import (
     hairstyle_metrics,
     interstrand_error,
+    interstrand_residual,
     mean_particle_distance,
     mean_segment_angle,
     penetration,
     root_errors,
     segment_angles,
+    segment_figures,
 )
 from tests.solver.hair_shapes import model_of, parallel_strands
 
@@ -64,25 +67,43 @@ def test_root_errors_to_targets_and_to_the_surface():
 def test_interstrand_error_and_all_metrics_of_a_moved_hairstyle():
     hair = parallel_strands(n_strands=3, n_points=5)
     model = model_of(hair, k=2)
+    nb = knn_other_strands(hair.points, hair.strand_of, 2)
     shifted = hair.points.copy()
     shifted[hair.strand_of == 1] += [0.0, 0.0, 0.002]  # the middle strand 2 mm off its neighbours
-    assert interstrand_error(model, hair.points + 0.5) < 1e-15  # Eq. 10 ignores translations
+    assert interstrand_error(nb, hair.points + 0.5, hair.points) < 1e-15  # Eq. 10 ignores translations
+    # the residual without K equals the sparse operator's K p - L-bar
+    np.testing.assert_allclose(interstrand_residual(nb, shifted, hair.points), model.K @ shifted - model.source_features,
+                               rtol=0, atol=1e-17)
     expected = np.mean(np.linalg.norm(model.K @ shifted - model.source_features, axis=1))
-    assert interstrand_error(model, shifted) == expected > 1e-3
+    assert interstrand_error(nb, shifted, hair.points) == pytest.approx(expected, rel=1e-13)
+    assert expected > 1e-3
 
     body = trimesh.creation.icosphere(2, radius=0.005)  # a small ball far below the strands
     query = MeshQuery(np.asarray(body.vertices) + [0.0, -0.5, 0.0], body.faces)
     roots = hair.points[hair.roots]
-    metrics = hairstyle_metrics(shifted, hair.points, hair.points, hair.is_root, roots, model, query, eps_c=5e-4)
+    metrics = hairstyle_metrics(shifted, hair, hair.points, roots, nb, query, eps_c=5e-4)
     n = hair.n_particles
     assert metrics["particles"] == n and metrics["penetrating_particles"] == metrics["particles_below_clearance"] == 0
     assert metrics["mean_segment_angle_rad"] == metrics["max_segment_angle_rad"] == 0.0  # a translated strand
     assert metrics["mean_distance_to_initial_m"] == pytest.approx(0.002 * 5 / n, rel=1e-12)
-    assert metrics["interstrand_error_m"] == expected
+    assert metrics["interstrand_error_m"] == pytest.approx(expected, rel=1e-13)
     terms = energy_terms(model, shifted, hair.points)
-    assert metrics["energy_inter_strand_per_particle"] == terms.inter_strand / n
+    assert metrics["energy_inter_strand_per_particle"] == pytest.approx(terms.inter_strand / n, rel=1e-13)
     assert metrics["energy_hair_body_per_particle"] == pytest.approx(5 * 0.002**2 / n, rel=1e-12)
-    assert metrics["energy_total_per_particle"] == terms.total(EnergyWeights()) / n
+    assert metrics["energy_total_per_particle"] == pytest.approx(terms.total(EnergyWeights()) / n, rel=1e-13)
     assert metrics["root_to_target_max"] == pytest.approx(0.002, rel=1e-12)  # the middle strand's root moved too
     assert metrics["root_to_target_mean"] == pytest.approx(0.002 / 3, rel=1e-12)
     assert metrics["min_signed_distance_m"] == pytest.approx(0.5 - 0.02 - 0.005, abs=1e-9)  # tip over the ball's pole
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 1 << 18])
+def test_segment_figures_equal_the_per_segment_angles_and_eq7_in_any_block_size(chunk):
+    hair = parallel_strands(n_strands=4, n_points=9)
+    rng = np.random.default_rng(2)
+    bent = hair.points + rng.normal(scale=1e-3, size=hair.points.shape)
+    figures = segment_figures(bent, hair.points, hair.offsets, chunk=chunk)
+    angles = segment_angles(bent, hair.points, hair.segments)
+    assert figures.count == len(hair.segments) == 4 * 8
+    assert figures.angle_sum == pytest.approx(angles.sum(), rel=1e-13) and figures.angle_max == angles.max() > 0.05
+    assert figures.strand_shape == pytest.approx(energy_terms(model_of(hair, k=2), bent, hair.points).strand_shape,
+                                                 rel=1e-13)

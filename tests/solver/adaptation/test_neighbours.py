@@ -142,3 +142,15 @@ def test_fewer_than_k_neighbours_renormalise_eq9_and_pad_with_the_particle():
     # K's row of such a particle still sums to zero: translation invariance holds
     K = laplacian_operator(nb, queries, hair.n_particles)
     np.testing.assert_allclose(K @ np.ones(hair.n_particles), 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64])
+def test_the_compiled_neighbour_average_equals_the_numpy_gather(dtype):
+    points, strand_of = _random_walk_groom([30, 7, 50, 12], seed=4)
+    nb = knn_other_strands(points, strand_of, 5)
+    nb = neighbours.Neighbours(nb.index.astype(dtype), nb.weight)
+    average = neighbours.neighbour_average(nb, points)
+    np.testing.assert_array_equal(average, neighbours.neighbour_average_reference(nb, points))
+    # the weights sum to 1 per row: the average lies within the neighbours' bounding box
+    assert (average >= points[nb.index].min(axis=1) - 1e-15).all()
+    assert (average <= points[nb.index].max(axis=1) + 1e-15).all()
