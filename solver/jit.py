@@ -64,7 +64,9 @@ def _import_kernel_modules() -> None:
 
 
 #: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = ()
+KERNEL_MODULES: tuple[str, ...] = (
+    "hairport.solver.adaptation.coupled_kernels",
+)
 
 
 def warm_up() -> dict[str, float]:

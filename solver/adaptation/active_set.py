@@ -38,6 +38,7 @@ import scipy.sparse.linalg as spla
 
 from hairport.solver.adaptation import banded
 from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
+from hairport.solver.adaptation.coupled_kernels import RotatedHessian
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import (
     BACKTRACK_FACTOR,
@@ -71,6 +72,9 @@ CG_MAX_STEPS = 1000
 #: exact solves are as fast or faster (and spare the active set the cycling inexact CG solves
 #: can cause). Measured by bench/coarse_stage.py.
 DIRECT_SOLVE_MAX_PARTICLES = 2_000
+#: how coupled systems beyond that size are solved: by the compiled kernels of
+#: :mod:`.coupled_kernels` or by their numpy reference (scipy's banded Cholesky, sparse products)
+LINEAR_SOLVERS = ("compiled", "numpy")
 
 
 def normal_frames(normals: np.ndarray) -> np.ndarray:
@@ -102,6 +106,14 @@ class Frames:
             self.rows = rows
         self.R = R
         self.RT = np.ascontiguousarray(np.transpose(R, (0, 2, 1)))
+
+    def all_rotations(self) -> np.ndarray:
+        """``R_i`` of every particle ``(n, 3, 3)`` (identity off ``rows``)."""
+        if self.dense:
+            return self.R
+        R = np.broadcast_to(np.eye(3), (self.n, 3, 3)).copy()
+        R[self.rows] = self.R
+        return R
 
     def to_local(self, x: np.ndarray) -> np.ndarray:
         """``R_i^T x_i``."""
@@ -146,8 +158,7 @@ def _length(x: np.ndarray) -> float:
 def rotated_matrix(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper) -> sp.csr_matrix:
     """``H' = R^T H R`` as a ``(3N, 3N)`` sparse matrix (particle-major unknowns)."""
     n = frames.n
-    R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-    R[frames.rows] = frames.R
+    R = frames.all_rotations()
     rows, cols = np.arange(n), np.arange(n)
     blocks = [rotated_diagonal]
     if n > 1:
@@ -178,13 +189,20 @@ def _direct_pinned_solve(matrix: sp.csr_matrix, rhs, pinned, values) -> np.ndarr
 
 
 def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values,
-                  direct: bool = False) -> tuple[np.ndarray, int]:
+                  direct: bool = False, guess: np.ndarray | None = None,
+                  compiled: RotatedHessian | None = None) -> tuple[np.ndarray, int]:
     """Solve ``H' y = rhs`` (``H' = R^T H R``) for the free unknowns with ``y[pinned] = values[pinned]``.
 
-    Returns the solution and the CG steps taken (0 when solved by ``direct`` factorisation,
-    which a coupled system may ask for; an uncoupled one is always solved by one banded factorisation)."""
+    A coupled system is solved by conjugate gradients from ``guess`` (the free unknowns' first
+    iterate, 0 by default), by the ``compiled`` kernels when given, else by this numpy
+    reference; or, when ``direct``, by a sparse factorisation. An uncoupled one is always
+    solved by one banded factorisation.
+
+    Returns the solution and the CG steps taken (0 when solved by ``direct`` factorisation)."""
     if direct and system.coupling is not None:
         return _direct_pinned_solve(rotated_matrix(system, frames, rotated_diagonal, rotated_upper), rhs, pinned, values), 0
+    if compiled is not None and system.coupling is not None:
+        return compiled.pinned_solve(rhs, pinned, values, guess, CG_RELATIVE_TOLERANCE, CG_MAX_STEPS)
     start = np.where(pinned, values, 0.0)
 
     def rotated_matvec(y: np.ndarray) -> np.ndarray:
@@ -202,12 +220,16 @@ def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotate
 
     if system.coupling is None:
         return start + precondition(residual), 1
-    # conjugate gradients on the free unknowns
+    # conjugate gradients on the free unknowns, the tolerance relative to the zero guess's residual
+    target = CG_RELATIVE_TOLERANCE * _length(residual)
     x = np.zeros_like(residual)
+    if guess is not None:
+        x = np.where(pinned, 0.0, guess)
+        residual -= rotated_matvec(x)
+        residual[pinned] = 0.0
     z = precondition(residual)
     direction = z.copy()
     rz = float(np.sum(residual * z))
-    target = CG_RELATIVE_TOLERANCE * _length(residual)
     steps = 0
     for steps in range(1, CG_MAX_STEPS + 1):
         if _length(residual) <= target or rz <= 0:
@@ -232,6 +254,8 @@ def solve_qp(
     lower: np.ndarray,
     active: np.ndarray,
     direct_max_particles: int | None = None,
+    linear_solver: str = "compiled",
+    warm_start: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """``min 1/2 d^T H d + g^T d  s.t. <n_i, d_i> >= l_i (i constrained), d_i = 0 (i fixed)``.
 
@@ -248,6 +272,11 @@ def solve_qp(
     direct_max_particles : int, optional
         Coupled systems of at most this many particles are solved by sparse LU instead of
         conjugate gradients (:data:`DIRECT_SOLVE_MAX_PARTICLES` by default).
+    linear_solver : str
+        One of :data:`LINEAR_SOLVERS`: how larger coupled systems are solved.
+    warm_start : bool
+        Coupled: each round's CG starts from the previous round's solution (only the pins
+        changed), not from zero.
 
     Returns
     -------
@@ -257,9 +286,18 @@ def solve_qp(
     active : (N,) bool
     rounds, cg_steps : int
     """
+    if linear_solver not in LINEAR_SOLVERS:
+        raise ValueError(f"unknown linear solver {linear_solver!r}; expected one of {', '.join(LINEAR_SOLVERS)}")
     n = len(system.gradient)
     frames = Frames(n, np.flatnonzero(constrained), normals[constrained])
-    rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
+    limit = DIRECT_SOLVE_MAX_PARTICLES if direct_max_particles is None else direct_max_particles
+    direct = n <= limit
+    compiled = None
+    if system.coupling is not None and not direct and linear_solver == "compiled":
+        compiled = RotatedHessian.build(frames.all_rotations(), system.diagonal, system.upper, system.coupling)
+        rotated_diagonal, rotated_upper = compiled.rotated_diagonal, compiled.rotated_upper
+    else:
+        rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
     rotated_gradient = frames.to_local(system.gradient)
     curvature = rotated_diagonal[:, 0, 0]
     active = active & constrained & ~fixed
@@ -269,14 +307,14 @@ def solve_qp(
     rounds = cg_steps = 0
     y = np.zeros((n, 3))
     multipliers = np.zeros(n)
-    limit = DIRECT_SOLVE_MAX_PARTICLES if direct_max_particles is None else direct_max_particles
-    direct = n <= limit
     for rounds in range(1, MAX_ACTIVE_SET_ROUNDS + 1):
         pinned[:, 0] = fixed | active
+        guess = y if warm_start and rounds > 1 else None
         y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values,
-                                 direct)
+                                 direct, guess, compiled)
         cg_steps += steps
-        residual = frames.to_local(system.matvec(frames.to_world(y))) + rotated_gradient
+        product = compiled.product(y) if compiled is not None else frames.to_local(system.matvec(frames.to_world(y)))
+        residual = product + rotated_gradient
         multipliers = np.where(active, residual[:, 0], 0.0)
         next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)
         if np.array_equal(next_active, active):
