@@ -2,24 +2,29 @@
 conjugate gradients preconditioned by the strand-banded part of ``H'``.
 
 ``H' = R^T H R`` is the Newton Hessian of Eq. 1 in contact frames (:mod:`.active_set`): its
-strand-banded blocks, rotated (``rotated_diagonal``, ``rotated_upper``, :mod:`.banded` layout),
-plus the scalar coupling ``C`` between particles of different strands
-(``2 alpha K^T G K`` minus its diagonal, a CSR matrix) taken to world coordinates and back:
-``H' y = B' y + R^T C R y``. Pinned unknowns (roots; active constraints' normal components)
-take given values and drop out.
+strand-banded part ``B`` rotated (``B' = R^T B R``, :mod:`.banded` block layout) plus the scalar
+coupling ``C`` between particles of different strands (``2 alpha K^T G K`` minus its diagonal,
+CSR) taken to world coordinates and back: ``H' y = B' y + R^T C R y``. Pinned unknowns (roots,
+the normal components of active constraints) take given values and drop out.
 
-The kernels are the compiled counterparts of :func:`.active_set._pinned_solve`'s numpy
-reference (the same arithmetic, the same stopping rule; they agree to rounding):
+These kernels are the compiled counterparts of the numpy reference in
+:func:`.active_set._pinned_solve` (scipy's banded Cholesky, sparse products): the same
+arithmetic and stopping rule, equal to rounding.
 
-* :func:`factor_bands`: banded Cholesky ``B' = U^T U`` of the strand-banded part with the
-  pinned rows and columns replaced by identity (LAPACK's ``dpbtrf`` upper factor, stored
-  row-wise ``factor[r, m] = U[r, r + m]``), each run of rows the band decouples (a strand)
-  factorised on its own;
+* :func:`rotate_blocks`: ``B'`` from ``B`` and the frames;
+* :func:`factor_bands`: banded Cholesky ``U^T U`` of ``B'`` with the pinned rows and columns
+  replaced by identity (LAPACK's ``dpbtrf`` upper factor; see :func:`factor_bands` for the storage);
+* :func:`solve_bands`: the preconditioner ``(U^T U)^{-1} r``;
 * :func:`rotated_product`: ``H' y``;
-* :func:`conjugate_gradients`: the preconditioned CG loop, from a warm start.
+* :func:`conjugate_gradients`: the preconditioned CG loop, from a warm start;
+* :class:`RotatedHessian`: one QP's arrays, with the pinned solve and product built on them.
 
-Convention: ``n`` particles, 3 unknowns each, particle-major; ``(n, 3)`` arrays are float64
-C-contiguous, index arrays int64.
+The strands are not split among threads: a CG step is a few milliseconds of memory-bound
+work, and two cores shared with the fine level's processes (or other jobs) gain less from
+threads than the launches and waits cost.
+
+Convention: ``n`` particles, 3 unknowns each, particle-major; ``(n, 3)`` arrays float64 and
+C-contiguous; ``(n, 3, 3)`` blocks act on a particle's 3 unknowns.
 """
 
 from __future__ import annotations
@@ -31,32 +36,13 @@ import scipy.sparse as sp
 
 from hairport.solver.jit import kernel, warms
 
-#: super-diagonals of the strand-banded part (a particle's unknowns reach the next particle's last one)
+#: super-diagonals of the strand-banded part (a particle's first unknown reaches the next particle's last)
 BANDWIDTH = 5
-
-
-def band_runs(rotated_upper: np.ndarray) -> np.ndarray:
-    """Row ranges where the strand-banded matrix decouples: the particles after a zero off-diagonal block.
-
-    Parameters
-    ----------
-    rotated_upper : (n, 3, 3) float64
-        ``upper[i]`` couples particle ``i`` with ``i + 1``; zero where a strand ends.
-
-    Returns
-    -------
-    starts : (r + 1,) int64
-        Run ``j`` is particles ``starts[j] .. starts[j + 1] - 1``: independent blocks of the
-        band (each strand, or a piece of one), factorised and solved one by one.
-    """
-    n = len(rotated_upper)
-    ends = np.flatnonzero(~np.any(rotated_upper[: n - 1] != 0.0, axis=(1, 2))) + 1
-    return np.concatenate([[0], ends, [n]]).astype(np.int64)
 
 
 @kernel
 def rotate_blocks(R, diagonal, upper, rotated_diagonal, rotated_upper):
-    """``R_i^T D_i R_i`` and ``R_i^T U_i R_{i+1}`` into the two ``(n, 3, 3)`` outputs."""
+    """``B'``: ``R_i^T D_i R_i`` and ``R_i^T U_i R_{i+1}`` (all ``(n, 3, 3)``) into the two outputs."""
     n = diagonal.shape[0]
     for i in range(n):
         for a in range(3):
@@ -73,89 +59,80 @@ def rotate_blocks(R, diagonal, upper, rotated_diagonal, rotated_upper):
 
 
 @kernel
-def factor_bands(rotated_diagonal, rotated_upper, pinned, runs, factor):
-    """Banded Cholesky of the strand-banded part with pinned unknowns as identity rows.
+def factor_bands(rotated_diagonal, rotated_upper, pinned, factor):
+    """Banded Cholesky ``U^T U`` of ``B'`` with the pinned unknowns' rows and columns as identity.
 
     Parameters
     ----------
     rotated_diagonal, rotated_upper : (n, 3, 3) float64
+        ``B'``; ``rotated_upper[i]`` is zero where a strand ends, so strands stay independent.
     pinned : (n, 3) bool
-    runs : (r + 1,) int64
-        :func:`band_runs`.
     factor : (3n, 6) float64
-        Output: ``factor[r, m] = U[r, r + m]`` with ``B' = U^T U``.
+        Output, row ``r`` of ``U``: ``factor[r, m] = U[r, r + m]`` for ``m = 1 .. 5`` and the
+        reciprocal pivot ``factor[r, 0] = 1 / U[r, r]`` (the solves multiply by it).
 
     Returns
     -------
     ok : bool
-        False if a pivot was not positive (the matrix is not positive definite).
+        False if a pivot was not positive (``B'`` not positive definite).
     """
+    size = 3 * rotated_diagonal.shape[0]
     flat_pinned = pinned.ravel()
-    failed = np.zeros(len(runs) - 1, dtype=np.bool_)
-    for run in range(len(runs) - 1):
-        lo = 3 * runs[run]
-        hi = 3 * runs[run + 1]
-        for r in range(lo, hi):
-            i, a = r // 3, r % 3
-            for m in range(BANDWIDTH + 1):
-                c = r + m
-                value = 0.0
-                j, b = c // 3, c % 3
-                if c < hi and j <= i + 1 and not flat_pinned[r] and not flat_pinned[c]:
-                    value = rotated_diagonal[i, a, b] if j == i else rotated_upper[i, a, b]
-                factor[r, m] = value
-            if flat_pinned[r]:
-                factor[r, 0] = 1.0
-        for r in range(lo, hi):
-            pivot = factor[r, 0]
-            if not pivot > 0.0:
-                failed[run] = True
-                pivot = 1.0
-            pivot = np.sqrt(pivot)
-            factor[r, 0] = pivot
-            for m in range(1, BANDWIDTH + 1):
-                factor[r, m] /= pivot
-            for m1 in range(1, BANDWIDTH + 1):
-                if r + m1 >= hi:
-                    break
-                u1 = factor[r, m1]
-                if u1 != 0.0:
-                    for m2 in range(m1, BANDWIDTH + 1):
-                        factor[r + m1, m2 - m1] -= u1 * factor[r, m2]
-    return not failed.any()
+    for r in range(size):
+        i, a = r // 3, r % 3
+        for m in range(BANDWIDTH + 1):
+            c = r + m
+            j, b = c // 3, c % 3
+            value = 0.0
+            if c < size and j <= i + 1 and not flat_pinned[r] and not flat_pinned[c]:
+                value = rotated_diagonal[i, a, b] if j == i else rotated_upper[i, a, b]
+            factor[r, m] = value
+        if flat_pinned[r]:
+            factor[r, 0] = 1.0
+    ok = True
+    for r in range(size):
+        pivot = factor[r, 0]
+        if not pivot > 0.0:
+            ok = False
+            pivot = 1.0
+        inverse = 1.0 / np.sqrt(pivot)
+        factor[r, 0] = inverse
+        for m in range(1, BANDWIDTH + 1):
+            factor[r, m] *= inverse
+        for m1 in range(1, min(BANDWIDTH, size - 1 - r) + 1):
+            u1 = factor[r, m1]
+            if u1 != 0.0:
+                for m2 in range(m1, BANDWIDTH + 1):
+                    factor[r + m1, m2 - m1] -= u1 * factor[r, m2]
+    return ok
 
 
 @kernel
-def solve_bands(factor, runs, pinned, rhs, out):
-    """``out = (U^T U)^{-1} rhs`` with ``out[pinned] = 0``, for ``rhs, out (n, 3)``."""
+def solve_bands(factor, pinned, rhs, out):
+    """``out = (U^T U)^{-1} rhs`` (:func:`factor_bands`), then 0 at ``pinned``; ``rhs, out (n, 3)``."""
     b = rhs.ravel()
     x = out.ravel()
+    size = b.size
+    # the nearest unknown last: each one waits for its predecessor's product only
+    for r in range(size):  # U^T z = b
+        value = b[r]
+        for m in range(min(BANDWIDTH, r), 0, -1):
+            value -= factor[r - m, m] * x[r - m]
+        x[r] = value * factor[r, 0]
+    for r in range(size - 1, -1, -1):  # U x = z
+        value = x[r]
+        for m in range(min(BANDWIDTH, size - 1 - r), 0, -1):
+            value -= factor[r, m] * x[r + m]
+        x[r] = value * factor[r, 0]
     flat_pinned = pinned.ravel()
-    for run in range(len(runs) - 1):
-        lo = 3 * runs[run]
-        hi = 3 * runs[run + 1]
-        for r in range(lo, hi):  # U^T z = b
-            value = b[r]
-            for m in range(1, BANDWIDTH + 1):
-                if r - m < lo:
-                    break
-                value -= factor[r - m, m] * x[r - m]
-            x[r] = value / factor[r, 0]
-        for r in range(hi - 1, lo - 1, -1):  # U x = z
-            value = x[r]
-            for m in range(1, BANDWIDTH + 1):
-                if r + m >= hi:
-                    break
-                value -= factor[r, m] * x[r + m]
-            x[r] = value / factor[r, 0]
-        for r in range(lo, hi):
-            if flat_pinned[r]:
-                x[r] = 0.0
+    for r in range(size):
+        if flat_pinned[r]:
+            x[r] = 0.0
 
 
 @kernel
 def rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, pinned, y, world, out):
-    """``out = H' y`` (``B' y + R^T C R y``), zero at ``pinned``; ``world (n, 3)`` is scratch."""
+    """``out = H' y = B' y + R^T C R y``, then 0 at ``pinned``; ``world (n, 3)`` is scratch."""
     n = y.shape[0]
     for i in range(n):
         for a in range(3):
@@ -180,6 +157,7 @@ def rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, p
 
 @kernel
 def _dot(x, y):
+    """``sum(x * y)`` over all entries."""
     flat_x = x.ravel()
     flat_y = y.ravel()
     total = 0.0
@@ -189,32 +167,30 @@ def _dot(x, y):
 
 
 @kernel
-def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, runs, pinned, rhs, x,
-                        relative_tolerance, max_steps, cold_residual_norm):
+def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, pinned, rhs, x,
+                        target, max_steps):
     """Preconditioned CG on the free unknowns of ``H' y = rhs``, in place on ``x``.
 
     Parameters
     ----------
     R, rotated_diagonal, rotated_upper : (n, 3, 3) float64
     indptr, indices, data
-        The coupling ``C`` (CSR, int64 indices, no diagonal).
-    factor, runs
-        :func:`factor_bands` of the pinned strand-banded part.
+        The coupling ``C`` (CSR, no diagonal).
+    factor : (3n, 6) float64
+        :func:`factor_bands` of ``B'`` with these pins.
     pinned : (n, 3) bool
     rhs : (n, 3) float64
     x : (n, 3) float64
         In: pinned values at ``pinned``, a first guess elsewhere. Out: the solution.
-    relative_tolerance : float
-        Stop once the residual is this times ``cold_residual_norm`` ...
+    target : float
+        Stop once the residual's norm is at most this ...
     max_steps : int
         ... or after this many steps.
-    cold_residual_norm : float
-        The residual's norm from the zero guess (``rhs - H' x_pinned`` on the free unknowns).
 
     Returns
     -------
     steps : int
-        Counted like the reference: one more than the products taken when converged.
+        Counted like the reference: when it converges, one more than the products taken.
     """
     n = x.shape[0]
     world = np.empty((n, 3))
@@ -225,10 +201,9 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     for i in range(n):
         for a in range(3):
             residual[i, a] = 0.0 if pinned[i, a] else rhs[i, a] - product[i, a]
-    solve_bands(factor, runs, pinned, residual, z)
+    solve_bands(factor, pinned, residual, z)
     direction = z.copy()
     rz = _dot(residual, z)
-    target = relative_tolerance * cold_residual_norm
     flat_x, flat_r, flat_z = x.ravel(), residual.ravel(), z.ravel()
     flat_d, flat_q = direction.ravel(), product.ravel()
     steps = 0
@@ -240,7 +215,7 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
         for k in range(flat_x.size):
             flat_x[k] += step * flat_d[k]
             flat_r[k] -= step * flat_q[k]
-        solve_bands(factor, runs, pinned, residual, z)
+        solve_bands(factor, pinned, residual, z)
         rz_next = _dot(residual, z)
         ratio = rz_next / rz
         for k in range(flat_d.size):
@@ -251,44 +226,41 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
 
 @dataclass(frozen=True, eq=False)
 class RotatedHessian:
-    """``H' = R^T H R`` of one QP for the kernels: the arrays they take, prepared once per QP.
+    """``H' = R^T H R`` of one QP as the kernels take it, prepared once per QP.
 
     Attributes
     ----------
     R : (n, 3, 3) float64
         Contact frames (identity for unconstrained particles).
     rotated_diagonal, rotated_upper : (n, 3, 3) float64
-    indptr, indices : int64
-    data : float64
-        The coupling ``C`` (CSR, no diagonal).
-    runs : (r + 1,) int64
-        :func:`band_runs`.
+        ``B'``.
+    coupling : (n, n) csr_matrix
+        ``C``, no diagonal.
     """
 
     R: np.ndarray
     rotated_diagonal: np.ndarray
     rotated_upper: np.ndarray
-    indptr: np.ndarray
-    indices: np.ndarray
-    data: np.ndarray
-    runs: np.ndarray
+    coupling: sp.csr_matrix
 
     @classmethod
     def build(cls, R: np.ndarray, diagonal: np.ndarray, upper: np.ndarray, coupling: sp.csr_matrix) -> "RotatedHessian":
-        """From the world-frame blocks ``(n, 3, 3)`` of ``H``'s strand-banded part and the coupling ``(n, n)``."""
+        """From the frames ``R (n, 3, 3)``, ``H``'s world-frame strand-banded blocks ``(n, 3, 3)`` and ``C (n, n)``."""
         R = np.ascontiguousarray(R, dtype=np.float64)
         rotated_diagonal, rotated_upper = np.empty_like(R), np.empty_like(R)
         rotate_blocks(R, np.ascontiguousarray(diagonal), np.ascontiguousarray(upper), rotated_diagonal, rotated_upper)
-        return cls(R, rotated_diagonal, rotated_upper, coupling.indptr.astype(np.int64),
-                   coupling.indices.astype(np.int64), np.ascontiguousarray(coupling.data, dtype=np.float64),
-                   band_runs(rotated_upper))
+        return cls(R, rotated_diagonal, rotated_upper, sp.csr_matrix(coupling))
+
+    def _product(self, y: np.ndarray, pinned: np.ndarray) -> np.ndarray:
+        out = np.empty_like(y)
+        C = self.coupling
+        rotated_product(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data, pinned,
+                        np.ascontiguousarray(y, dtype=np.float64), np.empty_like(y), out)
+        return out
 
     def product(self, y: np.ndarray) -> np.ndarray:
         """``H' y`` for ``y (n, 3)``."""
-        out = np.empty_like(y)
-        rotated_product(self.R, self.rotated_diagonal, self.rotated_upper, self.indptr, self.indices, self.data,
-                        np.zeros(y.shape, dtype=np.bool_), np.ascontiguousarray(y), np.empty_like(y), out)
-        return out
+        return self._product(y, np.zeros(y.shape, dtype=np.bool_))
 
     def pinned_solve(self, rhs: np.ndarray, pinned: np.ndarray, values: np.ndarray, guess: np.ndarray | None,
                      relative_tolerance: float, max_steps: int) -> tuple[np.ndarray, int]:
@@ -301,8 +273,10 @@ class RotatedHessian:
         values : (n, 3) float64
         guess : (n, 3) float64 or None
             First iterate of the free unknowns (0 by default).
-        relative_tolerance, max_steps
-            CG stops at this residual relative to the zero guess's, or after this many steps.
+        relative_tolerance : float
+            CG stops at this residual relative to the one of the zero guess ...
+        max_steps : int
+            ... or after this many steps.
 
         Returns
         -------
@@ -312,18 +286,19 @@ class RotatedHessian:
         Raises
         ------
         numpy.linalg.LinAlgError
-            If the strand-banded part is not positive definite.
+            If ``B'`` with these pins is not positive definite.
         """
-        n = len(rhs)
-        factor = np.empty((3 * n, BANDWIDTH + 1))
-        if not factor_bands(self.rotated_diagonal, self.rotated_upper, pinned, self.runs, factor):
+        factor = np.empty((3 * len(rhs), BANDWIDTH + 1))
+        pinned = np.ascontiguousarray(pinned)
+        if not factor_bands(self.rotated_diagonal, self.rotated_upper, pinned, factor):
             raise np.linalg.LinAlgError("the strand-banded Hessian is not positive definite")
         start = np.where(pinned, values, 0.0)
-        cold = np.where(pinned, 0.0, rhs - self.product(start))
+        cold = np.where(pinned, 0.0, rhs - self._product(start, pinned))
         y = start if guess is None else np.where(pinned, values, guess)
-        steps = conjugate_gradients(self.R, self.rotated_diagonal, self.rotated_upper, self.indptr, self.indices,
-                                    self.data, factor, self.runs, pinned, np.ascontiguousarray(rhs), y,
-                                    relative_tolerance, max_steps, float(np.sqrt(_dot(cold, cold))))
+        C = self.coupling
+        steps = conjugate_gradients(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
+                                    factor, pinned, np.ascontiguousarray(rhs, dtype=np.float64), y,
+                                    relative_tolerance * np.sqrt(_dot(cold, cold)), max_steps)
         return y, steps
 
 
@@ -333,9 +308,10 @@ def _warm() -> None:
     R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
     diagonal = np.broadcast_to(4.0 * np.eye(3), (n, 3, 3)).copy()
     upper = np.broadcast_to(-np.eye(3), (n, 3, 3)).copy()
-    upper[1] = 0.0  # two strands of two particles
-    coupling = sp.csr_matrix(([-0.5, -0.5], ([0, 2], [2, 0])), shape=(n, n))
+    upper[1] = 0.0  # two strands of two particles, coupled at their tips
+    coupling = sp.csr_matrix(([-0.5, -0.5], ([1, 3], [3, 1])), shape=(n, n))
     pinned = np.zeros((n, 3), dtype=bool)
     pinned[[0, 2]] = True
     hessian = RotatedHessian.build(R, diagonal, upper, coupling)
     hessian.pinned_solve(np.ones((n, 3)), pinned, np.zeros((n, 3)), np.ones((n, 3)), 1e-6, 10)
+    hessian.product(np.ones((n, 3)))
