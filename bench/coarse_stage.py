@@ -14,7 +14,8 @@ first), ``--runs`` times each, interleaved:
 * ``after``: ... and rounds whose active set still changes solved to
   :data:`.active_set.SCREENING_CG_TOLERANCE` only, with the cycle guard (the default).
 
-It prints, per path, the median seconds and their ratio to ``before``, outer iterations,
+It prints, per path, the median wall-clock and CPU seconds of this process (less sensitive
+to other jobs on a shared machine) and their ratios to ``before``, outer iterations,
 active-set rounds, CG steps, whether it converged, the final merit, and the largest and mean
 distance of its guides from the ``before`` result. With ``--compare N`` the first N QPs are
 solved again by conjugate gradients and by the sparse direct factorisation
@@ -101,34 +102,38 @@ def main() -> None:
 
         active_set.solve_qp = patched
         try:
-            began = time.perf_counter()
+            began, began_cpu = time.perf_counter(), time.process_time()
             points, report = solve_hairstyle(
                 adaptable.coarse_model, guide_offsets, initial[guide_particles], guide_roots, body,
                 EnergyWeights(options.alpha, options.beta), solve_options, grid=grid, band=CONTACT_BAND,
             )
-            return points, report, time.perf_counter() - began
+            return points, report, time.perf_counter() - began, time.process_time() - began_cpu
         finally:
             active_set.solve_qp = solve_qp
 
     seconds = {path: [] for path in args.paths}
+    cpu_seconds = {path: [] for path in args.paths}
     results = {}
     for run in range(args.runs):
         for path in args.paths:
-            points, report, elapsed = solve(path, record=run == 0 and path == args.paths[0])
+            points, report, elapsed, cpu = solve(path, record=run == 0 and path == args.paths[0])
             seconds[path].append(elapsed)
+            cpu_seconds[path].append(cpu)
             results[path] = points, report
 
     print(f"{hair.n_particles} particles, {len(model.guides)} guides ({len(guide_particles)} particles), "
           f"coarse level, median of {args.runs} runs")
     reference = results[args.paths[0]][0]
-    print(f"{'path':<10} {'seconds':>8} {'ratio':>6} {'iter':>5} {'rounds':>7} {'CG steps':>9} {'conv':>5} "
-          f"{'merit':>10} {'max dist m':>11} {'mean dist m':>12}")
+    print(f"{'path':<10} {'seconds':>8} {'ratio':>6} {'cpu s':>7} {'ratio':>6} {'iter':>5} {'rounds':>7} "
+          f"{'CG steps':>9} {'conv':>5} {'merit':>10} {'max dist m':>11} {'mean dist m':>12}")
     first = statistics.median(seconds[args.paths[0]])
+    first_cpu = statistics.median(cpu_seconds[args.paths[0]])
     for path in args.paths:
         points, report = results[path]
-        median = statistics.median(seconds[path])
+        median, cpu = statistics.median(seconds[path]), statistics.median(cpu_seconds[path])
         distance = np.linalg.norm(points - reference, axis=1)
-        print(f"{path:<10} {median:8.2f} {median / first:6.2f} {report.iterations:5d} {sum(report.active_set_rounds):7d} "
+        print(f"{path:<10} {median:8.2f} {median / first:6.2f} {cpu:7.2f} {cpu / first_cpu:6.2f} {report.iterations:5d} "
+              f"{sum(report.active_set_rounds):7d} "
               f"{sum(report.cg_steps):9d} {str(report.converged):>5} {report.merit[-1]:10.3f} {distance.max():11.1e} "
               f"{distance.mean():12.1e}")
 

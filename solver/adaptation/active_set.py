@@ -195,28 +195,43 @@ def _direct_pinned_solve(matrix: sp.csr_matrix, rhs, pinned, values) -> np.ndarr
 
 
 def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values,
-                  direct: bool = False, guess: np.ndarray | None = None,
-                  compiled: RotatedHessian | None = None,
-                  tolerance: float = CG_RELATIVE_TOLERANCE) -> tuple[np.ndarray, int]:
+                  direct: bool = False) -> tuple[np.ndarray, int]:
     """Solve ``H' y = rhs`` (``H' = R^T H R``) for the free unknowns with ``y[pinned] = values[pinned]``.
 
-    A coupled system is solved by conjugate gradients from ``guess`` (the free unknowns' first
-    iterate, 0 by default) to a residual of ``tolerance`` times the zero guess's, by the
-    ``compiled`` kernels when given, else by this numpy reference; or, when ``direct``, by a
-    sparse factorisation. An uncoupled one is always solved by one banded factorisation.
-
-    Returns the solution and the CG steps taken (0 when solved by ``direct`` factorisation)."""
+    Returns the solution and the CG steps taken (0 when solved by ``direct`` factorisation,
+    which a coupled system may ask for; an uncoupled one is always solved by one banded
+    factorisation, a coupled one otherwise by :func:`_conjugate_gradients` from zero)."""
     if direct and system.coupling is not None:
         return _direct_pinned_solve(rotated_matrix(system, frames, rotated_diagonal, rotated_upper), rhs, pinned, values), 0
-    if compiled is not None and system.coupling is not None:
-        return compiled.pinned_solve(rhs, pinned, values, guess, tolerance, CG_MAX_STEPS)
+    if system.coupling is not None:
+        y, steps, _ = _conjugate_gradients(system, frames, rotated_diagonal, rotated_upper, rhs, pinned, values)
+        return y, steps
+    start = np.where(pinned, values, 0.0)
+    residual = rhs - frames.to_local(system.matvec(frames.to_world(start)))
+    residual[pinned] = 0.0
+    ab = banded.with_fixed_unknowns(banded.to_bands(rotated_diagonal, rotated_upper), pinned.ravel())
+    factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+    z = scipy.linalg.cho_solve_banded((factor, False), residual.ravel(), check_finite=False).reshape(-1, 3)
+    z[pinned] = 0.0
+    return start + z, 1
+
+
+def _conjugate_gradients(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values,
+                         guess: np.ndarray | None = None,
+                         tolerance: float = CG_RELATIVE_TOLERANCE) -> tuple[np.ndarray, int, np.ndarray]:
+    """``H' y = rhs`` with ``y[pinned] = values[pinned]`` by conjugate gradients on the free unknowns,
+    preconditioned by the pinned strand-banded part: the numpy reference of
+    :meth:`.coupled_kernels.RotatedHessian.pinned_solve` (see there).
+
+    Returns ``y (N, 3)``, the steps, and the residual ``rhs - H' y (N, 3)`` at every unknown,
+    pinned ones included, kept up to date by the CG recursion."""
     start = np.where(pinned, values, 0.0)
 
     def rotated_matvec(y: np.ndarray) -> np.ndarray:
         return frames.to_local(system.matvec(frames.to_world(y)))
 
     residual = rhs - rotated_matvec(start)
-    residual[pinned] = 0.0
+    target = tolerance * _length(np.where(pinned, 0.0, residual))
     ab = banded.with_fixed_unknowns(banded.to_bands(rotated_diagonal, rotated_upper), pinned.ravel())
     factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
 
@@ -225,32 +240,26 @@ def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotate
         z[pinned] = 0.0
         return z
 
-    if system.coupling is None:
-        return start + precondition(residual), 1
-    # conjugate gradients on the free unknowns, the tolerance relative to the zero guess's residual
-    target = tolerance * _length(residual)
-    x = np.zeros_like(residual)
+    y = start
     if guess is not None:
-        x = np.where(pinned, 0.0, guess)
-        residual -= rotated_matvec(x)
-        residual[pinned] = 0.0
+        y = np.where(pinned, values, guess)
+        residual = rhs - rotated_matvec(y)
     z = precondition(residual)
     direction = z.copy()
     rz = float(np.sum(residual * z))
     steps = 0
     for steps in range(1, CG_MAX_STEPS + 1):
-        if _length(residual) <= target or rz <= 0:
+        if _length(np.where(pinned, 0.0, residual)) <= target or rz <= 0:
             break
         q = rotated_matvec(direction)
-        q[pinned] = 0.0
         step = rz / float(np.sum(direction * q))
-        x += step * direction
+        y = y + step * direction
         residual -= step * q
         z = precondition(residual)
         rz_next = float(np.sum(residual * z))
         direction = z + (rz_next / rz) * direction
         rz = rz_next
-    return start + x, steps
+    return y, steps, residual
 
 
 def solve_qp(
@@ -324,13 +333,20 @@ def solve_qp(
     accurate, forced, visited = not screened, False, set()
     for rounds in range(1, MAX_ACTIVE_SET_ROUNDS + 1):
         pinned[:, 0] = fixed | active
-        guess = y if warm_start and rounds > 1 else None
-        tolerance = CG_RELATIVE_TOLERANCE if accurate else SCREENING_CG_TOLERANCE
-        y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values,
-                                 direct, guess, compiled, tolerance)
+        if system.coupling is None or direct:
+            y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values,
+                                     direct)
+            residual = frames.to_local(system.matvec(frames.to_world(y))) + rotated_gradient
+        else:
+            guess = y if warm_start and rounds > 1 else None
+            tolerance = CG_RELATIVE_TOLERANCE if accurate else SCREENING_CG_TOLERANCE
+            if compiled is not None:
+                y, steps, rest = compiled.pinned_solve(-rotated_gradient, pinned, values, guess, tolerance, CG_MAX_STEPS)
+            else:
+                y, steps, rest = _conjugate_gradients(system, frames, rotated_diagonal, rotated_upper,
+                                                      -rotated_gradient, pinned, values, guess, tolerance)
+            residual = -rest
         cg_steps += steps
-        product = compiled.product(y) if compiled is not None else frames.to_local(system.matvec(frames.to_world(y)))
-        residual = product + rotated_gradient
         multipliers = np.where(active, residual[:, 0], 0.0)
         next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)
         if np.array_equal(next_active, active):

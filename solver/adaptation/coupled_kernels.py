@@ -13,9 +13,11 @@ arithmetic and stopping rule, equal to rounding.
 
 * :func:`rotate_blocks`: ``B'`` from ``B`` and the frames;
 * :func:`factor_bands`: banded Cholesky ``U^T U`` of ``B'`` with the pinned rows and columns
-  replaced by identity (LAPACK's ``dpbtrf`` upper factor; see :func:`factor_bands` for the storage);
+  replaced by identity (LAPACK's ``dpbtrf`` upper factor; see :func:`factor_bands` for the
+  storage), strand by strand (:func:`band_runs`);
 * :func:`solve_bands`: the preconditioner ``(U^T U)^{-1} r``;
-* :func:`rotated_product`: ``H' y``;
+* :func:`rotated_product`: ``H' y``; :func:`sparse_product`: the same for a ``y`` that is zero
+  but at a few particles (the pinned values);
 * :func:`conjugate_gradients`: the preconditioned CG loop, from a warm start;
 * :class:`RotatedHessian`: one QP's arrays, with the pinned solve and product built on them.
 
@@ -28,8 +30,6 @@ C-contiguous; ``(n, 3, 3)`` blocks act on a particle's 3 unknowns.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -58,52 +58,75 @@ def rotate_blocks(R, diagonal, upper, rotated_diagonal, rotated_upper):
                 rotated_upper[i, a, b] = u
 
 
+def band_runs(rotated_upper: np.ndarray) -> np.ndarray:
+    """Where ``B'`` decouples: the particles that follow a zero off-diagonal block (strand ends).
+
+    Parameters
+    ----------
+    rotated_upper : (n, 3, 3) float64
+
+    Returns
+    -------
+    starts : (r + 1,) int64
+        Run ``k`` is particles ``starts[k] .. starts[k + 1] - 1``: an independent block of the
+        band (a strand, or a piece of one) that :func:`factor_bands` factorises on its own.
+    """
+    n = len(rotated_upper)
+    ends = np.flatnonzero(~np.any(rotated_upper[: n - 1] != 0.0, axis=(1, 2))) + 1
+    return np.concatenate([[0], ends, [n]]).astype(np.int64)
+
+
 @kernel
-def factor_bands(rotated_diagonal, rotated_upper, pinned, factor):
-    """Banded Cholesky ``U^T U`` of ``B'`` with the pinned unknowns' rows and columns as identity.
+def factor_bands(rotated_diagonal, rotated_upper, pinned, runs, which, factor):
+    """Banded Cholesky ``U^T U`` of ``B'`` with the pinned unknowns' rows and columns as identity, run by run.
 
     Parameters
     ----------
     rotated_diagonal, rotated_upper : (n, 3, 3) float64
-        ``B'``; ``rotated_upper[i]`` is zero where a strand ends, so strands stay independent.
+        ``B'``.
     pinned : (n, 3) bool
+    runs : (r + 1,) int64
+        :func:`band_runs` of ``rotated_upper``.
+    which : (w,) int64
+        The runs to factorise; the rows of the others are left as they are.
     factor : (3n, 6) float64
-        Output, row ``r`` of ``U``: ``factor[r, m] = U[r, r + m]`` for ``m = 1 .. 5`` and the
-        reciprocal pivot ``factor[r, 0] = 1 / U[r, r]`` (the solves multiply by it).
+        Output, row ``q`` of ``U``: ``factor[q, m] = U[q, q + m]`` for ``m = 1 .. 5`` and the
+        reciprocal pivot ``factor[q, 0] = 1 / U[q, q]`` (the solves multiply by it).
 
     Returns
     -------
     ok : bool
         False if a pivot was not positive (``B'`` not positive definite).
     """
-    size = 3 * rotated_diagonal.shape[0]
     flat_pinned = pinned.ravel()
-    for r in range(size):
-        i, a = r // 3, r % 3
-        for m in range(BANDWIDTH + 1):
-            c = r + m
-            j, b = c // 3, c % 3
-            value = 0.0
-            if c < size and j <= i + 1 and not flat_pinned[r] and not flat_pinned[c]:
-                value = rotated_diagonal[i, a, b] if j == i else rotated_upper[i, a, b]
-            factor[r, m] = value
-        if flat_pinned[r]:
-            factor[r, 0] = 1.0
     ok = True
-    for r in range(size):
-        pivot = factor[r, 0]
-        if not pivot > 0.0:
-            ok = False
-            pivot = 1.0
-        inverse = 1.0 / np.sqrt(pivot)
-        factor[r, 0] = inverse
-        for m in range(1, BANDWIDTH + 1):
-            factor[r, m] *= inverse
-        for m1 in range(1, min(BANDWIDTH, size - 1 - r) + 1):
-            u1 = factor[r, m1]
-            if u1 != 0.0:
-                for m2 in range(m1, BANDWIDTH + 1):
-                    factor[r + m1, m2 - m1] -= u1 * factor[r, m2]
+    for run in which:
+        lo, hi = 3 * runs[run], 3 * runs[run + 1]
+        for q in range(lo, hi):
+            i, a = q // 3, q % 3
+            for m in range(BANDWIDTH + 1):
+                c = q + m
+                j, b = c // 3, c % 3
+                value = 0.0
+                if c < hi and j <= i + 1 and not flat_pinned[q] and not flat_pinned[c]:
+                    value = rotated_diagonal[i, a, b] if j == i else rotated_upper[i, a, b]
+                factor[q, m] = value
+            if flat_pinned[q]:
+                factor[q, 0] = 1.0
+        for q in range(lo, hi):
+            pivot = factor[q, 0]
+            if not pivot > 0.0:
+                ok = False
+                pivot = 1.0
+            inverse = 1.0 / np.sqrt(pivot)
+            factor[q, 0] = inverse
+            for m in range(1, BANDWIDTH + 1):
+                factor[q, m] *= inverse
+            for m1 in range(1, min(BANDWIDTH, hi - 1 - q) + 1):
+                u1 = factor[q, m1]
+                if u1 != 0.0:
+                    for m2 in range(m1, BANDWIDTH + 1):
+                        factor[q + m1, m2 - m1] -= u1 * factor[q, m2]
     return ok
 
 
@@ -156,6 +179,29 @@ def rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, p
 
 
 @kernel
+def sparse_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, rows, x, out):
+    """``out = H' x`` for an ``x (n, 3)`` that is zero off ``rows (k,) int64``, in time linear in ``k``
+    (``C`` is symmetric: row ``j`` of it lists the rows that column ``j`` reaches)."""
+    n = x.shape[0]
+    out[:] = 0.0
+    for j in rows:
+        w0 = R[j, 0, 0] * x[j, 0] + R[j, 0, 1] * x[j, 1] + R[j, 0, 2] * x[j, 2]
+        w1 = R[j, 1, 0] * x[j, 0] + R[j, 1, 1] * x[j, 1] + R[j, 1, 2] * x[j, 2]
+        w2 = R[j, 2, 0] * x[j, 0] + R[j, 2, 1] * x[j, 1] + R[j, 2, 2] * x[j, 2]
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            for a in range(3):
+                out[i, a] += data[k] * (R[i, 0, a] * w0 + R[i, 1, a] * w1 + R[i, 2, a] * w2)
+        for a in range(3):
+            for b in range(3):
+                out[j, a] += rotated_diagonal[j, a, b] * x[j, b]
+                if j > 0:
+                    out[j - 1, a] += rotated_upper[j - 1, a, b] * x[j, b]
+                if j < n - 1:
+                    out[j + 1, a] += rotated_upper[j, b, a] * x[j, b]
+
+
+@kernel
 def _dot(x, y):
     """``sum(x * y)`` over all entries."""
     flat_x = x.ravel()
@@ -167,9 +213,21 @@ def _dot(x, y):
 
 
 @kernel
-def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, pinned, rhs, x,
+def _free_norm(x, pinned):
+    """Euclidean norm of the entries of ``x`` off ``pinned``."""
+    flat_x = x.ravel()
+    flat_pinned = pinned.ravel()
+    total = 0.0
+    for k in range(flat_x.size):
+        if not flat_pinned[k]:
+            total += flat_x[k] * flat_x[k]
+    return np.sqrt(total)
+
+
+@kernel
+def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, pinned, x, residual,
                         target, max_steps):
-    """Preconditioned CG on the free unknowns of ``H' y = rhs``, in place on ``x``.
+    """Preconditioned CG on the free unknowns of ``H' y = rhs``, in place on ``x`` and ``residual``.
 
     Parameters
     ----------
@@ -179,11 +237,13 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     factor : (3n, 6) float64
         :func:`factor_bands` of ``B'`` with these pins.
     pinned : (n, 3) bool
-    rhs : (n, 3) float64
     x : (n, 3) float64
         In: pinned values at ``pinned``, a first guess elsewhere. Out: the solution.
+    residual : (n, 3) float64
+        In: ``rhs - H' x``. Out: the same at the solution, at every unknown (the pinned ones'
+        give the multipliers), kept up to date by the recursion.
     target : float
-        Stop once the residual's norm is at most this ...
+        Stop once the free residual's norm is at most this ...
     max_steps : int
         ... or after this many steps.
 
@@ -195,12 +255,8 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     n = x.shape[0]
     world = np.empty((n, 3))
     product = np.empty((n, 3))
-    residual = np.empty((n, 3))
     z = np.empty((n, 3))
-    rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, pinned, x, world, product)
-    for i in range(n):
-        for a in range(3):
-            residual[i, a] = 0.0 if pinned[i, a] else rhs[i, a] - product[i, a]
+    no_pins = np.zeros((n, 3), dtype=np.bool_)
     solve_bands(factor, pinned, residual, z)
     direction = z.copy()
     rz = _dot(residual, z)
@@ -208,9 +264,9 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     flat_d, flat_q = direction.ravel(), product.ravel()
     steps = 0
     for steps in range(1, max_steps + 1):
-        if np.sqrt(_dot(residual, residual)) <= target or rz <= 0.0:
+        if _free_norm(residual, pinned) <= target or rz <= 0.0:
             break
-        rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, pinned, direction, world, product)
+        rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, no_pins, direction, world, product)
         step = rz / _dot(direction, product)
         for k in range(flat_x.size):
             flat_x[k] += step * flat_d[k]
@@ -224,9 +280,11 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     return steps
 
 
-@dataclass(frozen=True, eq=False)
 class RotatedHessian:
-    """``H' = R^T H R`` of one QP as the kernels take it, prepared once per QP.
+    """``H' = R^T H R`` of one QP as the kernels take it, prepared once per QP, and its pinned solves.
+
+    It keeps the last band factor and its pins: the next round refactorises only the runs
+    (:func:`band_runs`, strands) whose pins changed, and none for a repeated set of pins.
 
     Attributes
     ----------
@@ -235,13 +293,20 @@ class RotatedHessian:
     rotated_diagonal, rotated_upper : (n, 3, 3) float64
         ``B'``.
     coupling : (n, n) csr_matrix
-        ``C``, no diagonal.
+        ``C``, symmetric, no diagonal.
+    runs : (r + 1,) int64
+        :func:`band_runs`.
     """
 
-    R: np.ndarray
-    rotated_diagonal: np.ndarray
-    rotated_upper: np.ndarray
-    coupling: sp.csr_matrix
+    def __init__(self, R: np.ndarray, rotated_diagonal: np.ndarray, rotated_upper: np.ndarray,
+                 coupling: sp.csr_matrix):
+        self.R = R
+        self.rotated_diagonal = rotated_diagonal
+        self.rotated_upper = rotated_upper
+        self.coupling = coupling
+        self.runs = band_runs(rotated_upper)
+        self._factor = np.empty((3 * len(R), BANDWIDTH + 1))
+        self._factor_pins: np.ndarray | None = None
 
     @classmethod
     def build(cls, R: np.ndarray, diagonal: np.ndarray, upper: np.ndarray, coupling: sp.csr_matrix) -> "RotatedHessian":
@@ -251,19 +316,35 @@ class RotatedHessian:
         rotate_blocks(R, np.ascontiguousarray(diagonal), np.ascontiguousarray(upper), rotated_diagonal, rotated_upper)
         return cls(R, rotated_diagonal, rotated_upper, sp.csr_matrix(coupling))
 
-    def _product(self, y: np.ndarray, pinned: np.ndarray) -> np.ndarray:
-        out = np.empty_like(y)
-        C = self.coupling
-        rotated_product(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data, pinned,
-                        np.ascontiguousarray(y, dtype=np.float64), np.empty_like(y), out)
-        return out
-
     def product(self, y: np.ndarray) -> np.ndarray:
         """``H' y`` for ``y (n, 3)``."""
-        return self._product(y, np.zeros(y.shape, dtype=np.bool_))
+        out, C = np.empty_like(y), self.coupling
+        rotated_product(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
+                        np.zeros(y.shape, dtype=np.bool_), np.ascontiguousarray(y, dtype=np.float64),
+                        np.empty_like(y), out)
+        return out
+
+    def factor(self, pinned: np.ndarray) -> np.ndarray:
+        """:func:`factor_bands` with these pins ``(n, 3) bool``, refactorising only the runs whose pins changed.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            If ``B'`` with these pins is not positive definite.
+        """
+        if self._factor_pins is None:
+            which = np.arange(len(self.runs) - 1)
+        else:
+            changed = np.flatnonzero(np.any(pinned != self._factor_pins, axis=1))
+            which = np.unique(np.searchsorted(self.runs, changed, side="right") - 1)
+        self._factor_pins = None  # unusable until factorised
+        if not factor_bands(self.rotated_diagonal, self.rotated_upper, pinned, self.runs, which, self._factor):
+            raise np.linalg.LinAlgError("the strand-banded Hessian is not positive definite")
+        self._factor_pins = pinned.copy()
+        return self._factor
 
     def pinned_solve(self, rhs: np.ndarray, pinned: np.ndarray, values: np.ndarray, guess: np.ndarray | None,
-                     relative_tolerance: float, max_steps: int) -> tuple[np.ndarray, int]:
+                     relative_tolerance: float, max_steps: int) -> tuple[np.ndarray, int, np.ndarray]:
         """``H' y = rhs`` for the free unknowns with ``y[pinned] = values[pinned]``, by CG from ``guess``.
 
         Parameters
@@ -274,7 +355,8 @@ class RotatedHessian:
         guess : (n, 3) float64 or None
             First iterate of the free unknowns (0 by default).
         relative_tolerance : float
-            CG stops at this residual relative to the one of the zero guess ...
+            CG stops once the free residual is this times the zero step's (``rhs - H' x`` with
+            ``x`` the pinned values, 0 elsewhere) ...
         max_steps : int
             ... or after this many steps.
 
@@ -282,24 +364,30 @@ class RotatedHessian:
         -------
         y : (n, 3) float64
         steps : int
+        residual : (n, 3) float64
+            ``rhs - H' y`` at every unknown.
 
         Raises
         ------
         numpy.linalg.LinAlgError
             If ``B'`` with these pins is not positive definite.
         """
-        factor = np.empty((3 * len(rhs), BANDWIDTH + 1))
         pinned = np.ascontiguousarray(pinned)
-        if not factor_bands(self.rotated_diagonal, self.rotated_upper, pinned, factor):
-            raise np.linalg.LinAlgError("the strand-banded Hessian is not positive definite")
+        factor = self.factor(pinned)
         start = np.where(pinned, values, 0.0)
-        cold = np.where(pinned, 0.0, rhs - self._product(start, pinned))
-        y = start if guess is None else np.where(pinned, values, guess)
         C = self.coupling
+        residual = np.empty_like(start)
+        sparse_product(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
+                       np.flatnonzero(np.any(start != 0.0, axis=1)), start, residual)
+        residual = rhs - residual
+        target = relative_tolerance * _free_norm(residual, pinned)
+        y = start
+        if guess is not None:
+            y = np.where(pinned, values, guess)
+            residual = rhs - self.product(y)
         steps = conjugate_gradients(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
-                                    factor, pinned, np.ascontiguousarray(rhs, dtype=np.float64), y,
-                                    relative_tolerance * np.sqrt(_dot(cold, cold)), max_steps)
-        return y, steps
+                                    factor, pinned, y, residual, target, max_steps)
+        return y, steps, residual
 
 
 @warms("coupled active-set kernels")
@@ -313,5 +401,7 @@ def _warm() -> None:
     pinned = np.zeros((n, 3), dtype=bool)
     pinned[[0, 2]] = True
     hessian = RotatedHessian.build(R, diagonal, upper, coupling)
-    hessian.pinned_solve(np.ones((n, 3)), pinned, np.zeros((n, 3)), np.ones((n, 3)), 1e-6, 10)
+    hessian.pinned_solve(np.ones((n, 3)), pinned, np.zeros((n, 3)), None, 1e-6, 10)
+    pinned[1, 0] = True
+    hessian.pinned_solve(np.ones((n, 3)), pinned, np.ones((n, 3)), np.ones((n, 3)), 1e-6, 10)
     hessian.product(np.ones((n, 3)))

@@ -310,22 +310,22 @@ def test_a_cycling_active_set_ends_the_qp(sphere, monkeypatch):
     """Inexact solves can make the rounds alternate between two active sets: the guard makes the
     rounds accurate, then ends the QP instead of running MAX_ACTIVE_SET_ROUNDS rounds."""
     system, fixed, constrained, normals, lower = coupled_qp(sphere)
-    solve = active_set._pinned_solve
+    solve = active_set._conjugate_gradients
     tolerances = []
 
-    def alternating(*args, **keywords):  # pushes every constrained particle in, then out, then in ...
-        y, steps = solve(*args, **keywords)
-        y[:, 0] = args[6][:, 0] + (-1e-3 if len(tolerances) % 2 == 0 else 1e-3)
-        tolerances.append(args[-1] if len(args) > 10 else keywords.get("tolerance"))
-        return y, steps
+    def alternating(*args):  # pushes every constrained particle in, then out, then in ...
+        y, steps, _ = solve(*args)
+        frames, rhs, values = args[1], args[4], args[6]
+        y[:, 0] = values[:, 0] + (-1e-3 if len(tolerances) % 2 == 0 else 1e-3)
+        tolerances.append(args[-1])
+        return y, steps, rhs - frames.to_local(system.matvec(frames.to_world(y)))
 
-    monkeypatch.setattr(active_set, "_pinned_solve", alternating)
-    *_, rounds, _ = solve_qp(system, fixed, constrained, normals, lower, np.zeros(len(fixed), bool),
-                             direct_max_particles=0)
+    monkeypatch.setattr(active_set, "_conjugate_gradients", alternating)
+    qp = (system, fixed, constrained, normals, lower, np.zeros(len(fixed), bool))
+    *_, rounds, _ = solve_qp(*qp, direct_max_particles=0, linear_solver="numpy")
     # screened until a set comes back, accurate after it, ended when one comes back again
     assert rounds == len(tolerances) <= 5
     assert tolerances[:2] == [active_set.SCREENING_CG_TOLERANCE] * 2 and tolerances[-1] == CG_RELATIVE_TOLERANCE
     tolerances.clear()
-    *_, rounds, _ = solve_qp(system, fixed, constrained, normals, lower, np.zeros(len(fixed), bool),
-                             direct_max_particles=0, screening=False)
+    *_, rounds, _ = solve_qp(*qp, direct_max_particles=0, linear_solver="numpy", screening=False)
     assert rounds == MAX_ACTIVE_SET_ROUNDS  # unguarded
