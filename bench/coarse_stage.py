@@ -1,13 +1,28 @@
-"""The multi-scale solve's coarse level (the guides, coupled) alone, and its linear solves by CG or direct.
+"""The multi-scale solve's coarse level (the guides, coupled) alone: its linear-solve paths side by side.
 
 Builds Table 4's groom (average female -> heavy male, 'long'; bench/table4.py) at one size,
-runs the initial transfer, then the coarse level as :func:`solver.adaptation.multiscale.solve_multiscale`
-calls it, and prints its seconds, outer iterations, active-set rounds and CG steps. With
-``--compare N`` the first N of its QPs are solved again by conjugate gradients and by the
-sparse direct factorisation (:data:`.active_set.DIRECT_SOLVE_MAX_PARTICLES`), each timed,
-with the largest difference of their steps.
+runs the initial transfer, then solves the coarse level as
+:func:`solver.adaptation.multiscale.solve_multiscale` poses it, once per path of
+:func:`.active_set.solve_qp`'s coupled rounds, all in this process (the kernels warmed up
+first), ``--runs`` times each, interleaved:
 
-    python bench/coarse_stage.py [--size 1e5] [--guides 300] [--compare 3]
+* ``before``: the numpy reference (scipy banded Cholesky, sparse products), every round's
+  conjugate gradients from zero to :data:`.active_set.CG_RELATIVE_TOLERANCE` (the path
+  before issue 13);
+* ``compiled``: the same rounds by the compiled kernels (:mod:`.coupled_kernels`);
+* ``+warm``: ... each round's CG started from the previous round's solution;
+* ``after``: ... and rounds whose active set still changes solved to
+  :data:`.active_set.SCREENING_CG_TOLERANCE` only, with the cycle guard (the default).
+
+It prints, per path, the median wall-clock and CPU seconds of this process (less sensitive
+to other jobs on a shared machine) and their ratios to ``before``, outer iterations,
+active-set rounds, CG steps, whether it converged, the final merit, and the largest and mean
+distance of its guides from the ``before`` result. With ``--compare N`` the first N QPs are
+solved again by conjugate gradients and by the sparse direct factorisation
+(:data:`.active_set.DIRECT_SOLVE_MAX_PARTICLES`), each timed, with the largest difference
+of their steps.
+
+    python bench/coarse_stage.py [--size 1e5] [--guides 300] [--runs 3] [--paths before after] [--compare 3]
 
 Prints figures; not a test. Times are wall-clock seconds on this machine.
 """
@@ -15,20 +30,32 @@ Prints figures; not a test. Times are wall-clock seconds on this machine.
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 import numpy as np
 from table4 import SOURCE, STYLE, TARGET, groom_shape
+
+#: solve_qp's keywords per path, in the order they run
+PATHS = {
+    "before": {"linear_solver": "numpy", "warm_start": False, "screening": False},
+    "compiled": {"linear_solver": "compiled", "warm_start": False, "screening": False},
+    "+warm": {"linear_solver": "compiled", "warm_start": True, "screening": False},
+    "after": {"linear_solver": "compiled", "warm_start": True, "screening": True},
+}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", default="1e5", help="particles of the groom")
     parser.add_argument("--guides", type=int, default=300)
+    parser.add_argument("--runs", type=int, default=3, help="solves per path (median)")
+    parser.add_argument("--paths", nargs="+", default=list(PATHS), choices=list(PATHS))
     parser.add_argument("--compare", type=int, default=0, help="QPs to solve again by CG and by direct factorisation")
     args = parser.parse_args()
 
     from hairport import solver
+    from hairport.solver import jit
     from hairport.solver.adaptation import active_set
     from hairport.solver.adaptation.coupled import solve_hairstyle
     from hairport.solver.adaptation.energies import EnergyWeights
@@ -54,6 +81,7 @@ def main() -> None:
                                             initial.max(axis=0) + GRID_REGION_MARGIN))
     solve_options = SolveOptions(eps_c=options.eps_c, max_iterations=options.max_iterations,
                                  step_tolerance=options.step_tolerance, energy_tolerance=options.energy_tolerance)
+    jit.warm_up()
 
     # the guides' problem exactly as solve_multiscale poses it
     model = adaptable.multiscale
@@ -63,25 +91,52 @@ def main() -> None:
     guide_roots = np.zeros(len(guide_particles), dtype=bool)
     guide_roots[guide_offsets[:-1]] = True
 
-    qps = []
     solve_qp = active_set.solve_qp
+    qps = []
 
-    def recording(*qp):  # keeps the first QPs' inputs for --compare
-        if len(qps) < args.compare:
-            qps.append(qp)
-        return solve_qp(*qp)
+    def solve(path: str, record: bool = False):
+        def patched(*qp, **keywords):
+            if record and len(qps) < args.compare:
+                qps.append(qp)
+            return solve_qp(*qp, **{**keywords, **PATHS[path]})
 
-    active_set.solve_qp = recording
-    began = time.perf_counter()
-    _, report = solve_hairstyle(
-        adaptable.coarse_model, guide_offsets, initial[guide_particles], guide_roots, body,
-        EnergyWeights(options.alpha, options.beta), solve_options, grid=grid, band=CONTACT_BAND,
-    )
-    seconds = time.perf_counter() - began
-    active_set.solve_qp = solve_qp
-    print(f"{hair.n_particles} particles, {len(model.guides)} guides ({len(guide_particles)} particles): coarse level "
-          f"{seconds:.2f} s, {report.iterations} iterations, {sum(report.active_set_rounds)} active-set rounds, "
-          f"{sum(report.cg_steps)} CG steps, converged {report.converged}")
+        active_set.solve_qp = patched
+        try:
+            began, began_cpu = time.perf_counter(), time.process_time()
+            points, report = solve_hairstyle(
+                adaptable.coarse_model, guide_offsets, initial[guide_particles], guide_roots, body,
+                EnergyWeights(options.alpha, options.beta), solve_options, grid=grid, band=CONTACT_BAND,
+            )
+            return points, report, time.perf_counter() - began, time.process_time() - began_cpu
+        finally:
+            active_set.solve_qp = solve_qp
+
+    seconds = {path: [] for path in args.paths}
+    cpu_seconds = {path: [] for path in args.paths}
+    results = {}
+    for run in range(args.runs):
+        for path in args.paths:
+            points, report, elapsed, cpu = solve(path, record=run == 0 and path == args.paths[0])
+            seconds[path].append(elapsed)
+            cpu_seconds[path].append(cpu)
+            results[path] = points, report
+
+    print(f"{hair.n_particles} particles, {len(model.guides)} guides ({len(guide_particles)} particles), "
+          f"coarse level, median of {args.runs} runs")
+    reference = results[args.paths[0]][0]
+    print(f"{'path':<10} {'seconds':>8} {'ratio':>6} {'cpu s':>7} {'ratio':>6} {'iter':>5} {'rounds':>7} "
+          f"{'CG steps':>9} {'conv':>5} {'merit':>10} {'max dist m':>11} {'mean dist m':>12}")
+    first = statistics.median(seconds[args.paths[0]])
+    first_cpu = statistics.median(cpu_seconds[args.paths[0]])
+    for path in args.paths:
+        points, report = results[path]
+        median, cpu = statistics.median(seconds[path]), statistics.median(cpu_seconds[path])
+        distance = np.linalg.norm(points - reference, axis=1)
+        print(f"{path:<10} {median:8.2f} {median / first:6.2f} {cpu:7.2f} {cpu / first_cpu:6.2f} {report.iterations:5d} "
+              f"{sum(report.active_set_rounds):7d} "
+              f"{sum(report.cg_steps):9d} {str(report.converged):>5} {report.merit[-1]:10.3f} {distance.max():11.1e} "
+              f"{distance.mean():12.1e}")
+
     for number, qp in enumerate(qps):
         began = time.perf_counter()
         cg = solve_qp(*qp, direct_max_particles=0)

@@ -76,6 +76,13 @@ class StrandProblem:
         return (K.T @ sp.diags(self.gamma) @ K).tocsr()
 
     @cached_property
+    def gram_off_diagonal(self) -> sp.csr_matrix:
+        """``K^T diag(gamma) K`` without its diagonal, stored zeros dropped: what couples particles."""
+        off_diagonal = (self.gram - sp.diags(self.gram.diagonal())).tocsr()
+        off_diagonal.eliminate_zeros()
+        return off_diagonal
+
+    @cached_property
     def coupled(self) -> bool:
         """Whether ``K`` links particles of different strands."""
         K = self.coupling.tocoo()
@@ -184,17 +191,15 @@ def newton_system(
     blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
 
     K = problem.coupling
-    KtGK = problem.gram
-    kdiag = KtGK.diagonal()
+    kdiag = problem.gram.diagonal()
     diagonal = np.zeros((n, 3, 3))
     diagonal[seg] += blocks
     diagonal[seg + 1] += blocks
     diagonal += (2.0 * weights.alpha * kdiag + 2.0 * weights.beta * g)[:, None, None] * np.eye(3)[None]
     upper = np.zeros((n, 3, 3))
     upper[seg] = -blocks
-    off_diagonal = KtGK - sp.diags(kdiag)
-    off_diagonal.eliminate_zeros()
-    coupling = 2.0 * weights.alpha * off_diagonal.tocsr() if off_diagonal.nnz else None
+    off_diagonal = problem.gram_off_diagonal
+    coupling = 2.0 * weights.alpha * off_diagonal if off_diagonal.nnz else None
 
     shape_residual = (unit * cosine[:, None] - d) / length[:, None]
     gradient = np.zeros((n, 3))

@@ -130,3 +130,28 @@ def test_hessian_matches_finite_differences_of_the_gradient_where_convex():
                    - newton_system(problem, points - h * e, weights, np.zeros(n)).gradient) / (2 * h)
         np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
 
+
+
+def test_coupled_hessian_matches_finite_differences_of_the_gradient_where_convex():
+    """The kNN coupling (Eq. 10) enters the Newton model as the off-diagonal ``2 alpha K^T G K``,
+    its diagonal with the strand-banded blocks."""
+    rng = np.random.default_rng(4)
+    hair = outward_strands(sphere_character(), n_strands=6, n_points=5)
+    n = hair.n_particles
+    gamma = rng.random(n) + 0.5
+    problem = problem_from_shape_model(model_of(hair, k=3), hair.offsets, hair.points, hair.is_root, gamma)
+    off_diagonal = problem.gram_off_diagonal
+    assert problem.coupled and off_diagonal.nnz > 3 * n
+    assert not off_diagonal.diagonal().any()
+    np.testing.assert_allclose((off_diagonal + sp.diags(problem.gram.diagonal())).toarray(), problem.gram.toarray(),
+                               rtol=0, atol=1e-15)
+    points = hair.points + rng.normal(scale=1e-5, size=hair.points.shape)
+    weights = EnergyWeights()
+    system = newton_system(problem, points, weights, np.zeros(n))
+    h = 1e-8
+    for j in rng.choice(3 * n, size=10, replace=False):
+        e = np.zeros((n, 3))
+        e.ravel()[j] = 1.0
+        numeric = (newton_system(problem, points + h * e, weights, np.zeros(n)).gradient
+                   - newton_system(problem, points - h * e, weights, np.zeros(n)).gradient) / (2 * h)
+        np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
