@@ -172,4 +172,4 @@ def test_a_new_round_refactorises_only_the_strands_whose_pins_changed(coupled_ro
 
 def test_kernels_are_warmed_up():
     assert "hairport.solver.adaptation.coupled_kernels" in jit.KERNEL_MODULES
-    assert "coupled active-set kernels" in jit.warm_up()
+    assert "coupled active-set kernels" in jit.warm_up().seconds
