@@ -14,8 +14,15 @@ conjugate-gradient method preconditioned by the strand-banded part of ``H`` (``S
 diagonal terms and the diagonal of ``K^T G K``), factorised by banded Cholesky
 (:mod:`.banded`): exact, in one step, when ``K`` is diagonal (Eq. 14's fine level, whose
 neighbours are fixed guides), a few dozen steps when strands are coupled.
-Small coupled systems (:data:`DIRECT_SOLVE_MAX_PARTICLES`) are solved exactly by a sparse
-LU factorisation of ``R^T H R`` instead: its fill makes it dearer than CG beyond that.
+
+Coupled rounds (the guides of the multi-scale solve, the global solve) run on compiled
+kernels (:mod:`.coupled_kernels`; the numpy code here is their reference). Only the pins
+change from one round to the next, so each round's CG starts from the previous solution and
+refactorises only the strands whose pins changed; rounds whose active set is still changing
+are solved loosely (:data:`SCREENING_CG_TOLERANCE`) and the set they settle on accurately;
+an active set that comes back (inexact solves can cycle) makes the rounds accurate, and a
+second cycle ends the QP. On request, coupled systems up to a size are solved exactly by a
+sparse LU factorisation of ``R^T H R`` instead (:data:`DIRECT_SOLVE_MAX_PARTICLES`).
 
 When no entry of ``K`` links two strands every strand is its own problem: each gets its own
 backtracking line search, damping and convergence test, and leaves the loop when done.
@@ -61,23 +68,25 @@ MAX_ACTIVE_SET_ROUNDS = 50
 #: a group stops once this many iterations in a row lowered its merit by less than the energy
 #: tolerance: one short, backtracked step says little about the minimum
 STALLED_ITERATIONS = 2
-#: conjugate gradients stop at this residual relative to the right-hand side ...
+#: conjugate gradients stop at this residual relative to the zero step's (the pinned values alone) ...
 CG_RELATIVE_TOLERANCE = 1e-6
 #: ... or at this one in the rounds of a coupled QP whose active set is still changing: their
 #: solution only decides the next active set (its multipliers' and violations' signs), and the
-#: set that settles is solved again to CG_RELATIVE_TOLERANCE (measured by bench/coarse_stage.py
-#: at 10^5 particles: 40 % fewer CG steps, steps within 1e-5 m of the accurate rounds'; 1e-2
-#: screens worse and takes more rounds, 1e-4 more steps)
+#: set that settles is solved again to CG_RELATIVE_TOLERANCE (bench/coarse_stage.py at 10^5
+#: particles: 478 CG steps in 71 rounds against 803 in 52 with every round accurate, the guides
+#: within 1.2e-5 m of those rounds' result; 1e-2 took 520 steps in 104 rounds, 1e-4 558 in 72)
 SCREENING_CG_TOLERANCE = 1e-3
 #: ... or after this many steps
 CG_MAX_STEPS = 1000
 #: coupled systems of at most this many particles are solved by a sparse direct factorisation
-#: (SuperLU) instead of conjugate gradients. ``K^T G K`` links a particle with its neighbours'
-#: neighbours, so the factor fills in: a 300-guide coarse level of 1.5e4 particles factors into
-#: 6.4e6 entries in 0.9 s a round against 0.08 s for a CG solve; below about 2e3 particles the
-#: exact solves are as fast or faster (and spare the active set the cycling inexact CG solves
-#: can cause). Measured by bench/coarse_stage.py.
-DIRECT_SOLVE_MAX_PARTICLES = 2_000
+#: (SuperLU) instead of conjugate gradients: by default none. ``K^T G K`` links a particle with
+#: its neighbours' neighbours, so the factor fills in: a 300-guide coarse level of 1.5e4
+#: particles factors into 6.4e6 entries in 0.9 s a round against 0.08 s for a numpy CG solve
+#: (bench/coarse_stage.py). Below 2e3 particles the direct solves were as fast as numpy's CG,
+#: but the compiled CG is faster at every size: a first QP of 50 / 200 / 500 / 2,000 / 4,000
+#: coupled particles took 0.8 / 1.6 / 3.0 / 42 / 68 ms against 2.9 / 7.6 / 91 / 303 / 559 ms
+#: direct (2026-11-25), and the cycle guard of :func:`solve_qp` stands in for the exactness.
+DIRECT_SOLVE_MAX_PARTICLES = 0
 #: how coupled systems beyond that size are solved: by the compiled kernels of
 #: :mod:`.coupled_kernels` or by their numpy reference (scipy's banded Cholesky, sparse products)
 LINEAR_SOLVERS = ("compiled", "numpy")
