@@ -42,10 +42,13 @@ def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
     is_end[offsets[:-1]] = True
     is_end[offsets[1:] - 1] = True
     interior = np.flatnonzero(~is_end)
-    rows = np.repeat(interior, 3)
-    cols = (interior[:, None] + np.array([-1, 0, 1])).ravel()
+    # CSR straight away (rows sorted, three sorted columns each, no duplicates): what the
+    # (row, column) triplets converted to, without their (3N,) int64 arrays
+    indptr = np.zeros(n + 1, dtype=np.int32 if 3 * n < np.iinfo(np.int32).max else np.int64)
+    np.cumsum(3 * ~is_end, out=indptr[1:])
+    cols = (interior[:, None] + np.array([-1, 0, 1])).astype(indptr.dtype).ravel()
     vals = np.stack([inv[interior - 1], -(inv[interior - 1] + inv[interior]), inv[interior]], axis=1).ravel()
-    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+    return sp.csr_matrix((vals, cols, indptr), shape=(n, n))
 
 
 def smooth_strands(
