@@ -81,8 +81,10 @@ def _import_kernel_modules() -> None:
 #: modules that declare kernels (imported by :func:`warm_up`)
 KERNEL_MODULES: tuple[str, ...] = (
     "hairport.solver.adaptation.coupled_kernels",
+    "hairport.solver.adaptation.kdtree",
     "hairport.solver.adaptation.neighbours",
     "hairport.solver.transfer.bone_rays",
+    "hairport.solver.transfer.smoothing",
 )
 
 

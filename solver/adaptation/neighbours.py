@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from hairport.solver.adaptation.kdtree import build_tree, query_tree
 from hairport.solver.jit import parallel_kernel, prange, warms
 
 #: neighbour distances are clamped to this (m) before inverting (Eq. 9)
@@ -94,6 +95,37 @@ def knn_other_strands(
         Rows for ``queries`` (or all particles); fewer than ``k`` neighbours where the pool
         holds fewer particles of other strands (padding: the particle itself, weight 0).
     """
+    n = len(points)
+    strand_of = np.asarray(strand_of, dtype=np.int64)
+    queries = np.arange(n, dtype=np.int64) if queries is None else np.asarray(queries, dtype=np.int64)
+    pool = np.arange(n, dtype=np.int64) if candidates is None else np.flatnonzero(candidates)
+    index = np.repeat(queries[:, None].astype(NEIGHBOUR_INDEX_DTYPE), k, axis=1)
+    distance = np.full((len(queries), k), np.inf)
+    if len(pool) == 0 or k == 0 or len(queries) == 0:
+        return Neighbours(index, np.zeros((len(queries), k)))
+    tree = build_tree(points[pool], pool, strand_of[pool])
+    complete = np.empty(len(queries), dtype=bool)
+    for first in range(0, len(queries), KNN_QUERY_CHUNK):  # bounds the gathered query points
+        rows = slice(first, first + KNN_QUERY_CHUNK)
+        complete[rows] = query_tree(tree, points[queries[rows]], strand_of[queries[rows]], index[rows],
+                                    distance[rows], KNN_MAX_ROUND_CANDIDATES)
+    hard = np.flatnonzero(~complete)  # met more than KNN_MAX_ROUND_CANDIDATES of their own strand
+    if len(hard):
+        index[hard] = queries[hard, None]
+        index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
+    return Neighbours(index, _inverse_distance_weights(distance))
+
+
+def knn_other_strands_reference(
+    points: np.ndarray,
+    strand_of: np.ndarray,
+    k: int,
+    candidates: np.ndarray | None = None,
+    queries: np.ndarray | None = None,
+    workers: int = -1,
+) -> Neighbours:
+    """:func:`knn_other_strands` by scipy's k-d tree and rounds of candidates (module
+    docstring): the reference the compiled tree is tested against (same parameters and results)."""
     n = len(points)
     strand_of = np.asarray(strand_of, dtype=np.int64)
     queries = np.arange(n, dtype=np.int64) if queries is None else np.asarray(queries, dtype=np.int64)

@@ -47,3 +47,24 @@ def test_strand_laplacian_weights_are_inverse_source_lengths_floored():
     np.testing.assert_array_equal(L[1], [1 / MIN_SEGMENT_LENGTH, -(1 / MIN_SEGMENT_LENGTH + 100.0), 100.0, 0.0])
     np.testing.assert_allclose(L[2], [0.0, 100.0, -150.0, 50.0], rtol=1e-12)
     assert not L[[0, 3]].any()
+
+
+def test_the_run_by_run_solve_equals_the_sparse_lu_solve():
+    from hairport.solver.transfer.smoothing import restore_laplacian, restore_laplacian_reference
+
+    rng = np.random.default_rng(5)
+    source = sphere_character()
+    hair = outward_strands(source, n_strands=30, n_points=12)
+    L = strand_laplacian(hair.points, hair.offsets)
+    anchored = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)
+    features = L @ hair.points
+    interior = np.flatnonzero(np.diff(L.indptr) > 0)
+    # runs of every length: single particles, pairs, whole strand interiors, a repeated particle's huge weight
+    unsmooth = np.sort(rng.choice(interior, size=len(interior) // 2, replace=False))
+    unsmooth = np.union1d(unsmooth, interior[(interior > hair.offsets[3]) & (interior < hair.offsets[4])])
+    solved = restore_laplacian(L, anchored, features, unsmooth)
+    reference = restore_laplacian_reference(L, anchored, features, unsmooth)
+    assert np.abs(solved - reference).max() < 1e-12
+    np.testing.assert_array_equal(np.delete(solved, unsmooth, axis=0), np.delete(anchored, unsmooth, axis=0))
+    np.testing.assert_allclose((L @ solved)[unsmooth], features[unsmooth], atol=1e-9)  # Eq. 4 holds on the set
+    assert np.abs(solved - anchored)[unsmooth].max() > 1e-3  # and it moved them
