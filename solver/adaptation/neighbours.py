@@ -1,13 +1,20 @@
 """Eq. 8-9: each particle's k nearest particles on other strands and their inverse-distance weights.
 
-The search is linear in memory for any strand layout. Most particles find ``k`` particles of
-other strands among a few dozen nearest candidates of one k-d tree (rounds that double the
-candidates while some are missing). A particle whose own strand holds so many candidates
-that the rounds could grow to the whole pool (a long strand with no neighbour near: the
-rounds once took 4.3 GB for one 10,000-point strand) goes instead to an exact search that
-never sees its own strand: the strands are split in halves recursively, and each half's
-particles query a tree of the other half's, so every particle meets every other strand
-once, in ``log2(S)`` levels of trees whose sizes add up to the pool per level.
+The search is linear in memory for any strand layout. :func:`knn_other_strands` asks a
+compiled k-d tree (:mod:`.kdtree`) that skips the query's own strand while it searches, so
+one search per particle gives the exact answer. A particle that meets more than
+:data:`KNN_MAX_ROUND_CANDIDATES` particles of its own strand before it has found ``k`` others
+(a long strand with no neighbour near: candidate rounds once took 4.3 GB for one
+10,000-point strand) goes instead to an exact search that never sees its own strand: the
+strands are split in halves recursively, and each half's particles query a tree of the
+other half's, so every particle meets every other strand once, in ``log2(S)`` levels of
+trees whose sizes add up to the pool per level.
+
+:func:`knn_other_strands_reference`, the tested reference, finds the same sets with scipy's
+``cKDTree``: most particles find ``k`` particles of other strands among a few dozen nearest
+candidates (rounds that double the candidates while some are missing), long strands that
+miss go to the exact search. The compiled tree was 2-3x faster on the MakeHuman long groom
+at 10^6 particles (full sets: 5.5 s against 16 s on a loaded machine), with equal results.
 
 A particle may find fewer than ``k`` neighbours (the pool holds fewer particles of other
 strands, or none: a groom of one strand). Eq. 9's weights are normalised over the
@@ -27,17 +34,19 @@ from hairport.solver.jit import parallel_kernel, prange, warms
 
 #: neighbour distances are clamped to this (m) before inverting (Eq. 9)
 MIN_NEIGHBOUR_DISTANCE = 1e-9
-#: extra candidates asked of the k-d tree in the first round, to skip particles of the same strand
+#: extra candidates asked of the k-d tree in the reference's first round, to skip particles of the same strand
 KNN_EXTRA_CANDIDATES = 16
-#: queries per k-d tree call in the first round (bounds the candidate arrays to ~20 MB)
+#: queries per k-d tree call (bounds the gathered query points and, in the reference's first
+#: round, the candidate arrays to ~20 MB)
 KNN_QUERY_CHUNK = 65536
 #: candidate entries (rows x candidates) per k-d tree call in every round: the first round's
 #: size at the default k = 5, so later rounds, with more candidates, take fewer rows per call
 KNN_CANDIDATE_BUDGET = KNN_QUERY_CHUNK * (5 + KNN_EXTRA_CANDIDATES)
-#: a particle whose strand holds more pool particles than this (less k) leaves the doubling
-#: rounds for the exact other-strand search when the first round misses neighbours: the
-#: rounds' cost grows with the strand's length, the exact search's does not. Strands of
-#: ordinary grooms (up to a few hundred particles) stay below it and keep the rounds' result
+#: a particle that meets more particles of its own strand than this before it has found k
+#: others (the reference: whose strand holds more pool particles than this, less k, and whose
+#: first round missed) takes the exact other-strand search: the tree's and the rounds' cost
+#: grows with the strand's length, the exact search's does not. Strands of ordinary grooms (up
+#: to a few hundred particles) stay below it
 KNN_MAX_ROUND_CANDIDATES = 512
 
 

@@ -154,3 +154,17 @@ def test_the_compiled_neighbour_average_equals_the_numpy_gather(dtype):
     # the weights sum to 1 per row: the average lies within the neighbours' bounding box
     assert (average >= points[nb.index].min(axis=1) - 1e-15).all()
     assert (average <= points[nb.index].max(axis=1) + 1e-15).all()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_tree_finds_the_reference_s_sets_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    points, strand_of = _random_walk_groom(rng.integers(2, 80, 120), seed)
+    guides = np.isin(strand_of, rng.choice(120, 15, replace=False))
+    for candidates, queries in ((None, None), (guides, None), (guides, np.flatnonzero(~guides))):
+        nb = knn_other_strands(points, strand_of, 5, candidates=candidates, queries=queries)
+        reference = neighbours.knn_other_strands_reference(points, strand_of, 5, candidates=candidates,
+                                                           queries=queries)
+        np.testing.assert_array_equal(nb.index, reference.index)
+        np.testing.assert_array_equal(nb.weight, reference.weight)
+        assert nb.index.dtype == np.int32 and (nb.weight > 0).all()
