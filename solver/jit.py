@@ -64,7 +64,11 @@ def _import_kernel_modules() -> None:
 
 
 #: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = ()
+KERNEL_MODULES: tuple[str, ...] = (
+    "hairport.solver.mesh.bvh",
+    "hairport.solver.mesh.cells",
+    "hairport.solver.mesh.signed_distance",
+)
 
 
 def warm_up() -> dict[str, float]:
