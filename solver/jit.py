@@ -65,9 +65,8 @@ def _import_kernel_modules() -> None:
 
 #: modules that declare kernels (imported by :func:`warm_up`)
 KERNEL_MODULES: tuple[str, ...] = (
-    "hairport.solver.mesh.bvh",
-    "hairport.solver.mesh.cells",
-    "hairport.solver.mesh.signed_distance",
+    "hairport.solver.mesh.closest_kernels",
+    "hairport.solver.mesh.distance_grid",
 )
 
 

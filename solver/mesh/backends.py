@@ -85,9 +85,16 @@ class _IglFaces:
         self._tree.init(vertices, faces)
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Face holding the closest point, and the closest point."""
-        _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
-        return np.maximum(faces.astype(np.int64), 0), closest
+        """Face holding the closest point, and the closest point (face 0 and NaN for a
+        non-finite point, for which libigl's face would be undefined)."""
+        finite = np.isfinite(points).all(axis=1)
+        if finite.all():
+            _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
+            return np.maximum(faces.astype(np.int64), 0), closest
+        faces, closest = np.zeros(len(points), dtype=np.int64), np.full(points.shape, np.nan)
+        if finite.any():
+            faces[finite], closest[finite] = self.closest(np.ascontiguousarray(points[finite]))
+        return faces, closest
 
 
 class _CompiledFaces:

@@ -52,8 +52,8 @@ import numpy as np
 
 from hairport.solver.mesh.backends import _PARALLEL, _closest_face_index, _EmbreeFaces, _IglFaces
 from hairport.solver.mesh.cells import CellCache
+from hairport.solver.mesh.closest_kernels import FEATURE_EPSILON, ON_SURFACE_DISTANCE
 from hairport.solver.mesh.inside import InsideTest, manifold_closed, shell_count
-from hairport.solver.mesh.signed_distance import FEATURE_EPSILON, ON_SURFACE_DISTANCE
 
 #: from this many points on, queries are sorted along a Z-curve before the tree search
 SORT_QUERIES_FROM = 2048
