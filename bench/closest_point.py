@@ -205,7 +205,7 @@ def main():
         print(f"groom long {spec}: {n:,} particles within {BAND * 100:.0f} cm; "
               f"filled cache: {filled.n_cells:,} cells of {filled.size * 1e3:.0f} mm, "
               f"{filled.n_candidates / max(filled.n_cells, 1):.1f} candidates per cell, "
-              f"{(filled.candidates.nbytes + filled.bounds.nbytes + filled.slots.nbytes) / 2**20:.1f} MiB")
+              f"{filled.nbytes / 2**20:.1f} MiB")
         print(header)
         print("-" * len(header))
         for label in methods:

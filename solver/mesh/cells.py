@@ -52,9 +52,10 @@ DEFAULT_CELL_SIZE = 3e-3
 #: that would need more answers by the tree
 MAX_CANDIDATES = 64
 
-#: candidates over all cells of one cache at most (12 bytes each: ~200 MB); the cache
-#: starts over when a fill would pass it
-MAX_CACHED_CANDIDATES = 1 << 24
+#: candidates over all cells of one cache at most (8 bytes each: 64 MiB; a 10^6-particle
+#: groom's fine level visits ~3 M, ``bench/closest_point.py``); the cache starts over when a
+#: fill would pass it
+MAX_CACHED_CANDIDATES = 1 << 23
 
 #: cells filled per call of the fill kernel (bounds its (cells, MAX_CANDIDATES) buffers)
 FILL_CHUNK = 1 << 14
@@ -78,7 +79,8 @@ class CellCache:
         (``count = -1``: the cell is answered by the tree).
     candidates : (E,) int32
         Triangles in the tree's leaf order, cell after cell, the cells in Z-curve order of
-        their filling batch (neighbouring cells close in memory).
+        their filling batch (neighbouring cells close in memory); a view of a buffer that
+        grows by doubling.
     bounds : (E,) float32
         ``|c - f|`` rounded down (less :data:`~.closest_kernels.CELL_SLACK`), increasing within a cell.
     """
@@ -96,12 +98,22 @@ class CellCache:
     def _clear(self) -> None:
         self.slots = np.full((1 << 12, 2), EMPTY, dtype=np.int64)
         self.n_cells = 0
-        self.candidates = np.zeros(0, dtype=np.int32)
-        self.bounds = np.zeros(0, dtype=np.float32)
+        self.n_candidates = 0
+        self._candidates = np.zeros(1 << 12, dtype=np.int32)
+        self._bounds = np.zeros(1 << 12, dtype=np.float32)
 
     @property
-    def n_candidates(self) -> int:
-        return len(self.candidates)
+    def candidates(self) -> np.ndarray:
+        return self._candidates[: self.n_candidates]
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self._bounds[: self.n_candidates]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes the cache holds (its buffers' capacity)."""
+        return self.slots.nbytes + self._candidates.nbytes + self._bounds.nbytes
 
     def fill(self, points: np.ndarray) -> None:
         """Find the candidates of the cells of ``points (M, 3)`` not cached yet."""
@@ -124,9 +136,15 @@ class CellCache:
         if self.n_candidates + kept.sum() > MAX_CACHED_CANDIDATES:
             self._clear()
         rows = np.arange(MAX_CANDIDATES) < kept[:, None]
-        begin = self.n_candidates + np.concatenate([[0], np.cumsum(kept)[:-1]])
-        self.candidates = np.concatenate([self.candidates, triangles[rows].astype(np.int32)])
-        self.bounds = np.concatenate([self.bounds, _lower_float32(np.sqrt(squared[rows]) - CELL_SLACK)])
+        begin = self.n_candidates + np.cumsum(kept) - kept
+        end = self.n_candidates + int(kept.sum())
+        if end > len(self._candidates):
+            capacity = max(end, 2 * len(self._candidates))
+            self._candidates = np.concatenate([self.candidates, np.zeros(capacity - self.n_candidates, np.int32)])
+            self._bounds = np.concatenate([self.bounds, np.zeros(capacity - self.n_candidates, np.float32)])
+        self._candidates[self.n_candidates : end] = triangles[rows]
+        self._bounds[self.n_candidates : end] = _lower_float32(np.sqrt(squared[rows]) - CELL_SLACK)
+        self.n_candidates = end
         self.n_cells += len(keys)
         capacity = len(self.slots)
         if 2 * self.n_cells > capacity:

@@ -206,35 +206,6 @@ def _search(px, py, pz, hint, boxes, child, first, count, rank, table, stack_nod
     return best_t, best, best_v, best_w
 
 
-@kernel
-def _faces_within(px, py, pz, radius_squared, boxes, child, first, count, table, stack, out_triangles, out_squared):
-    """Triangles (leaf order) within ``sqrt(radius_squared)`` of the point and their squared
-    distances, into the outputs; returns how many, or ``-1`` if more than fit."""
-    found = 0
-    top = 0
-    stack[0] = 0
-    while top >= 0:
-        node = stack[top]
-        top -= 1
-        if _box_squared(boxes, node, px, py, pz) > radius_squared:
-            continue
-        c = child[node]
-        if c >= 0:
-            top += 1
-            stack[top] = c + 1
-            top += 1
-            stack[top] = c
-            continue
-        for t in range(first[node], first[node] + count[node]):
-            squared = _triangle_closest(table, t, px, py, pz)[0]
-            if squared <= radius_squared:
-                if found == len(out_triangles):
-                    return -1
-                out_triangles[found], out_squared[found] = t, squared
-                found += 1
-    return found
-
-
 @parallel_kernel
 def closest_kernel(points, hints, boxes, child, first, count, faces, rank, table,
                     out_faces, out_closest, out_coordinates, out_squared):
@@ -349,19 +320,81 @@ def _cell_center(key, origin, size, axis):
     return origin[axis] + size * (index + 0.5)
 
 
+@kernel
+def _candidates(cx, cy, cz, reach, boxes, child, first, count, table, stack, stack_squared, out_triangles,
+                out_squared):
+    """Triangles (leaf order) within ``u + reach`` of the point, ``u`` its distance to the mesh,
+    with their squared distances, into the outputs; returns how many, or ``-1`` if more than fit.
+
+    One search, nearer child first: the reach is measured from the nearest triangle found so
+    far, so it shrinks to ``u + reach`` as the search goes and prunes like a closest-point
+    search; entries beyond the final reach are dropped at the end."""
+    capacity = len(out_triangles)
+    found = 0
+    best, limit = np.inf, np.inf  # squared: the nearest so far, and (its distance + reach)^2
+    top = 0
+    stack[0] = 0
+    stack_squared[0] = _box_squared(boxes, 0, cx, cy, cz)
+    while top >= 0:
+        node, box = stack[top], stack_squared[top]
+        top -= 1
+        if box > limit:
+            continue
+        c = child[node]
+        if c < 0:
+            for t in range(first[node], first[node] + count[node]):
+                squared = _triangle_closest(table, t, cx, cy, cz)[0]
+                if squared < best:
+                    best = squared
+                    limit = (math.sqrt(squared) + reach) ** 2
+                if squared <= limit:
+                    if found == capacity:
+                        found = _within(found, limit, out_triangles, out_squared)
+                        if found == capacity:
+                            return -1
+                    out_triangles[found], out_squared[found] = t, squared
+                    found += 1
+            continue
+        near_squared = _box_squared(boxes, c, cx, cy, cz)
+        far_squared = _box_squared(boxes, c + 1, cx, cy, cz)
+        near, far = c, c + 1
+        if far_squared < near_squared:
+            near, far = far, near
+            near_squared, far_squared = far_squared, near_squared
+        if far_squared <= limit:
+            top += 1
+            stack[top], stack_squared[top] = far, far_squared
+        if near_squared <= limit:
+            top += 1
+            stack[top], stack_squared[top] = near, near_squared
+    return _within(found, limit, out_triangles, out_squared)
+
+
+@kernel
+def _within(found, limit, out_triangles, out_squared):
+    """Keep the first ``found`` entries with a squared distance at most ``limit``, in order; how many."""
+    kept = 0
+    for e in range(found):
+        if out_squared[e] <= limit:
+            out_triangles[kept], out_squared[kept] = out_triangles[e], out_squared[e]
+            kept += 1
+    return kept
+
+
 @parallel_kernel
 def fill_cells(keys, origin, size, half_diagonal, boxes, child, first, count, rank, table,
-                 out_triangles, out_squared, out_found):
+               out_triangles, out_squared, out_found):
+    """Candidates of the cells ``keys``: every triangle within ``u(c) + 2 r`` (plus
+    :data:`CELL_SLACK`) of the cell's centre ``c``, in increasing distance (see :mod:`.cells`)."""
+    reach = 2.0 * half_diagonal + CELL_SLACK
     for cell in prange(len(keys)):
         stack = np.empty(STACK_DEPTH, dtype=np.int64)
         stack_squared = np.empty(STACK_DEPTH)
         cx = _cell_center(keys[cell], origin, size, 0)
         cy = _cell_center(keys[cell], origin, size, 1)
         cz = _cell_center(keys[cell], origin, size, 2)
-        squared = _search(cx, cy, cz, -1, boxes, child, first, count, rank, table, stack, stack_squared)[1]
-        radius = math.sqrt(squared) + 2.0 * half_diagonal + CELL_SLACK
-        found = _faces_within(cx, cy, cz, radius * radius, boxes, child, first, count, table, stack,
-                              out_triangles[cell], out_squared[cell])
+        found = _candidates(cx, cy, cz, reach, boxes, child, first, count, table, stack, stack_squared,
+                            out_triangles[cell], out_squared[cell])
         out_found[cell] = found
         if found > 1:
             order = np.argsort(out_squared[cell, :found])
