@@ -8,16 +8,24 @@ cheap repeated queries.
 Signed distance
 ---------------
 A BVH built once per :class:`MeshQuery` (lazily, on the first query) finds the face holding
-the closest point and, with libigl's float64 ``AABB`` (the default), the closest point
-itself; queries of :data:`SORT_QUERIES_FROM` points or more are visited in Z-curve order,
-so that consecutive ones walk the same tree nodes (2-3x on scattered points). The sign is
-float64 numpy over all points at once, from the angle-weighted pseudonormal of the feature
-the closest point lies on (Baerentzen & Aanaes 2005): the face normal inside a face, the
-normalised sum of the adjacent face normals on an edge, the angle-weighted vertex normal at
-a corner, all precomputed per face. The feature is read off the barycentric coordinates
-with libigl's tolerance, so this is exactly the sign rule of
-``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which the previous
+the closest point and the closest point itself. The sign is that of the offset along the
+angle-weighted pseudonormal of the feature the closest point lies on (Baerentzen & Aanaes
+2005): the face normal inside a face, the normalised sum of the adjacent face normals on an
+edge, the angle-weighted vertex normal at a corner, all precomputed per face. The feature is
+read off the barycentric coordinates with libigl's tolerance, so this is exactly the sign
+rule of ``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which an earlier
 implementation called on every query, rebuilding its tree and normals each time.
+
+The default face search is the compiled float64 BVH of :mod:`.bvh`: the whole signed
+distance of a point in one compiled pass (:mod:`.signed_distance`), parallel over the
+points, ~2x libigl's AABB on hair near the body (``bench/closest_point.py``). It takes a
+*hint* per point (a face near it, e.g. :attr:`SignedDistance.faces` of the previous
+iterate) and a *cell cache* (:meth:`MeshQuery.cell_cache`, :mod:`.cells`: candidate faces
+per 3 mm cell, 3-4x libigl for a solver's iterates, which come back to the same cells);
+both change nothing but the time (and which face of a tie is named). libigl's ``AABB``
+(float64) with the numpy steps over all points at once is the tested reference: queries of
+:data:`SORT_QUERIES_FROM` points or more are visited in Z-curve order there, so that
+consecutive ones walk the same tree nodes (2-3x on scattered points).
 
 The pseudonormal sign is exact for a closed, consistently oriented, manifold mesh (the
 MakeHuman body is one). On an open mesh it is still the side of the nearest feature, but
@@ -26,8 +34,9 @@ nearer shell. A query given an :class:`~.inside.InsideTest` (the collision surfa
 :mod:`.collision`) takes the sign from the generalized winding number wherever the
 pseudonormal's is not exact (:mod:`.inside`).
 
-Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: libigl's
-``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH; not a
+Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: the compiled
+BVH (``"bvh"``, float64, exact; the default), libigl's ``AABB`` (``"igl"``, float64, exact;
+the reference) or, opted in, ``fcpw`` (float32 wide BVH; not a
 declared dependency; in ``bench/geometry.py`` no faster end to end except ~15 % on
 hair-like points far from the body). fcpw gives the face only; the closest point on it is
 then Ericson's region test in float64 numpy. A point whose distance is within ~1e-7 of
