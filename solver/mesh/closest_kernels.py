@@ -58,6 +58,8 @@ _AXIS_MASK = (1 << AXIS_BITS) - 1
 EMPTY = -1
 #: the triangle of a point whose cell is not cached yet
 MISSING = -2
+#: the triangle of a point whose cell sends it to the tree
+BY_TREE = -3
 
 #: a packed slot value is ``begin * COUNT_FACTOR + count + 1``: the cell's first candidate,
 #: and how many it has (``-1``: the cell is answered by the tree); above the most candidates
@@ -511,26 +513,28 @@ def _scan(px, py, pz, cx, cy, cz, begin, found, candidates, bounds, table):
 
 
 @kernel
-def _cached_search(px, py, pz, hint, origin, size, inverse_size, half_diagonal, slots, candidates, bounds,
-                   boxes, child, first, count, rank, table, stack, stack_squared):
-    """Nearest triangle (leaf order) by the point's cell, else by the tree:
-    ``(triangle or MISSING, squared, v, w)``; MISSING when the cell is not cached yet."""
+def _cached_scan(px, py, pz, origin, size, inverse_size, half_diagonal, slots, candidates, bounds, table):
+    """Nearest triangle (leaf order) by the point's cell: ``(triangle, squared, v, w)``, with
+    the triangle :data:`MISSING` when the cell is not cached yet and :data:`BY_TREE` when the
+    cell (or the point) is left to the tree."""
     key = _cell_key(px, py, pz, origin, inverse_size)
-    if key >= 0:
-        packed = _lookup(key, slots)
-        if packed == EMPTY:
-            return MISSING, np.inf, 0.0, 0.0
-        found = packed % COUNT_FACTOR - 1
-        if found >= 0:
-            cx = _cell_center(key, origin, size, 0)
-            cy = _cell_center(key, origin, size, 1)
-            cz = _cell_center(key, origin, size, 2)
-            ox, oy, oz = px - cx, py - cy, pz - cz
-            # a point a rounding away from its cell is still within the slack of the radius;
-            # anything more (never, by construction) is left to the tree
-            if ox * ox + oy * oy + oz * oz <= half_diagonal * half_diagonal * (1.0 + 1e-9):
-                return _scan(px, py, pz, cx, cy, cz, packed // COUNT_FACTOR, found, candidates, bounds, table)
-    return _search(px, py, pz, hint, boxes, child, first, count, rank, table, stack, stack_squared)
+    if key < 0:
+        return BY_TREE, np.inf, 0.0, 0.0
+    packed = _lookup(key, slots)
+    if packed == EMPTY:
+        return MISSING, np.inf, 0.0, 0.0
+    found = packed % COUNT_FACTOR - 1
+    if found < 0:
+        return BY_TREE, np.inf, 0.0, 0.0
+    cx = _cell_center(key, origin, size, 0)
+    cy = _cell_center(key, origin, size, 1)
+    cz = _cell_center(key, origin, size, 2)
+    ox, oy, oz = px - cx, py - cy, pz - cz
+    # a point a rounding away from its cell is still within the slack of the radius;
+    # anything more (never, by construction) is left to the tree
+    if ox * ox + oy * oy + oz * oz > half_diagonal * half_diagonal * (1.0 + 1e-9):
+        return BY_TREE, np.inf, 0.0, 0.0
+    return _scan(px, py, pz, cx, cy, cz, packed // COUNT_FACTOR, found, candidates, bounds, table)
 
 
 @parallel_kernel
@@ -548,18 +552,15 @@ def signed_kernel(points, hints, pseudonormals, boxes, child, first, count, face
             px, py, pz = points[i, 0], points[i, 1], points[i, 2]
             t, v, w = -1, 0.0, 0.0
             if np.isfinite(px) and np.isfinite(py) and np.isfinite(pz):
-                hint = hints[i] if hinted else -1
+                t = BY_TREE
                 if use_cells:
-                    t, squared, v, w = _cached_search(
-                        px, py, pz, hint, origin, size, inverse_size, half_diagonal, slots, candidates, bounds,
-                        boxes, child, first, count, rank, table, stack, stack_squared)
-                    if t == MISSING:
-                        if fill_missing:
-                            out_faces[i] = MISSING
-                            continue
-                        t, squared, v, w = _search(px, py, pz, hint, boxes, child, first, count, rank, table,
-                                                   stack, stack_squared)
-                else:
+                    t, squared, v, w = _cached_scan(px, py, pz, origin, size, inverse_size, half_diagonal, slots,
+                                                    candidates, bounds, table)
+                    if t == MISSING and fill_missing:
+                        out_faces[i] = MISSING
+                        continue
+                if t < 0:  # one search per point written once: the kernel compiles faster
+                    hint = hints[i] if hinted else -1
                     t, squared, v, w = _search(px, py, pz, hint, boxes, child, first, count, rank, table,
                                                stack, stack_squared)
             if t < 0:  # not finite, or every face degenerate
