@@ -85,6 +85,8 @@ KERNEL_MODULES: tuple[str, ...] = (
     "hairport.solver.adaptation.neighbours",
     "hairport.solver.transfer.bone_rays",
     "hairport.solver.transfer.smoothing",
+    "hairport.solver.mesh.closest_kernels",
+    "hairport.solver.mesh.distance_grid",
 )
 
 

@@ -25,6 +25,8 @@ from hairport.solver.mesh.clearance import push_out
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 
+_NOT_MADE = object()
+
 
 class BodyDistance:
     """Signed distance to the target for the particles that can be near it or are inside it.
@@ -37,18 +39,29 @@ class BodyDistance:
     (:attr:`~hairport.solver.mesh.query.MeshQuery.inside_test`). So every particle inside the body
     gets its Eq. 13 constraint whatever its depth. The others are far outside: distance
     ``inf``, a zero normal, and no constraint.
+
+    The exact queries go through a cell cache of the query (:meth:`.MeshQuery.cell_cache`,
+    :mod:`hairport.solver.mesh.cells`), kept for the life of this object: a solve asks about
+    the same region every iteration, and a point in a cell seen before is answered from the
+    cell's few candidate faces (the same result, but for ties).
     """
 
     def __init__(self, query: MeshQuery, band: float = np.inf, grid: DistanceGrid | None = None):
         self.query = query
         self.band = band
         self.grid = grid
+        self._cells = _NOT_MADE  # the query's cell cache (None if its face search has none), made on the first call
+
+    def _signed_distance(self, points: np.ndarray):
+        if self._cells is _NOT_MADE:
+            self._cells = self.query.cell_cache()
+        return self.query.signed_distance(points, cells=self._cells)
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``points (N, 3)`` -> distance ``(N,)``, normal ``(N, 3)``, near ``(N,) bool``."""
         n = len(points)
         if self.grid is None:
-            sd = self.query.signed_distance(points)
+            sd = self._signed_distance(points)
             return sd.distance, sd.normal, np.ones(n, dtype=bool)
         bound, sign = self.grid.bound_and_sign(points)
         near = (bound < self.band) | (sign < 0)
@@ -61,7 +74,7 @@ class BodyDistance:
         distance = np.full(n, np.inf)
         normal = np.zeros((n, 3))
         if near.any():
-            sd = self.query.signed_distance(points[near])
+            sd = self._signed_distance(points[near])
             distance[near] = sd.distance
             normal[near] = sd.normal
         return distance, normal, near

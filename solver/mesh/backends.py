@@ -1,4 +1,5 @@
-"""Closest-face and ray backends behind :class:`.query.MeshQuery`: libigl AABB (default), fcpw (opt-in), embree rays."""
+"""Closest-face and ray backends behind :class:`.query.MeshQuery`: the compiled BVH (default), libigl AABB
+(the reference), fcpw (opt-in), embree rays."""
 
 from __future__ import annotations
 
@@ -7,9 +8,14 @@ from operator import attrgetter
 import igl
 import numpy as np
 
+from hairport.solver.mesh import bvh
+from hairport.solver.mesh.cells import DEFAULT_CELL_SIZE, CellCache
+from hairport.solver.mesh.signed_distance import signed_distance
+
 #: face-search backends for :meth:`~hairport.solver.mesh.query.MeshQuery.signed_distance`, the first importable one is
-#: used: ``("fcpw", "igl")`` opts in to fcpw (float32)
-CLOSEST_FACE_BACKENDS = ("igl",)
+#: used: the compiled BVH (float64, exact; 2x libigl's AABB on hair near the body, 4x with a cell cache, see
+#: ``bench/closest_point.py``), libigl's AABB (the tested reference), ``("fcpw", "igl")`` opts in to fcpw (float32)
+CLOSEST_FACE_BACKENDS = ("bvh", "igl")
 
 
 _PRIMITIVE_INDEX = attrgetter("primitive_index")
@@ -79,12 +85,45 @@ class _IglFaces:
         self._tree.init(vertices, faces)
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Face holding the closest point, and the closest point (face 0 and NaN for a
+        non-finite point, for which libigl's face would be undefined)."""
+        finite = np.isfinite(points).all(axis=1)
+        if finite.all():
+            _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
+            return np.maximum(faces.astype(np.int64), 0), closest
+        faces, closest = np.zeros(len(points), dtype=np.int64), np.full(points.shape, np.nan)
+        if finite.any():
+            faces[finite], closest[finite] = self.closest(np.ascontiguousarray(points[finite]))
+        return faces, closest
+
+
+class _CompiledFaces:
+    """Closest face, point and signed distance by the compiled BVH (:mod:`.bvh`, float64), in
+    one pass per point (:mod:`.signed_distance`); hints and cell caches (:mod:`.cells`) speed it up."""
+
+    exact = True
+    #: :meth:`signed` gives the whole signed distance (the query skips its numpy steps)
+    fused = True
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self._tree = bvh.build_tree(vertices, faces)
+
+    def closest(self, points: np.ndarray, hint: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Face holding the closest point, and the closest point."""
-        _, faces, closest = self._tree.squared_distance(self._vertices, self._faces, points)
-        return np.maximum(faces.astype(np.int64), 0), closest
+        faces, closest, _, _ = bvh.closest_points(self._tree, points, hint)
+        return np.maximum(faces, 0), closest
+
+    def signed(self, points: np.ndarray, pseudonormals: np.ndarray, hint: np.ndarray | None = None,
+               cells: CellCache | None = None):
+        """:func:`.signed_distance.signed_distance`: distance, closest, normal, faces, feature."""
+        return signed_distance(self._tree, pseudonormals, points, hint, cells)
+
+    def cell_cache(self, size: float = DEFAULT_CELL_SIZE) -> CellCache:
+        """An empty cell cache over this tree."""
+        return CellCache(self._tree, size)
 
 
-_FACE_INDEXES = {"fcpw": _FcpwFaces, "igl": _IglFaces}
+_FACE_INDEXES = {"bvh": _CompiledFaces, "fcpw": _FcpwFaces, "igl": _IglFaces}
 
 
 def _closest_face_index(vertices: np.ndarray, faces: np.ndarray, backends=None):

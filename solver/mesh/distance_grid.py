@@ -51,6 +51,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 from hairport.solver.mesh.query import MeshQuery
 
 #: default grid spacing (m): edge of the cubic cells
@@ -71,7 +72,8 @@ BUILD_CHUNK = 1 << 20
 #: a sign counts as certain only where the lower bound exceeds this (m): far above the
 #: round-off of the bound (~1e-16 m per meter of coordinates), far below any physical scale
 SIGN_MARGIN = 1e-9
-#: points per block in the lower-bound evaluation (bounds its temporaries, ~20 arrays of this size)
+#: points per block in the numpy reference of the lower-bound evaluation (bounds its
+#: temporaries, ~20 arrays of this size)
 EVAL_CHUNK = 1 << 17
 
 _SQRT3 = math.sqrt(3.0)
@@ -239,6 +241,16 @@ class DistanceGrid:
         return self._evaluate(points, want_sign=True)
 
     def _evaluate(self, points: np.ndarray, want_sign: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        bound = np.empty(len(points))
+        sign = np.empty(len(points), dtype=np.int8)
+        _bound_and_sign_kernel(self.values.reshape(-1), self.values.shape[0], self.values.shape[1],
+                               self.values.shape[2], self.origin, self.spacing, points, self.covers_mesh,
+                               self.closed, bound, sign)
+        return bound, (sign if want_sign else None)
+
+    def _evaluate_reference(self, points: np.ndarray, want_sign: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`_evaluate` in numpy, block by block: the tested reference of the kernel."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         bound = np.empty(len(points))
         sign = np.empty(len(points), dtype=np.int8) if want_sign else None
@@ -429,3 +441,62 @@ def _bound_and_sign(values: np.ndarray, origin: np.ndarray, spacing: float, poin
         if want_sign:
             sign[~finite] = 0
     return bound, sign
+
+
+@kernel
+def _along_axis(x, start, n, spacing, inverse):
+    """One axis of :func:`_bound_and_sign`: ``(squared distance to the box, cell, squared offsets
+    to the cell's lower and upper corner planes, outside the box)``."""
+    top = start + spacing * (n - 1)
+    inside = min(max(x, start), top)  # p', the projection onto the box
+    t = (inside - start) * inverse
+    cell = min(int(t), n - 2)  # t >= 0: truncation is floor
+    frac = t - cell
+    return (x - inside) ** 2, cell, (frac * spacing) ** 2, ((1.0 - frac) * spacing) ** 2, x < start or x > top
+
+
+@parallel_kernel
+def _bound_and_sign_kernel(values, nx, ny, nz, origin, spacing, points, covers_mesh, closed, out_bound, out_sign):
+    """:func:`_bound_and_sign` point by point, in its operations, with :meth:`DistanceGrid._evaluate_reference`'s
+    handling of a grid that does not cover the mesh or is not closed; ``values`` flat (C order)."""
+    inverse = 1.0 / spacing
+    for i in prange(len(points)):
+        x0, x1, x2 = points[i, 0], points[i, 1], points[i, 2]
+        if not (np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2)):
+            out_bound[i], out_sign[i] = 0.0, 0
+            continue
+        away0, c0, low0, up0, out0 = _along_axis(x0, origin[0], nx, spacing, inverse)
+        away1, c1, low1, up1, out1 = _along_axis(x1, origin[1], ny, spacing, inverse)
+        away2, c2, low2, up2, out2 = _along_axis(x2, origin[2], nz, spacing, inverse)
+        if (out0 or out1 or out2) and not covers_mesh:
+            out_bound[i], out_sign[i] = 0.0, 0
+            continue
+        away_sq = 0.0 + away0
+        away_sq += away1
+        away_sq += away2
+        base = (c0 * ny + c1) * nz + c2
+        best, best_value = -np.inf, 0.0
+        for corner in range(8):
+            b0, b1, b2 = (corner >> 2) & 1, (corner >> 1) & 1, corner & 1
+            v = values[base + (b0 * ny * nz + b1 * nz + b2)]
+            dist_sq = (up0 if b0 else low0) + (up1 if b1 else low1)
+            dist_sq += up2 if b2 else low2
+            candidate = abs(v) - np.sqrt(dist_sq)
+            if candidate > best:
+                best, best_value = candidate, v
+        bound = max(best, 0.0)
+        if away_sq > 0.0:
+            out_bound[i] = np.sqrt(away_sq + bound * bound)
+            sign = 1
+        else:
+            out_bound[i] = bound
+            sign = (1 if best_value > 0 else (-1 if best_value < 0 else 0)) if best > SIGN_MARGIN else 0
+        out_sign[i] = sign if closed else 0
+
+
+@warms("hairport.solver.mesh.distance_grid")
+def _warm() -> None:
+    values = np.arange(8, dtype=np.float64).reshape(2, 2, 2) - 3.5
+    points = np.array([[0.5, 0.5, 0.5], [3.0, 0.0, 0.0], [np.nan, 0.0, 0.0]])
+    bound, sign = np.empty(3), np.empty(3, dtype=np.int8)
+    _bound_and_sign_kernel(values.reshape(-1), 2, 2, 2, np.zeros(3), 1.0, points, True, True, bound, sign)

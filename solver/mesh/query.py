@@ -8,16 +8,24 @@ cheap repeated queries.
 Signed distance
 ---------------
 A BVH built once per :class:`MeshQuery` (lazily, on the first query) finds the face holding
-the closest point and, with libigl's float64 ``AABB`` (the default), the closest point
-itself; queries of :data:`SORT_QUERIES_FROM` points or more are visited in Z-curve order,
-so that consecutive ones walk the same tree nodes (2-3x on scattered points). The sign is
-float64 numpy over all points at once, from the angle-weighted pseudonormal of the feature
-the closest point lies on (Baerentzen & Aanaes 2005): the face normal inside a face, the
-normalised sum of the adjacent face normals on an edge, the angle-weighted vertex normal at
-a corner, all precomputed per face. The feature is read off the barycentric coordinates
-with libigl's tolerance, so this is exactly the sign rule of
-``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which the previous
+the closest point and the closest point itself. The sign is that of the offset along the
+angle-weighted pseudonormal of the feature the closest point lies on (Baerentzen & Aanaes
+2005): the face normal inside a face, the normalised sum of the adjacent face normals on an
+edge, the angle-weighted vertex normal at a corner, all precomputed per face. The feature is
+read off the barycentric coordinates with libigl's tolerance, so this is exactly the sign
+rule of ``igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)``, which an earlier
 implementation called on every query, rebuilding its tree and normals each time.
+
+The default face search is the compiled float64 BVH of :mod:`.bvh`: the whole signed
+distance of a point in one compiled pass (:mod:`.signed_distance`), parallel over the
+points, ~2x libigl's AABB on hair near the body (``bench/closest_point.py``). It takes a
+*hint* per point (a face near it, e.g. :attr:`SignedDistance.faces` of the previous
+iterate) and a *cell cache* (:meth:`MeshQuery.cell_cache`, :mod:`.cells`: candidate faces
+per 3 mm cell, 3-4x libigl for a solver's iterates, which come back to the same cells);
+both change nothing but the time (and which face of a tie is named). libigl's ``AABB``
+(float64) with the numpy steps over all points at once is the tested reference: queries of
+:data:`SORT_QUERIES_FROM` points or more are visited in Z-curve order there, so that
+consecutive ones walk the same tree nodes (2-3x on scattered points).
 
 The pseudonormal sign is exact for a closed, consistently oriented, manifold mesh (the
 MakeHuman body is one). On an open mesh it is still the side of the nearest feature, but
@@ -26,8 +34,9 @@ nearer shell. A query given an :class:`~.inside.InsideTest` (the collision surfa
 :mod:`.collision`) takes the sign from the generalized winding number wherever the
 pseudonormal's is not exact (:mod:`.inside`).
 
-Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: libigl's
-``AABB`` (float64, exact; the default) or, opted in, ``fcpw`` (float32 wide BVH; not a
+Face search backends, the first importable of :data:`CLOSEST_FACE_BACKENDS`: the compiled
+BVH (``"bvh"``, float64, exact; the default), libigl's ``AABB`` (``"igl"``, float64, exact;
+the reference) or, opted in, ``fcpw`` (float32 wide BVH; not a
 declared dependency; in ``bench/geometry.py`` no faster end to end except ~15 % on
 hair-like points far from the body). fcpw gives the face only; the closest point on it is
 then Ericson's region test in float64 numpy. A point whose distance is within ~1e-7 of
@@ -51,17 +60,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport.solver.mesh.backends import _PARALLEL, _closest_face_index, _EmbreeFaces, _IglFaces
+from hairport.solver.mesh.cells import CellCache
+from hairport.solver.mesh.closest_kernels import FEATURE_EPSILON, ON_SURFACE_DISTANCE
 from hairport.solver.mesh.inside import InsideTest, manifold_closed, shell_count
-
-#: below this distance (m) a point counts as on the surface and the pseudonormal gives the direction
-ON_SURFACE_DISTANCE = 1e-12
 
 #: from this many points on, queries are sorted along a Z-curve before the tree search
 SORT_QUERIES_FROM = 2048
-
-#: barycentric coordinate at or below which the closest point counts as on an edge or vertex
-#: of its face (the pseudonormal's feature), libigl's value
-FEATURE_EPSILON = 1e-12
 
 
 #: on an open body's collision surface, points closer to a manifold part of it than this
@@ -208,17 +212,63 @@ class MeshQuery:
             self._exact = _IglFaces(self.vertices, self.faces)
         return self._exact
 
-    def signed_distance(self, points: np.ndarray) -> SignedDistance:
+    def cell_cache(self) -> CellCache | None:
+        """An empty :class:`~.cells.CellCache` over this mesh for :meth:`signed_distance`, or None
+        when the face search has none (libigl, fcpw). For a caller that queries the same region
+        again and again (a solver's iterates); it grows with the cells visited."""
+        index = self._prepare()
+        return index.cell_cache() if getattr(index, "fused", False) else None
+
+    def signed_distance(
+        self, points: np.ndarray, hint: np.ndarray | None = None, cells: CellCache | None = None
+    ) -> SignedDistance:
         """Signed distance (negative inside), closest point and distance normal.
 
         Parameters
         ----------
         points : (N, 3) float64
+            Non-finite points get NaN (face 0).
+        hint : (N,) int64, optional
+            A face near each point, such as :attr:`SignedDistance.faces` of an earlier query of
+            the same particles: it seeds the compiled search. Any value is allowed (out of range:
+            ignored); the result is the same but for ties (a face at exactly the same distance
+            may be another one). Ignored by libigl and fcpw.
+        cells : CellCache, optional
+            From :meth:`cell_cache` of this query: candidate faces of the cells visited, kept
+            and reused (same results as without, but for ties).
         """
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if len(points) == 0:
             return SignedDistance(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64))
         index = self._prepare()
+        if getattr(index, "fused", False):
+            distance, closest, normal, faces, feature = index.signed(points, self._pseudonormals, hint, cells)
+            sign = np.where(distance < 0.0, -1.0, 1.0)
+            length = np.abs(distance)
+        else:
+            closest, faces, feature, length, sign = self._signed_steps(index, points)
+            distance = normal = None
+        counted = self._untrusted(faces, feature, length)
+        if len(counted):
+            sign[counted] = np.where(self._inside.inside(points[counted]), -1.0, 1.0)
+        if distance is None:
+            distance = sign * length
+            offset = points - closest
+            on_surface = length < ON_SURFACE_DISTANCE
+            normal = offset * (sign / np.where(on_surface, 1.0, length))[:, None]
+            if on_surface.any():
+                normal[on_surface] = self._pseudonormals[faces[on_surface], feature[on_surface]]
+        elif len(counted):
+            # the winding number overrides some signs of the compiled pass: redo those rows
+            rows = counted[(distance[counted] < 0.0) != (sign[counted] < 0.0)]
+            distance[rows] = sign[rows] * length[rows]
+            off = rows[length[rows] >= ON_SURFACE_DISTANCE]
+            normal[off] = (points[off] - closest[off]) * (sign[off] / length[off])[:, None]
+        return SignedDistance(distance, closest, normal, faces)
+
+    def _signed_steps(self, index, points: np.ndarray):
+        """The numpy reference steps (libigl's or fcpw's face): closest, faces, feature,
+        length, and the pseudonormal's sign."""
         faces, closest = _search_in_space_order(index, points)
         if closest is None:
             closest, feature = _closest_on_table(points, self._triangles, faces)
@@ -237,19 +287,16 @@ class MeshQuery:
                 length[near] = np.sqrt(np.einsum("ij,ij->i", offset[near], offset[near]))
         pseudonormal = self._pseudonormals[faces, feature]
         sign = np.where(np.einsum("ij,ij->i", offset, pseudonormal) < 0.0, -1.0, 1.0)
-        if self._inside is not None and self._inside.manifold is not None:
-            trusted = self._inside.manifold[faces, feature]
-            if not self._inside.closed:
-                trusted &= length < self._near_band
-            counted = np.flatnonzero(~trusted)
-            if len(counted):
-                sign[counted] = np.where(self._inside.inside(points[counted]), -1.0, 1.0)
-        distance = sign * length
-        on_surface = length < ON_SURFACE_DISTANCE
-        normal = offset * (sign / np.where(on_surface, 1.0, length))[:, None]
-        if on_surface.any():
-            normal[on_surface] = pseudonormal[on_surface]
-        return SignedDistance(distance, closest, normal, faces)
+        return closest, faces, feature, length, sign
+
+    def _untrusted(self, faces: np.ndarray, feature: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """(K,) int64 rows whose sign the winding number decides (:mod:`.inside`)."""
+        if self._inside is None or self._inside.manifold is None:
+            return np.zeros(0, dtype=np.int64)
+        trusted = self._inside.manifold[faces, feature]
+        if not self._inside.closed:
+            trusted &= length < self._near_band
+        return np.flatnonzero(~trusted)
 
     def first_hits(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         """First intersection of each ray with the mesh.

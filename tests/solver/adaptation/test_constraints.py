@@ -138,3 +138,35 @@ def test_body_distance_on_an_open_body_asks_the_winding_number_far_from_the_surf
     assert distance[0] < -0.07 and distance[1] < -0.02
     # their normals point from them to their closest points: out of the body
     assert np.all(np.einsum("ij,ij->i", normals[:2], points[:2] - query.signed_distance(points[:2]).closest) < 0)
+
+
+def test_body_distance_keeps_a_cell_cache_and_answers_as_the_reference():
+    """The broad phase plus the compiled query through the cache the object keeps, against the
+    same broad phase over libigl's face search (the reference): the same near particles,
+    distances and normals, call after call on moving particles."""
+    from hairport.solver.mesh import backends
+
+    vertices, faces = icosphere(subdivisions=3)
+    query = collision_query(vertices, faces)
+    reference_query = MeshQuery(vertices, faces, inside=query.inside_test)
+    reference_query._prepare()
+    reference_query._closest = backends._IglFaces(reference_query.vertices, reference_query.faces)
+    grid = DistanceGrid.build(query)
+    compiled, reference = BodyDistance(query, 0.02, grid), BodyDistance(reference_query, 0.02, grid)
+    rng = np.random.default_rng(5)
+    direction = rng.normal(size=(4000, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    points = direction * rng.uniform(0.07, 0.15, size=(4000, 1))  # 3 cm deep to 5 cm out
+    for step in range(3):
+        distance, normal, near = compiled(points)
+        ref_distance, ref_normal, ref_near = reference(points)
+        np.testing.assert_array_equal(near, ref_near)
+        np.testing.assert_allclose(distance[near], ref_distance[near], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(normal[near], ref_normal[near], rtol=0, atol=1e-9)
+        assert np.isinf(distance[~near]).all() and near.sum() > 1000 and (~near).sum() > 500
+        if step == 0:
+            cache = compiled._cells
+            assert cache is not None and cache.n_cells > 500
+        points = points + rng.normal(scale=3e-4, size=points.shape)
+    assert compiled._cells is cache  # one cache for the object's life
+    assert reference._cells is None  # libigl has none

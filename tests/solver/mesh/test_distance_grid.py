@@ -268,11 +268,32 @@ def test_edge_inputs(banded_grid):
         DistanceGrid(np.zeros(3), 0.01, np.zeros((1, 2, 2)))
 
 
-def test_lower_bound_in_blocks_matches_one_block(banded_grid, samples, monkeypatch):
+def test_reference_in_blocks_matches_one_block(banded_grid, samples, monkeypatch):
     points, _ = samples
-    whole = banded_grid.lower_bound(points)
+    whole = banded_grid._evaluate_reference(points, want_sign=True)
     monkeypatch.setattr(distance_grid, "EVAL_CHUNK", 777)
-    np.testing.assert_array_equal(banded_grid.lower_bound(points), whole)
+    for blocks, one in zip(banded_grid._evaluate_reference(points, want_sign=True), whole):
+        np.testing.assert_array_equal(blocks, one)
+
+
+@pytest.mark.parametrize("covers_mesh, closed", [(True, True), (False, True), (True, False)])
+def test_the_compiled_evaluation_is_the_numpy_reference_to_the_bit(banded_grid, samples, covers_mesh, closed):
+    """Inside and outside the box (bounds from its projection, or 0 when the box does not
+    cover the mesh), certain and unknown signs, non-finite points."""
+    grid = DistanceGrid(banded_grid.origin, banded_grid.spacing, banded_grid.values, banded_grid.exact_band,
+                        covers_mesh, closed)
+    points, _ = samples
+    rng = np.random.default_rng(7)
+    around = rng.uniform(grid.origin - 0.05, grid.upper + 0.05, size=(20000, 3))
+    points = np.concatenate([points, around, [[np.nan, 0.0, 0.0], [np.inf, 0.0, 0.0], [0.0, -np.inf, 0.0]]])
+    bound, sign = grid.bound_and_sign(points)
+    reference_bound, reference_sign = grid._evaluate_reference(points, want_sign=True)
+    np.testing.assert_array_equal(bound, reference_bound)
+    np.testing.assert_array_equal(sign, reference_sign)
+    outside = np.any((around < grid.origin) | (around > grid.upper), axis=1)
+    assert outside.sum() > 1000 and (sign == 0).sum() > 3
+    assert (sign != 0).sum() > 1000 if closed else (sign == 0).all()
+    assert (bound[:-3] == 0).sum() > 1000 if not covers_mesh else (bound[:-3] > 0).sum() > 20000
 
 
 def test_region_grid_bounds_inside_and_defers_outside():
