@@ -16,7 +16,7 @@ diagonal terms and the diagonal of ``K^T G K``), factorised by banded Cholesky
 neighbours are fixed guides), a few dozen steps when strands are coupled.
 
 Coupled rounds (the guides of the multi-scale solve, the global solve) run on compiled
-kernels (:mod:`.coupled_kernels`; the numpy code here is their reference). Only the pins
+kernels (:mod:`.coupled_kernels`, beside their numpy reference). Only the pins
 change from one round to the next, so each round's CG starts from the previous solution and
 refactorises only the strands whose pins changed; rounds whose active set is still changing
 are solved loosely (:data:`SCREENING_CG_TOLERANCE`) and the set they settle on accurately;
@@ -35,6 +35,7 @@ vectors particle-major.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 
@@ -45,7 +46,7 @@ import scipy.sparse.linalg as spla
 
 from hairport.solver.adaptation import banded
 from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
-from hairport.solver.adaptation.coupled_kernels import RotatedHessian
+from hairport.solver.adaptation.coupled_kernels import RotatedHessian, reference_pinned_solve
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import (
     BACKTRACK_FACTOR,
@@ -164,12 +165,6 @@ class Frames:
         return rotated_diagonal, rotated_upper
 
 
-def _length(x: np.ndarray) -> float:
-    """Euclidean norm of all entries. Not ``np.linalg.norm``: its BLAS dot wakes OpenBLAS's
-    threads, which on a busy machine cost milliseconds a call (4x the whole solve here)."""
-    return float(np.sqrt(np.einsum("ij,ij->", x, x)))
-
-
 def rotated_matrix(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper) -> sp.csr_matrix:
     """``H' = R^T H R`` as a ``(3N, 3N)`` sparse matrix (particle-major unknowns)."""
     n = frames.n
@@ -209,11 +204,12 @@ def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotate
 
     Returns the solution and the CG steps taken (0 when solved by ``direct`` factorisation,
     which a coupled system may ask for; an uncoupled one is always solved by one banded
-    factorisation, a coupled one otherwise by :func:`_conjugate_gradients` from zero)."""
+    factorisation, a coupled one otherwise by the numpy CG from zero)."""
     if direct and system.coupling is not None:
         return _direct_pinned_solve(rotated_matrix(system, frames, rotated_diagonal, rotated_upper), rhs, pinned, values), 0
     if system.coupling is not None:
-        y, steps, _ = _conjugate_gradients(system, frames, rotated_diagonal, rotated_upper, rhs, pinned, values)
+        hessian = RotatedHessian(frames.all_rotations(), rotated_diagonal, rotated_upper, system.coupling)
+        y, steps, _ = reference_pinned_solve(hessian, rhs, pinned, values, None, CG_RELATIVE_TOLERANCE, CG_MAX_STEPS)
         return y, steps
     start = np.where(pinned, values, 0.0)
     residual = rhs - frames.to_local(system.matvec(frames.to_world(start)))
@@ -223,52 +219,6 @@ def _pinned_solve(system: NewtonSystem, frames: Frames, rotated_diagonal, rotate
     z = scipy.linalg.cho_solve_banded((factor, False), residual.ravel(), check_finite=False).reshape(-1, 3)
     z[pinned] = 0.0
     return start + z, 1
-
-
-def _conjugate_gradients(system: NewtonSystem, frames: Frames, rotated_diagonal, rotated_upper, rhs, pinned, values,
-                         guess: np.ndarray | None = None,
-                         tolerance: float = CG_RELATIVE_TOLERANCE) -> tuple[np.ndarray, int, np.ndarray]:
-    """``H' y = rhs`` with ``y[pinned] = values[pinned]`` by conjugate gradients on the free unknowns,
-    preconditioned by the pinned strand-banded part: the numpy reference of
-    :meth:`.coupled_kernels.RotatedHessian.pinned_solve` (see there).
-
-    Returns ``y (N, 3)``, the steps, and the residual ``rhs - H' y (N, 3)`` at every unknown,
-    pinned ones included, kept up to date by the CG recursion."""
-    start = np.where(pinned, values, 0.0)
-
-    def rotated_matvec(y: np.ndarray) -> np.ndarray:
-        return frames.to_local(system.matvec(frames.to_world(y)))
-
-    residual = rhs - rotated_matvec(start)
-    target = tolerance * _length(np.where(pinned, 0.0, residual))
-    ab = banded.with_fixed_unknowns(banded.to_bands(rotated_diagonal, rotated_upper), pinned.ravel())
-    factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
-
-    def precondition(r: np.ndarray) -> np.ndarray:
-        z = scipy.linalg.cho_solve_banded((factor, False), r.ravel(), check_finite=False).reshape(-1, 3)
-        z[pinned] = 0.0
-        return z
-
-    y = start
-    if guess is not None:
-        y = np.where(pinned, values, guess)
-        residual = rhs - rotated_matvec(y)
-    z = precondition(residual)
-    direction = z.copy()
-    rz = float(np.sum(residual * z))
-    steps = 0
-    for steps in range(1, CG_MAX_STEPS + 1):
-        if _length(np.where(pinned, 0.0, residual)) <= target or rz <= 0:
-            break
-        q = rotated_matvec(direction)
-        step = rz / float(np.sum(direction * q))
-        y = y + step * direction
-        residual -= step * q
-        z = precondition(residual)
-        rz_next = float(np.sum(residual * z))
-        direction = z + (rz_next / rz) * direction
-        rz = rz_next
-    return y, steps, residual
 
 
 def solve_qp(
@@ -323,12 +273,16 @@ def solve_qp(
     frames = Frames(n, np.flatnonzero(constrained), normals[constrained])
     limit = DIRECT_SOLVE_MAX_PARTICLES if direct_max_particles is None else direct_max_particles
     direct = n <= limit
-    compiled = None
-    if system.coupling is not None and not direct and linear_solver == "compiled":
-        compiled = RotatedHessian.build(frames.all_rotations(), system.diagonal, system.upper, system.coupling)
-        rotated_diagonal, rotated_upper = compiled.rotated_diagonal, compiled.rotated_upper
+    iterative = system.coupling is not None and not direct
+    if iterative and linear_solver == "compiled":
+        hessian = RotatedHessian.build(frames.all_rotations(), system.diagonal, system.upper, system.coupling)
+        rotated_diagonal, rotated_upper = hessian.rotated_diagonal, hessian.rotated_upper
+        pinned_solve = hessian.pinned_solve
     else:
         rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
+        if iterative:
+            hessian = RotatedHessian(frames.all_rotations(), rotated_diagonal, rotated_upper, system.coupling)
+            pinned_solve = functools.partial(reference_pinned_solve, hessian)
     rotated_gradient = frames.to_local(system.gradient)
     curvature = rotated_diagonal[:, 0, 0]
     active = active & constrained & ~fixed
@@ -338,23 +292,19 @@ def solve_qp(
     rounds = cg_steps = 0
     y = np.zeros((n, 3))
     multipliers = np.zeros(n)
-    screened = screening and system.coupling is not None and not direct
+    screened = screening and iterative
     accurate, forced, visited = not screened, False, set()
     for rounds in range(1, MAX_ACTIVE_SET_ROUNDS + 1):
         pinned[:, 0] = fixed | active
-        if system.coupling is None or direct:
+        if iterative:
+            guess = y if warm_start and rounds > 1 else None
+            tolerance = CG_RELATIVE_TOLERANCE if accurate else SCREENING_CG_TOLERANCE
+            y, steps, rest = pinned_solve(-rotated_gradient, pinned, values, guess, tolerance, CG_MAX_STEPS)
+            residual = -rest
+        else:
             y, steps = _pinned_solve(system, frames, rotated_diagonal, rotated_upper, -rotated_gradient, pinned, values,
                                      direct)
             residual = frames.to_local(system.matvec(frames.to_world(y))) + rotated_gradient
-        else:
-            guess = y if warm_start and rounds > 1 else None
-            tolerance = CG_RELATIVE_TOLERANCE if accurate else SCREENING_CG_TOLERANCE
-            if compiled is not None:
-                y, steps, rest = compiled.pinned_solve(-rotated_gradient, pinned, values, guess, tolerance, CG_MAX_STEPS)
-            else:
-                y, steps, rest = _conjugate_gradients(system, frames, rotated_diagonal, rotated_upper,
-                                                      -rotated_gradient, pinned, values, guess, tolerance)
-            residual = -rest
         cg_steps += steps
         multipliers = np.where(active, residual[:, 0], 0.0)
         next_active = constrained & ~fixed & (multipliers + curvature * (values[:, 0] - y[:, 0]) > 0)

@@ -7,9 +7,9 @@ coupling ``C`` between particles of different strands (``2 alpha K^T G K`` minus
 CSR) taken to world coordinates and back: ``H' y = B' y + R^T C R y``. Pinned unknowns (roots,
 the normal components of active constraints) take given values and drop out.
 
-These kernels are the compiled counterparts of the numpy reference in
-:func:`.active_set._pinned_solve` (scipy's banded Cholesky, sparse products): the same
-arithmetic and stopping rule, equal to rounding.
+The kernels are the compiled counterparts of the numpy reference at the end of this module
+(:func:`reference_pinned_solve`: scipy's banded Cholesky, sparse products, the same
+arithmetic and stopping rule), equal to it to rounding.
 
 * :func:`rotate_blocks`: ``B'`` from ``B`` and the frames;
 * :func:`factor_bands`: banded Cholesky ``U^T U`` of ``B'`` with the pinned rows and columns
@@ -19,7 +19,8 @@ arithmetic and stopping rule, equal to rounding.
 * :func:`rotated_product`: ``H' y``; :func:`sparse_product`: the same for a ``y`` that is zero
   but at a few particles (the pinned values);
 * :func:`conjugate_gradients`: the preconditioned CG loop, from a warm start;
-* :class:`RotatedHessian`: one QP's arrays, with the pinned solve and product built on them.
+* :class:`RotatedHessian`: one QP's arrays, with the pinned solve and product built on them;
+* :func:`reference_pinned_solve`, :func:`reference_product`: the numpy reference.
 
 The strands are not split among threads: a CG step is a few milliseconds of memory-bound
 work, and two cores shared with the fine level's processes (or other jobs) gain less from
@@ -32,8 +33,10 @@ C-contiguous; ``(n, 3, 3)`` blocks act on a particle's 3 unknowns.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 import scipy.sparse as sp
 
+from hairport.solver.adaptation import banded
 from hairport.solver.jit import kernel, warms
 
 #: super-diagonals of the strand-banded part (a particle's first unknown reaches the next particle's last)
@@ -388,6 +391,56 @@ class RotatedHessian:
         steps = conjugate_gradients(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
                                     factor, pinned, y, residual, target, max_steps)
         return y, steps, residual
+
+def reference_product(hessian: RotatedHessian, y: np.ndarray) -> np.ndarray:
+    """:meth:`RotatedHessian.product` in numpy: ``B' y + R^T C R y`` for ``y (n, 3)``."""
+    world = np.einsum("nij,nj->ni", hessian.R, y)
+    coupled = np.einsum("nji,nj->ni", hessian.R, hessian.coupling @ world)
+    return banded.matvec(hessian.rotated_diagonal, hessian.rotated_upper, y) + coupled
+
+
+def _length(x: np.ndarray) -> float:
+    """Euclidean norm of all entries. Not ``np.linalg.norm``: its BLAS dot wakes OpenBLAS's
+    threads, which on a busy machine cost milliseconds a call."""
+    return float(np.sqrt(np.einsum("ij,ij->", x, x)))
+
+
+def reference_pinned_solve(hessian: RotatedHessian, rhs: np.ndarray, pinned: np.ndarray, values: np.ndarray,
+                           guess: np.ndarray | None, relative_tolerance: float,
+                           max_steps: int) -> tuple[np.ndarray, int, np.ndarray]:
+    """:meth:`RotatedHessian.pinned_solve` in numpy (scipy's banded Cholesky, the whole band
+    factorised every call): the tested reference of the kernels, and the path before them."""
+    start = np.where(pinned, values, 0.0)
+    residual = rhs - reference_product(hessian, start)
+    target = relative_tolerance * _length(np.where(pinned, 0.0, residual))
+    ab = banded.with_fixed_unknowns(banded.to_bands(hessian.rotated_diagonal, hessian.rotated_upper), pinned.ravel())
+    factor = scipy.linalg.cholesky_banded(ab, lower=False, check_finite=False)
+
+    def precondition(r: np.ndarray) -> np.ndarray:
+        z = scipy.linalg.cho_solve_banded((factor, False), r.ravel(), check_finite=False).reshape(-1, 3)
+        z[pinned] = 0.0
+        return z
+
+    y = start
+    if guess is not None:
+        y = np.where(pinned, values, guess)
+        residual = rhs - reference_product(hessian, y)
+    z = precondition(residual)
+    direction = z.copy()
+    rz = float(np.sum(residual * z))
+    steps = 0
+    for steps in range(1, max_steps + 1):
+        if _length(np.where(pinned, 0.0, residual)) <= target or rz <= 0:
+            break
+        q = reference_product(hessian, direction)
+        step = rz / float(np.sum(direction * q))
+        y = y + step * direction
+        residual -= step * q
+        z = precondition(residual)
+        rz_next = float(np.sum(residual * z))
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return y, steps, residual
 
 
 @warms("coupled active-set kernels")

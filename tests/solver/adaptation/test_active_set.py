@@ -18,6 +18,7 @@ from hairport.solver.adaptation.active_set import (
     solve_strands,
 )
 from hairport.solver.adaptation.constraints import BodyDistance, linearised_clearance
+from hairport.solver.adaptation.coupled_kernels import reference_product
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
 from hairport.solver.adaptation.options import Cancelled, SolveOptions
 from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
@@ -310,17 +311,17 @@ def test_a_cycling_active_set_ends_the_qp(sphere, monkeypatch):
     """Inexact solves can make the rounds alternate between two active sets: the guard makes the
     rounds accurate, then ends the QP instead of running MAX_ACTIVE_SET_ROUNDS rounds."""
     system, fixed, constrained, normals, lower = coupled_qp(sphere)
-    solve = active_set._conjugate_gradients
+    solve = active_set.reference_pinned_solve
     tolerances = []
 
-    def alternating(*args):  # pushes every constrained particle in, then out, then in ...
-        y, steps, _ = solve(*args)
-        frames, rhs, values = args[1], args[4], args[6]
+    def alternating(hessian, rhs, pinned, values, guess, tolerance, max_steps):
+        """Pushes every constrained particle in, then out, then in ..."""
+        y, steps, _ = solve(hessian, rhs, pinned, values, guess, tolerance, max_steps)
         y[:, 0] = values[:, 0] + (-1e-3 if len(tolerances) % 2 == 0 else 1e-3)
-        tolerances.append(args[-1])
-        return y, steps, rhs - frames.to_local(system.matvec(frames.to_world(y)))
+        tolerances.append(tolerance)
+        return y, steps, rhs - reference_product(hessian, y)
 
-    monkeypatch.setattr(active_set, "_conjugate_gradients", alternating)
+    monkeypatch.setattr(active_set, "reference_pinned_solve", alternating)
     qp = (system, fixed, constrained, normals, lower, np.zeros(len(fixed), bool))
     *_, rounds, _ = solve_qp(*qp, direct_max_particles=0, linear_solver="numpy")
     # screened until a set comes back, accurate after it, ended when one comes back again

@@ -1,6 +1,6 @@
 """Compiled kernels of the coupled active-set rounds (solver/adaptation/coupled_kernels.py) against
-their numpy references: scipy's banded Cholesky, the block products of active_set.Frames, and
-active_set._pinned_solve's conjugate gradients."""
+their numpy references: scipy's banded Cholesky, the block products of active_set.Frames and of
+the Newton system, and the module's numpy conjugate gradients."""
 
 import numpy as np
 import pytest
@@ -9,13 +9,15 @@ import scipy.sparse as sp
 
 from hairport.solver import jit
 from hairport.solver.adaptation import banded
-from hairport.solver.adaptation.active_set import CG_MAX_STEPS, CG_RELATIVE_TOLERANCE, Frames, _conjugate_gradients
+from hairport.solver.adaptation.active_set import CG_MAX_STEPS, CG_RELATIVE_TOLERANCE, Frames
 from hairport.solver.adaptation.constraints import fixed_coordinates, linearised_clearance
 from hairport.solver.adaptation.coupled_kernels import (
     BANDWIDTH,
     RotatedHessian,
     band_runs,
     factor_bands,
+    reference_pinned_solve,
+    reference_product,
     rotate_blocks,
     solve_bands,
     sparse_product,
@@ -116,6 +118,7 @@ def test_rotated_blocks_and_product_are_the_numpy_ones(coupled_round):
     y = np.random.default_rng(2).normal(scale=1e-3, size=system.gradient.shape)
     expected = frames.to_local(system.matvec(frames.to_world(y)))
     np.testing.assert_allclose(hessian.product(y), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(reference_product(hessian, y), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
     # a vector that is zero but at a few particles
     rows = np.array([0, 7, 8, 150, len(y) - 1])
     sparse = np.zeros_like(y)
@@ -135,8 +138,9 @@ def test_pinned_solve_is_the_numpy_reference(coupled_round, warm):
     rhs = -frames.to_local(system.gradient)
     guess = np.random.default_rng(3).normal(scale=1e-3, size=rhs.shape) if warm else None
     rotated_diagonal, rotated_upper = frames.rotate_blocks(system.diagonal, system.upper)
-    expected, expected_steps, expected_residual = _conjugate_gradients(
-        system, frames, rotated_diagonal, rotated_upper, rhs, pinned, values, guess)
+    numpy_hessian = RotatedHessian(frames.all_rotations(), rotated_diagonal, rotated_upper, system.coupling)
+    expected, expected_steps, expected_residual = reference_pinned_solve(
+        numpy_hessian, rhs, pinned, values, guess, CG_RELATIVE_TOLERANCE, CG_MAX_STEPS)
     y, steps, residual = hessian.pinned_solve(rhs, pinned, values, guess, CG_RELATIVE_TOLERANCE, CG_MAX_STEPS)
     assert 5 < steps == expected_steps < CG_MAX_STEPS
     assert np.abs(expected).max() > 1e-3  # a step of millimetres
