@@ -64,7 +64,7 @@ def _import_kernel_modules() -> None:
 
 
 #: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = ()
+KERNEL_MODULES: tuple[str, ...] = ("hairport.solver.adaptation.strand_kernels",)
 
 
 def warm_up() -> dict[str, float]:

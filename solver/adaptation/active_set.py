@@ -39,12 +39,17 @@ import scipy.sparse.linalg as spla
 from hairport.solver.adaptation import banded
 from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
 from hairport.solver.adaptation.energies import EnergyWeights
+from hairport.solver.adaptation.fine_solve import pull_weights, solve_uncoupled
 from hairport.solver.adaptation.options import (
     BACKTRACK_FACTOR,
+    ENGINE_COMPILED,
+    ENGINES,
     INITIAL_RADIAL_DAMPING,
+    MAX_ACTIVE_SET_ROUNDS,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
     SOLVE_STAGE,
+    STALLED_ITERATIONS,
     Cancelled,
     SolveOptions,
     SolveReport,
@@ -55,11 +60,6 @@ from hairport.solver.model.progress import ProgressFn
 
 #: this backend's name in :data:`.coupled.QP_BACKENDS` and in its reports
 BACKEND = "active-set"
-#: active-set rounds per QP before the last iterate is taken (they converge in a few)
-MAX_ACTIVE_SET_ROUNDS = 50
-#: a group stops once this many iterations in a row lowered its merit by less than the energy
-#: tolerance: one short, backtracked step says little about the minimum
-STALLED_ITERATIONS = 2
 #: conjugate gradients stop at this residual relative to the right-hand side ...
 CG_RELATIVE_TOLERANCE = 1e-6
 #: ... or after this many steps
@@ -293,6 +293,7 @@ def solve_strands(
     start: np.ndarray | None = None,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    engine: str = ENGINE_COMPILED,
 ) -> tuple[np.ndarray, SolveReport]:
     """Minimise Eq. 1 under Eq. 12-13 by sequential QPs (Sec. 4.6).
 
@@ -300,7 +301,10 @@ def solve_strands(
     Eq. 1 plus an l1 penalty on clearance short of ``eps_c``, with a second-order correction
     (particles a step leaves short of ``eps_c`` are projected back out along the normal:
     the linearised half-spaces ignore the body's curvature, and without it the loop zig-zags
-    along the surface). Uncoupled strands each run this loop on their own.
+    along the surface). Uncoupled strands each run this loop on their own, with their own
+    merit penalty (so a strand's result does not depend on the strands solved with it); with
+    a diagonal ``K`` the compiled loop of :mod:`.fine_solve` runs it unless ``engine`` asks
+    for this numpy code, its reference.
 
     Parameters
     ----------
@@ -316,6 +320,9 @@ def solve_strands(
         ``progress("solve", fraction, message)`` after every outer iteration.
     should_stop : callable() -> bool, optional
         Polled once per outer iteration; True raises :class:`.options.Cancelled`.
+    engine : str
+        One of :data:`.options.ENGINES`: ``"compiled"`` (a diagonal ``K`` only; others take
+        the numpy path) or ``"numpy"``.
 
     Returns
     -------
@@ -323,6 +330,12 @@ def solve_strands(
     report : SolveReport
         With the active-set fields (``groups``, ``active_set_rounds``, ...).
     """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
+    if engine == ENGINE_COMPILED and pull_weights(problem.coupling) is not None:
+        points, report = solve_uncoupled(problem, distance, weights, options, start, progress, should_stop)
+        report.backend = BACKEND
+        return points, report
     began = time.perf_counter()
     points = np.array(problem.initial if start is None else start, dtype=np.float64)
     coupled = problem.coupled
@@ -335,7 +348,7 @@ def solve_strands(
     open_groups = np.arange(n_groups)
     small_steps = np.zeros(n_groups, dtype=np.int64)  # consecutive iterations below the energy tolerance
     dist_all, normal_all, near_all = distance(points)
-    penalty = 0.0
+    penalty = np.zeros(n_groups)  # the merit's l1 penalty, each group's own running maximum
     for iteration in range(options.max_iterations):
         if len(open_groups) == 0:
             break
@@ -360,13 +373,16 @@ def solve_strands(
         report.active_set_rounds.append(rounds)
         report.cg_steps.append(cg_steps)
         report.open_groups.append(k)
-        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(multipliers), initial=0.0)))
-        merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
+        largest = np.zeros(k)
+        np.maximum.at(largest, group, np.abs(multipliers))
+        penalty[open_groups] = np.maximum(penalty[open_groups], MERIT_PENALTY_FACTOR * largest)
+        particle_penalty = penalty[open_groups][group]
+        merit_now = group_energies(sub, p, weights, group, k, particle_penalty, dist, options.eps_c)
         model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
         strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
         # uncoupled, a group is a strand: the per-strand merits are the group merits
         strand_merit_now = merit_now if not coupled else group_energies(
-            sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
+            sub, p, weights, sub.strand_of, sub.n_strands, particle_penalty, dist, options.eps_c)
 
         fraction = np.ones(k)
         accepted = np.zeros(k, dtype=bool)
@@ -383,10 +399,10 @@ def solve_strands(
                 d[short], nrm[short], nr[short] = d2, nrm2, nr2
             trial[todo] = moved
             trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
-            merit_trial = group_energies(sub, trial, weights, group, k, penalty, trial_dist, options.eps_c)
+            merit_trial = group_energies(sub, trial, weights, group, k, particle_penalty, trial_dist, options.eps_c)
             if attempt == 0:
                 strand_merit_trial = merit_trial if not coupled else group_energies(
-                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c)
+                    sub, trial, weights, sub.strand_of, sub.n_strands, particle_penalty, trial_dist, options.eps_c)
                 damping[strands] = adapt_damping(
                     damping[strands], strand_merit_trial - strand_merit_now, strand_predicted)
             accepted |= merit_trial <= merit_now

@@ -1,0 +1,637 @@
+"""Compiled per-strand kernels of the uncoupled active-set loop (Eq. 14's fine level).
+
+When ``K`` is diagonal every strand is its own problem (:mod:`.active_set`): these kernels do
+one strand's share of an outer iteration in one pass over its particles, a strand per
+``prange`` iteration, with scratch arrays of the strand's size only:
+
+* :func:`newton_qp_steps`: Eq. 1's Newton model (:func:`.strand_problem.newton_system`:
+  Eq. 7's clamped exact blocks, Eq. 10's diagonal pull, Eq. 11, the radial damping), its
+  rotation into the contact frames of the constrained particles (:class:`.active_set.Frames`),
+  the primal-dual active-set rounds of :func:`.active_set.solve_qp`, each a banded Cholesky
+  solve of the pinned system (:func:`.banded.solve_with_fixed`), then the step, the strand's
+  merit penalty (its own running maximum of the multipliers), the model's predicted change and
+  the merit at the iterate;
+* :func:`gather_trial_points`, :func:`trial_merits`, :func:`commit_trial_points`: the line
+  search's trial points of the strands still backtracking (packed for one batched distance
+  query), their merits (:func:`.strand_problem.group_energies`), and the accepted ones
+  written back with their step length and clearance. These are serial: a few passes over
+  memory cost less than waking a second thread, whose barrier on a busy machine can wait a
+  scheduler quantum (measured at 10^5 particles on two shared cores: 0.2 s serial in all,
+  2-3 s in parallel).
+
+The numpy functions named above are the tested references. Strands are CSR runs
+(``offsets (S+1,) int64``) of a chunk's particle arrays; a "packed" array holds the rows of
+a list of strands back to back (``packed_offsets (T+1,) int64``). Every setting the kernels
+read is an argument: numba's on-disk cache does not notice a changed constant of another module.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hairport.solver.jit import kernel, parallel_kernel, prange, warms
+
+#: rows of one strand's band storage of the 3m x 3m pinned system: the diagonal and the 5
+#: super-diagonals a particle's unknowns reach (as :data:`.banded.BANDS`)
+BAND_REACH = 5
+
+
+@kernel
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@kernel
+def _norm(v) -> float:
+    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@kernel
+def _normal_to(v, out):
+    """A unit vector normal to ``v (3,)``: ``v x e_k`` with ``k`` its smallest component (as numpy's argmin)."""
+    k = 0
+    if abs(v[1]) < abs(v[k]):
+        k = 1
+    if abs(v[2]) < abs(v[k]):
+        k = 2
+    axis = np.zeros(3)
+    axis[k] = 1.0
+    _cross(v, axis, out)
+
+
+@kernel
+def clamped_direction_hessian(unit, direction, floor, parallel_sine, out):
+    """One block of :func:`.energies.clamped_direction_hessians`.
+
+    Parameters
+    ----------
+    unit, direction : (3,) float64
+        ``u`` and ``d``.
+    floor : float
+        Eigenvalues below ``-floor`` are raised to it.
+    parallel_sine : float
+        :data:`.energies.PARALLEL_SINE`.
+    out : (3, 3) float64
+        Receives the block.
+    """
+    c = unit[0] * direction[0] + unit[1] * direction[1] + unit[2] * direction[2]
+    e = np.empty(3)
+    for a in range(3):
+        e[a] = direction[a] - c * unit[a]
+    s = _norm(e)
+    if s < parallel_sine:
+        _normal_to(unit, e)
+    e_norm = _norm(e)
+    for a in range(3):
+        e[a] /= e_norm
+    w = np.empty(3)
+    _cross(unit, e, w)
+    low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
+    q = np.empty(3)
+    for a in range(3):
+        q[a] = s * unit[a] + low * e[a]
+    q_norm = _norm(q)
+    for a in range(3):
+        q[a] = q[a] / q_norm if q_norm > 0 else e[a]
+    raise_low = max(low, -floor) - low
+    raise_w = max(c, -floor) - c
+    for a in range(3):
+        for b in range(3):
+            identity = 1.0 if a == b else 0.0
+            exact = (unit[a] * direction[b] + unit[b] * direction[a]) + c * (identity - 3.0 * unit[a] * unit[b])
+            out[a, b] = (exact + raise_low * q[a] * q[b]) + raise_w * w[a] * w[b]
+
+
+@kernel
+def assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma,
+                    alpha, beta, damping, min_length, curvature_share, parallel_sine, diagonal, upper, gradient):
+    """One strand's Newton model of Eq. 1 (:func:`.strand_problem.newton_system` with ``K = diag(pull_weight)``).
+
+    Parameters
+    ----------
+    first, count : int
+        The strand's first particle and particle count.
+    points, source_directions, initial, features : (N, 3) float64
+        The chunk's arrays.
+    pull_weight, gamma : (N,) float64
+    alpha, beta : float
+        Eq. 1's weights.
+    damping : float
+        The strand's radial damping.
+    min_length, curvature_share, parallel_sine : float
+        :data:`.polyline.MIN_SEGMENT_LENGTH`, :data:`.energies.NEGATIVE_CURVATURE_SHARE`,
+        :data:`.energies.PARALLEL_SINE`.
+    diagonal, upper : (count, 3, 3) float64
+        Receive the blocks (``upper[i]``: particles ``i, i+1``; the last one zero).
+    gradient : (count, 3) float64
+        Receives the gradient.
+    """
+    diagonal[:] = 0.0
+    upper[:] = 0.0
+    gradient[:] = 0.0
+    unit = np.empty(3)
+    block = np.empty((3, 3))
+    for j in range(count - 1):
+        i = first + j
+        for a in range(3):
+            unit[a] = points[i + 1, a] - points[i, a]
+        length = max(_norm(unit), min_length)
+        for a in range(3):
+            unit[a] /= length
+        d = source_directions[i]
+        cosine = unit[0] * d[0] + unit[1] * d[1] + unit[2] * d[2]
+        floor = curvature_share * beta * min(gamma[i], gamma[i + 1]) * length**2
+        clamped_direction_hessian(unit, d, floor, parallel_sine, block)
+        for a in range(3):
+            for b in range(3):
+                value = 2.0 * (block[a, b] + damping * unit[a] * unit[b]) / length**2
+                diagonal[j, a, b] += value
+                diagonal[j + 1, a, b] += value
+                upper[j, a, b] = -value
+            shape_residual = 2.0 * ((unit[a] * cosine - d[a]) / length)
+            gradient[j, a] -= shape_residual
+            gradient[j + 1, a] += shape_residual
+    for j in range(count):
+        i = first + j
+        w = pull_weight[i]
+        g = gamma[i]
+        stiffness = 2.0 * alpha * (w * g * w) + 2.0 * beta * g
+        for a in range(3):
+            diagonal[j, a, a] += stiffness
+            gradient[j, a] += 2.0 * alpha * (w * (g * (w * points[i, a] - features[i, a])))
+            gradient[j, a] += 2.0 * beta * g * (points[i, a] - initial[i, a])
+
+
+@kernel
+def contact_frame(normal, frame):
+    """The rotation ``(3, 3)`` whose columns are the unit ``normal (3,)`` and two tangents (:func:`.active_set.normal_frames`)."""
+    t1 = np.empty(3)
+    _normal_to(normal, t1)
+    t1_norm = _norm(t1)
+    for a in range(3):
+        t1[a] /= t1_norm
+    t2 = np.empty(3)
+    _cross(normal, t1, t2)
+    for a in range(3):
+        frame[a, 0] = normal[a]
+        frame[a, 1] = t1[a]
+        frame[a, 2] = t2[a]
+
+
+@kernel
+def _left_transposed(frame, block, out):
+    """``out = frame^T block``."""
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = frame[0, a] * block[0, b] + frame[1, a] * block[1, b] + frame[2, a] * block[2, b]
+
+
+@kernel
+def _right(block, frame, out):
+    """``out = block frame``."""
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = block[a, 0] * frame[0, b] + block[a, 1] * frame[1, b] + block[a, 2] * frame[2, b]
+
+
+@kernel
+def rotate_strand(rotated, frames, diagonal, upper, gradient):
+    """``R^T H R`` and ``R^T g`` in place, ``R_i`` = ``frames[i]`` where ``rotated[i]`` (identity elsewhere).
+
+    Parameters
+    ----------
+    rotated : (m,) bool
+    frames : (m, 3, 3) float64
+    diagonal, upper : (m, 3, 3) float64
+    gradient : (m, 3) float64
+    """
+    m = len(rotated)
+    work = np.empty((3, 3))
+    for i in range(m):
+        if rotated[i]:
+            _left_transposed(frames[i], diagonal[i], work)
+            _right(work, frames[i], diagonal[i])
+            g = gradient[i].copy()
+            for a in range(3):
+                gradient[i, a] = frames[i, 0, a] * g[0] + frames[i, 1, a] * g[1] + frames[i, 2, a] * g[2]
+        if i + 1 < m:
+            if rotated[i]:
+                _left_transposed(frames[i], upper[i], work)
+                upper[i] = work
+            if rotated[i + 1]:
+                _right(upper[i], frames[i + 1], work)
+                upper[i] = work
+
+
+@kernel
+def block_matvec(diagonal, upper, x, out):
+    """``out = A x`` for a block-tridiagonal ``A`` (:func:`.banded.matvec`); ``x, out (m, 3)``."""
+    m = len(x)
+    for i in range(m):
+        for a in range(3):
+            value = diagonal[i, a, 0] * x[i, 0] + diagonal[i, a, 1] * x[i, 1] + diagonal[i, a, 2] * x[i, 2]
+            if i + 1 < m:
+                value += upper[i, a, 0] * x[i + 1, 0] + upper[i, a, 1] * x[i + 1, 1] + upper[i, a, 2] * x[i + 1, 2]
+            if i > 0:
+                value += upper[i - 1, 0, a] * x[i - 1, 0] + upper[i - 1, 1, a] * x[i - 1, 1] + upper[i - 1, 2, a] * x[i - 1, 2]
+            out[i, a] = value
+
+
+@kernel
+def pinned_band(diagonal, upper, pinned, band):
+    """Band storage of the block-tridiagonal matrix with pinned unknowns' rows and columns replaced by identity.
+
+    Parameters
+    ----------
+    diagonal, upper : (m, 3, 3) float64
+    pinned : (m, 3) bool
+    band : (3m, 6) float64
+        Receives ``band[r, k] = A[r, r + k]`` (:func:`.banded.with_fixed_unknowns` of :func:`.banded.to_bands`,
+        row-major per unknown).
+    """
+    m = len(diagonal)
+    band[:] = 0.0
+    for i in range(m):
+        for a in range(3):
+            row = 3 * i + a
+            if pinned[i, a]:
+                band[row, 0] = 1.0
+                continue
+            for b in range(a, 3):
+                if not pinned[i, b]:
+                    band[row, b - a] = diagonal[i, a, b]
+            if i + 1 < m:
+                for b in range(3):
+                    if not pinned[i + 1, b]:
+                        band[row, 3 + b - a] = upper[i, a, b]
+
+
+@kernel
+def band_cholesky(band) -> bool:
+    """``A = U^T U`` in place (``band[r, k] = U[r, r + k]`` after); False if ``A`` is not positive definite."""
+    n = band.shape[0]
+    for j in range(n):
+        pivot = band[j, 0]
+        if not pivot > 0.0:
+            return False
+        pivot = np.sqrt(pivot)
+        band[j, 0] = pivot
+        reach = min(BAND_REACH, n - 1 - j)
+        for k in range(1, reach + 1):
+            band[j, k] /= pivot
+        for k in range(1, reach + 1):
+            factor = band[j, k]
+            if factor != 0.0:
+                for step in range(k, reach + 1):
+                    band[j + k, step - k] -= factor * band[j, step]
+    return True
+
+
+@kernel
+def band_solve(band, x):
+    """Solve ``U^T U x = b`` in place (``x (3m,)`` holds ``b``) with the factor of :func:`band_cholesky`."""
+    n = band.shape[0]
+    for j in range(n):
+        value = x[j]
+        for k in range(1, min(BAND_REACH, j) + 1):
+            value -= band[j - k, k] * x[j - k]
+        x[j] = value / band[j, 0]
+    for j in range(n - 1, -1, -1):
+        value = x[j]
+        for k in range(1, min(BAND_REACH, n - 1 - j) + 1):
+            value -= band[j, k] * x[j + k]
+        x[j] = value / band[j, 0]
+
+
+@kernel
+def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, max_rounds, step, multipliers):
+    """:func:`.active_set.solve_qp` of one strand, in its contact frames (rotated ``H'``, ``g'``).
+
+    Parameters
+    ----------
+    diagonal, upper : (m, 3, 3) float64
+        ``R^T H R``.
+    gradient : (m, 3) float64
+        ``R^T g``.
+    fixed, constrained : (m,) bool
+    lower : (m,) float64
+        ``eps_c - s_i`` (rows of unconstrained particles unused).
+    active : (m,) bool
+        The previous active set in, this one's out.
+    max_rounds : int
+    step : (m, 3) float64
+        Receives ``y`` (the step in the contact frames).
+    multipliers : (m,) float64
+        Receives the multipliers (0 off the active set).
+
+    Returns
+    -------
+    rounds : int
+        Active-set rounds, or -1 if a pinned system was not positive definite.
+    """
+    m = len(fixed)
+    pinned = np.empty((m, 3), dtype=np.bool_)
+    values = np.zeros(m)
+    for i in range(m):
+        pinned[i, 1] = fixed[i]
+        pinned[i, 2] = fixed[i]
+        active[i] = active[i] and constrained[i] and not fixed[i]
+        if constrained[i]:
+            values[i] = lower[i]
+    band = np.empty((3 * m, BAND_REACH + 1))
+    start = np.zeros((m, 3))
+    product = np.empty((m, 3))
+    rhs = np.empty(3 * m)
+    rounds = 0
+    for rounds in range(1, max_rounds + 1):
+        for i in range(m):
+            pinned[i, 0] = fixed[i] or active[i]
+            start[i, 0] = values[i] if pinned[i, 0] else 0.0
+        block_matvec(diagonal, upper, start, product)
+        for i in range(m):
+            for a in range(3):
+                rhs[3 * i + a] = 0.0 if pinned[i, a] else -gradient[i, a] - product[i, a]
+        pinned_band(diagonal, upper, pinned, band)
+        if not band_cholesky(band):
+            return -1
+        band_solve(band, rhs)
+        for i in range(m):
+            for a in range(3):
+                step[i, a] = start[i, a] + (0.0 if pinned[i, a] else rhs[3 * i + a])
+        block_matvec(diagonal, upper, step, product)
+        changed = False
+        for i in range(m):
+            multipliers[i] = product[i, 0] + gradient[i, 0] if active[i] else 0.0
+            next_active = (constrained[i] and not fixed[i]
+                           and multipliers[i] + diagonal[i, 0, 0] * (values[i] - step[i, 0]) > 0)
+            if next_active != active[i]:
+                changed = True
+                active[i] = next_active
+        if not changed:
+            break
+    return rounds
+
+
+@kernel
+def strand_merit(first, count, points, distance, rows, source_directions, initial, pull_weight, features, gamma,
+                 fixed, alpha, beta, penalty, eps_c, min_length) -> float:
+    """One strand's merit: Eq. 1 plus ``penalty`` times its clearance short of ``eps_c`` (:func:`.strand_problem.group_energies`).
+
+    Parameters
+    ----------
+    first, count : int
+        The strand's first particle in the chunk's arrays and its particle count.
+    points : (P, 3) float64
+        Positions, the strand's at rows ``rows + j`` (the chunk's, or packed trial points).
+    distance : (P,) float64
+        Signed distances of those rows.
+    rows : int
+        The strand's first row in ``points`` and ``distance``.
+    source_directions, initial, features : (N, 3) float64
+    pull_weight, gamma : (N,) float64
+    fixed : (N,) bool
+    alpha, beta, penalty, eps_c, min_length : float
+    """
+    total = 0.0
+    for j in range(count):
+        i = first + j
+        r = rows + j
+        value = 0.0
+        if j + 1 < count:
+            e0 = points[r + 1, 0] - points[r, 0]
+            e1 = points[r + 1, 1] - points[r, 1]
+            e2 = points[r + 1, 2] - points[r, 2]
+            length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
+            d = source_directions[i]
+            value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
+        w = pull_weight[i]
+        inter = 0.0
+        body = 0.0
+        for a in range(3):
+            inter += (w * points[r, a] - features[i, a]) ** 2
+            body += (points[r, a] - initial[i, a]) ** 2
+        value += alpha * gamma[i] * inter
+        value += beta * gamma[i] * body
+        if penalty > 0 and not fixed[i]:
+            value += penalty * max(eps_c - distance[r], 0.0)
+        total += value
+    return total
+
+
+@parallel_kernel
+def newton_qp_steps(strands, offsets, points, distance, normal, near, source_directions, initial, pull_weight,
+                    features, gamma, fixed, alpha, beta, eps_c, damping, penalty, active, step, rounds, predicted,
+                    merit, min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
+    """One outer iteration's QP of every listed strand, the step, and the merit at the iterate.
+
+    Parameters
+    ----------
+    strands : (T,) int64
+        Strands to step (the open ones).
+    offsets : (S+1,) int64
+    points, normal : (N, 3) float64
+        The iterate and the distance normals.
+    distance : (N,) float64
+        Signed distance (``inf`` far from the body).
+    near : (N,) bool
+        Particles that get a linearised Eq. 13 half-space (:func:`.constraints.linearised_clearance`).
+    source_directions, initial, features : (N, 3) float64
+    pull_weight, gamma : (N,) float64
+    fixed : (N,) bool
+    alpha, beta, eps_c : float
+    damping : (S,) float64
+        Radial damping per strand.
+    penalty : (S,) float64
+        Each strand's merit penalty, raised in place to ``penalty_factor`` times its largest multiplier.
+    active : (N,) bool
+        Active constraints, updated in place.
+    step : (N, 3) float64
+        Receives the listed strands' steps.
+    rounds : (T,) int64
+        Receives the active-set rounds (-1: a pinned system was not positive definite).
+    predicted : (T,) float64
+        Receives the quadratic model's change along the step.
+    merit : (T,) float64
+        Receives the merit at the iterate (with the raised penalty).
+    min_length, curvature_share, parallel_sine, penalty_factor : float
+    max_rounds : int
+    """
+    for t in prange(len(strands)):
+        s = strands[t]
+        first = offsets[s]
+        count = offsets[s + 1] - first
+        diagonal = np.empty((count, 3, 3))
+        upper = np.empty((count, 3, 3))
+        gradient = np.empty((count, 3))
+        assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma,
+                        alpha, beta, damping[s], min_length, curvature_share, parallel_sine, diagonal, upper, gradient)
+        constrained = np.empty(count, dtype=np.bool_)
+        frames = np.empty((count, 3, 3))
+        lower = np.empty(count)
+        for j in range(count):
+            i = first + j
+            constrained[j] = near[i] and not fixed[i]
+            lower[j] = eps_c - distance[i]
+            if constrained[j]:
+                contact_frame(normal[i], frames[j])
+        rotate_strand(constrained, frames, diagonal, upper, gradient)
+        local_active = active[first:first + count].copy()
+        y = np.empty((count, 3))
+        multipliers = np.empty(count)
+        rounds[t] = active_set_qp(diagonal, upper, gradient, fixed[first:first + count], constrained, lower,
+                                  local_active, max_rounds, y, multipliers)
+        product = np.empty((count, 3))
+        block_matvec(diagonal, upper, y, product)
+        change = 0.0
+        largest = 0.0
+        for j in range(count):
+            i = first + j
+            active[i] = local_active[j]
+            largest = max(largest, abs(multipliers[j]))
+            for a in range(3):
+                change += y[j, a] * (gradient[j, a] + 0.5 * product[j, a])
+            if constrained[j]:
+                for a in range(3):
+                    step[i, a] = frames[j, a, 0] * y[j, 0] + frames[j, a, 1] * y[j, 1] + frames[j, a, 2] * y[j, 2]
+            else:
+                for a in range(3):
+                    step[i, a] = y[j, a]
+        predicted[t] = change
+        penalty[s] = max(penalty[s], penalty_factor * largest)
+        merit[t] = strand_merit(first, count, points, distance, first, source_directions, initial, pull_weight,
+                                features, gamma, fixed, alpha, beta, penalty[s], eps_c, min_length)
+
+
+@kernel
+def gather_trial_points(strands, offsets, packed_offsets, points, step, fraction, fixed, moved, free):
+    """The listed strands' trial points ``p + fraction * step``, packed.
+
+    Parameters
+    ----------
+    strands : (T,) int64
+    offsets : (S+1,) int64
+    packed_offsets : (T+1,) int64
+    points, step : (N, 3) float64
+    fraction : (T,) float64
+        Step length per listed strand.
+    fixed : (N,) bool
+    moved : (P, 3) float64
+        Receives the trial points.
+    free : (P,) bool
+        Receives ``~fixed`` of those rows.
+    """
+    for t in range(len(strands)):
+        first = offsets[strands[t]]
+        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
+            r = packed_offsets[t] + j
+            for a in range(3):
+                moved[r, a] = points[first + j, a] + fraction[t] * step[first + j, a]
+            free[r] = not fixed[first + j]
+
+
+@kernel
+def trial_merits(strands, offsets, packed_offsets, moved, moved_distance, source_directions, initial, pull_weight,
+                 features, gamma, fixed, alpha, beta, penalty, eps_c, min_length, merit):
+    """The merit (:func:`strand_merit`) of each listed strand at its packed trial points.
+
+    Parameters
+    ----------
+    strands : (T,) int64
+    offsets : (S+1,) int64
+    packed_offsets : (T+1,) int64
+    moved : (P, 3) float64
+    moved_distance : (P,) float64
+    penalty : (S,) float64
+    merit : (T,) float64
+        Receives the merits.
+    """
+    for t in range(len(strands)):
+        s = strands[t]
+        merit[t] = strand_merit(offsets[s], offsets[s + 1] - offsets[s], moved, moved_distance, packed_offsets[t],
+                                source_directions, initial, pull_weight, features, gamma, fixed, alpha, beta,
+                                penalty[s], eps_c, min_length)
+
+
+@kernel
+def commit_trial_points(strands, offsets, packed_offsets, take, moved, moved_distance, moved_normal, moved_near,
+                        fixed, eps_c, points, distance, normal, near, max_step, shortfall, min_clearance):
+    """Write the trial points of the strands that ``take (T,) bool`` says into the chunk's arrays.
+
+    Parameters
+    ----------
+    strands : (T,) int64
+    offsets : (S+1,) int64
+    packed_offsets : (T+1,) int64
+    take : (T,) bool
+    moved, moved_normal : (P, 3) float64
+    moved_distance : (P,) float64
+    moved_near : (P,) bool
+    fixed : (N,) bool
+    eps_c : float
+    points, normal : (N, 3) float64
+    distance : (N,) float64
+    near : (N,) bool
+        Updated in place for the taken strands.
+    max_step, shortfall, min_clearance : (T,) float64
+        Receive, per taken strand, the longest particle move (m), the largest ``eps_c - distance``
+        of a free particle (-inf without one), and the smallest distance of a free particle (inf without one).
+    """
+    for t in range(len(strands)):
+        if not take[t]:
+            continue
+        first = offsets[strands[t]]
+        longest = 0.0
+        short = -np.inf
+        closest = np.inf
+        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
+            r = packed_offsets[t] + j
+            i = first + j
+            e0 = moved[r, 0] - points[i, 0]
+            e1 = moved[r, 1] - points[i, 1]
+            e2 = moved[r, 2] - points[i, 2]
+            longest = max(longest, np.sqrt(e0 * e0 + e1 * e1 + e2 * e2))
+            if not fixed[i]:
+                short = max(short, eps_c - moved_distance[r])
+                closest = min(closest, moved_distance[r])
+            for a in range(3):
+                points[i, a] = moved[r, a]
+                normal[i, a] = moved_normal[r, a]
+            distance[i] = moved_distance[r]
+            near[i] = moved_near[r]
+        max_step[t] = longest
+        shortfall[t] = short
+        min_clearance[t] = closest
+
+
+@warms("hairport.solver.adaptation.strand_kernels")
+def _warm() -> None:
+    """Two strands (3 and 2 particles, the first touching the body) through every kernel."""
+    offsets = np.array([0, 3, 5], dtype=np.int64)
+    points = np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
+                       [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]])
+    n = len(points)
+    directions = np.tile([0.0, -1.0, 0.0], (n, 1))
+    fixed = np.array([True, False, False, True, False])
+    distance = np.array([0.0, 1e-4, np.inf, 0.0, np.inf])
+    normal = np.zeros((n, 3))
+    normal[:, 0] = 1.0
+    near = np.isfinite(distance)
+    weight, gamma = np.ones(n), np.ones(n)
+    strands = np.arange(2, dtype=np.int64)
+    active = np.zeros(n, dtype=bool)
+    step = np.zeros((n, 3))
+    penalty = np.zeros(2)
+    rounds = np.zeros(2, dtype=np.int64)
+    predicted, merit = np.zeros(2), np.zeros(2)
+    newton_qp_steps(strands, offsets, points, distance, normal, near, directions, points, weight, points, gamma,
+                    fixed, 3e3, 1e3, 5e-4, np.ones(2), penalty, active, step, rounds, predicted, merit,
+                    1e-9, 0.2, 1e-12, 2.0, 50)
+    moved, free = np.empty((n, 3)), np.empty(n, dtype=bool)
+    gather_trial_points(strands, offsets, offsets, points, step, np.ones(2), fixed, moved, free)
+    trial_merits(strands, offsets, offsets, moved, distance, directions, points, weight, points, gamma, fixed,
+                 3e3, 1e3, penalty, 5e-4, 1e-9, merit)
+    commit_trial_points(strands, offsets, offsets, np.ones(2, dtype=bool), moved, distance, normal, near, fixed,
+                        5e-4, points, distance.copy(), normal.copy(), near.copy(), np.zeros(2), np.zeros(2),
+                        np.zeros(2))
