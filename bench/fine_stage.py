@@ -4,12 +4,16 @@ Builds Table 4's groom (average female -> heavy male, 'long'; bench/table4.py) a
 runs the initial transfer and the coarse level once, then the fine level as
 :func:`solver.adaptation.multiscale.solve_multiscale` calls it, by each engine
 (:data:`solver.adaptation.options.ENGINES`) in turn, ``--runs`` times in the same process,
-and prints per engine the median seconds, the outer iterations (the longest chunk's), the
-microseconds per particle per iteration (seconds / (particles x iterations)), the largest
-distance between the two engines' results, and the strands still open per iteration.
-``--workers`` adds the compiled engine in that many processes (the process pool).
+and prints per engine the median wall-clock and CPU seconds (this process's threads and its
+worker processes; on a shared machine the CPU time is the steadier figure), the outer
+iterations (the longest chunk's), the microseconds per particle per iteration (seconds /
+(particles x iterations)), the peak resident memory (this process's high-water mark during
+the runs plus the largest worker's), the largest distance between the engines' results,
+and the strands still open per iteration. ``--workers`` adds the compiled engine in that
+many processes (the process pool).
 
     python bench/fine_stage.py [--size 1e5] [--guides 300] [--runs 3] [--engines numpy compiled] [--workers 2]
+                               [--chunk-particles 20000]
 
 Prints figures; not a test. Times are wall-clock seconds on this machine.
 """
@@ -17,14 +21,15 @@ Prints figures; not a test. Times are wall-clock seconds on this machine.
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import time
 
 import numpy as np
-from table4 import SOURCE, STYLE, TARGET, groom_shape
+from table4 import SOURCE, STYLE, TARGET, _reset_peak, _status_bytes, groom_shape
 
 
-def fine_level_case(size: int, guides: int):
+def fine_level_case(size: int, guides: int, style: str = STYLE):
     """The fine level's inputs at ``size`` particles: (problem, start, body, grid, weights, options)."""
     from hairport import solver
     from hairport.solver.adaptation.coupled import solve_hairstyle
@@ -41,7 +46,7 @@ def fine_level_case(size: int, guides: int):
 
     strands, per_strand = groom_shape(size)
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
-    hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
+    hair = generate_groom(source, style, strands, per_strand, seed=0)
     adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(guides=guides))
     options = solver.RetargetOptions(method="multiscale")
     weights = EnergyWeights(options.alpha, options.beta)
@@ -75,9 +80,10 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--engines", nargs="+", default=["numpy", "compiled"])
     parser.add_argument("--workers", type=int, default=1, help="also run the compiled engine in this many processes")
+    parser.add_argument("--chunk-particles", type=int, default=None, help="particles per chunk (the default's)")
     args = parser.parse_args()
 
-    from hairport.solver.adaptation.multiscale import solve_fine_level
+    from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES, solve_fine_level
     from hairport.solver.jit import threads, warm_up
 
     warm_up()
@@ -89,20 +95,31 @@ def main() -> None:
     if args.workers > 1:
         runs.append(("compiled", args.workers))
     results = {}
-    print(f"{'engine':<18}{'seconds':>9}{'iterations':>12}{'us/particle/it':>16}{'converged':>11}")
+    print(f"{'engine':<18}{'seconds':>9}{'cpu s':>8}{'iterations':>12}{'us/particle/it':>16}{'peak MB':>9}"
+          f"{'converged':>11}")
     for engine, workers in runs:
-        seconds = []
+        seconds, cpu = [], []
+        peak = 0
         for _ in range(args.runs):
+            fresh = _reset_peak()
+            before = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
             began = time.perf_counter()
             points, reports, _ = solve_fine_level(problem, start, body, weights, options, grid, workers=workers,
+                                                  chunk_particles=args.chunk_particles or DEFAULT_CHUNK_PARTICLES,
                                                   engine=engine)
             seconds.append(time.perf_counter() - began)
+            after = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu.append(sum(b.ru_utime + b.ru_stime - a.ru_utime - a.ru_stime for a, b in zip(before, after)))
+            # this process's high-water mark (reset before each run where the kernel lets us) plus the
+            # largest worker process's
+            peak = max(peak, (_status_bytes("VmHWM") if fresh else 0)
+                       + (1024 * after[1].ru_maxrss if workers > 1 else 0))
         label = engine if workers == 1 else f"{engine} x{workers} proc"
         results[label] = (points, reports)
         median = statistics.median(seconds)
         iterations = max(r.iterations for r in reports)
-        print(f"{label:<18}{median:>9.2f}{iterations:>12}{1e6 * median / (n * iterations):>16.3f}"
-              f"{str(all(r.converged for r in reports)):>11}")
+        print(f"{label:<18}{median:>9.2f}{statistics.median(cpu):>8.2f}{iterations:>12}"
+              f"{1e6 * median / (n * iterations):>16.3f}{peak / 1e6:>9.0f}{str(all(r.converged for r in reports)):>11}")
     labels = list(results)
     for label in labels[1:]:
         print(f"largest distance {labels[0]} vs {label}: "

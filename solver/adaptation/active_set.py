@@ -306,6 +306,13 @@ def solve_strands(
     a diagonal ``K`` the compiled loop of :mod:`.fine_solve` runs it unless ``engine`` asks
     for this numpy code, its reference.
 
+    A group stops when no particle moved more than ``step_tolerance`` or its merit fell by
+    less than ``energy_tolerance`` (relative) in :data:`.options.STALLED_ITERATIONS`
+    iterations in a row, with its clearance kept. An uncoupled strand also stops after one
+    such iteration when its QP predicted a decrease below the tolerance too (the model agrees
+    the minimum is near), and when no trial of its line search lowered the merit it stays where
+    it is, which counts as such an iteration.
+
     Parameters
     ----------
     problem : StrandProblem
@@ -409,6 +416,15 @@ def solve_strands(
             if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
             fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
+        # uncoupled, a strand whose every trial raised the merit stays where it is (and the iteration
+        # counts towards its stall): the shortest step taken anyway made such strands oscillate
+        # until the cap; coupled, the shortest step is taken
+        failed = ~accepted if not coupled else np.zeros(k, dtype=bool)
+        if failed.any():
+            stay = failed[group]
+            trial[stay], trial_dist[stay], trial_normal[stay], trial_near[stay] = p[stay], dist[stay], normal[stay], near[stay]
+            merit_trial = np.where(failed, merit_now, merit_trial)
+            fraction = np.where(failed, 0.0, fraction)
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial
@@ -418,11 +434,15 @@ def solve_strands(
         np.maximum.at(max_step, group, moved_by)
         shortfall = np.full(k, -np.inf)
         np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
+        threshold = options.energy_tolerance * np.abs(merit_now)
         decrease = merit_now - merit_trial
-        small = (decrease >= 0) & (decrease < options.energy_tolerance * np.abs(merit_now))
+        small = ((decrease >= 0) & (decrease < threshold)) | failed
         small_steps[open_groups] = np.where(small, small_steps[open_groups] + 1, 0)
         stalled = small_steps[open_groups] >= STALLED_ITERATIONS
-        done = ((max_step < options.step_tolerance) | stalled) & (shortfall <= options.clearance_tolerance)
+        if not coupled:
+            # one small decrease suffices where the QP's model also predicted a small one
+            stalled |= small & (-strand_predicted < threshold)
+        done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))

@@ -187,27 +187,34 @@ def solve_uncoupled(
             if attempt == 0:
                 damping[open_strands] = adapt_damping(damping[open_strands], merit_trial - merit_now, predicted)
             now_accepted = todo_merit <= merit_now[todo]
-            last = attempt == MAX_BACKTRACKS - 1
-            take = now_accepted | last
             todo_step, todo_short, todo_clearance = np.zeros(len(todo)), np.zeros(len(todo)), np.zeros(len(todo))
             strand_kernels.commit_trial_points(
-                strands, offsets, packed, take, moved, d, nrm, nr, fixed, eps_c, points, dist, normal, near,
+                strands, offsets, packed, now_accepted, moved, d, nrm, nr, fixed, eps_c, points, dist, normal, near,
                 todo_step, todo_short, todo_clearance,
             )
-            max_step[todo[take]] = todo_step[take]
-            shortfall[todo[take]] = todo_short[take]
-            min_clearance[todo[take]] = todo_clearance[take]
+            max_step[todo] = todo_step
+            shortfall[todo] = todo_short
+            min_clearance[todo] = todo_clearance
             accepted[todo] = now_accepted
-            if accepted.all() or last:
+            if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
             fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
+        # a strand whose every trial raised the merit stays where it is (see solve_strands)
+        failed = ~accepted
+        if failed.any():
+            stuck = open_strands[failed]
+            stuck_short, stuck_clearance = np.zeros(len(stuck)), np.zeros(len(stuck))
+            strand_kernels.strand_clearances(stuck, offsets, dist, fixed, eps_c, stuck_short, stuck_clearance)
+            shortfall[failed], min_clearance[failed] = stuck_short, stuck_clearance
+            max_step[failed], fraction[failed], merit_trial[failed] = 0.0, 0.0, merit_now[failed]
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
+        threshold = options.energy_tolerance * np.abs(merit_now)
         decrease = merit_now - merit_trial
-        small = (decrease >= 0) & (decrease < options.energy_tolerance * np.abs(merit_now))
+        small = ((decrease >= 0) & (decrease < threshold)) | failed
         small_steps[open_strands] = np.where(small, small_steps[open_strands] + 1, 0)
-        stalled = small_steps[open_strands] >= STALLED_ITERATIONS
-        done = ((max_step < options.step_tolerance) | stalled) & (shortfall <= options.clearance_tolerance)
+        stalled = (small_steps[open_strands] >= STALLED_ITERATIONS) | (small & (-predicted < threshold))
+        done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(min_clearance.min(initial=np.inf)))

@@ -11,10 +11,11 @@ one strand's share of an outer iteration in one pass over its particles, a stran
   solve of the pinned system (:func:`.banded.solve_with_fixed`), then the step, the strand's
   merit penalty (its own running maximum of the multipliers), the model's predicted change and
   the merit at the iterate;
-* :func:`gather_trial_points`, :func:`trial_merits`, :func:`commit_trial_points`: the line
-  search's trial points of the strands still backtracking (packed for one batched distance
-  query), their merits (:func:`.strand_problem.group_energies`), and the accepted ones
-  written back with their step length and clearance. These are serial: a few passes over
+* :func:`gather_trial_points`, :func:`trial_merits`, :func:`commit_trial_points`,
+  :func:`strand_clearances`: the line search's trial points of the strands still
+  backtracking (packed for one batched distance query), their merits
+  (:func:`.strand_problem.group_energies`), the accepted ones written back with their step
+  length and clearance, and the clearance of strands that stay. These are serial: a few passes over
   memory cost less than waking a second thread, whose barrier on a busy machine can wait a
   scheduler quantum (measured at 10^5 particles on two shared cores: 0.2 s serial in all,
   2-3 s in parallel).
@@ -605,6 +606,21 @@ def commit_trial_points(strands, offsets, packed_offsets, take, moved, moved_dis
         min_clearance[t] = closest
 
 
+@kernel
+def strand_clearances(strands, offsets, distance, fixed, eps_c, shortfall, clearance):
+    """Per listed strand ``(T,) int64``: the largest ``eps_c - distance`` of a free particle (-inf without one)
+    into ``shortfall (T,)``, and the smallest distance of a free particle (inf without one) into ``clearance (T,)``."""
+    for t in range(len(strands)):
+        short = -np.inf
+        closest = np.inf
+        for i in range(offsets[strands[t]], offsets[strands[t] + 1]):
+            if not fixed[i]:
+                short = max(short, eps_c - distance[i])
+                closest = min(closest, distance[i])
+        shortfall[t] = short
+        clearance[t] = closest
+
+
 @warms("hairport.solver.adaptation.strand_kernels")
 def _warm() -> None:
     """Two strands (3 and 2 particles, the first touching the body) through every kernel."""
@@ -635,3 +651,4 @@ def _warm() -> None:
     commit_trial_points(strands, offsets, offsets, np.ones(2, dtype=bool), moved, distance, normal, near, fixed,
                         5e-4, points, distance.copy(), normal.copy(), near.copy(), np.zeros(2), np.zeros(2),
                         np.zeros(2))
+    strand_clearances(strands, offsets, distance, fixed, 5e-4, np.zeros(2), np.zeros(2))

@@ -76,6 +76,8 @@ def test_compiled_loop_equals_the_numpy_reference(sphere, groom, options):
     np.testing.assert_array_equal(points[problem.fixed], first[problem.fixed])
     assert query.signed_distance(points[~problem.fixed]).distance.min() >= EPS_C - options.clearance_tolerance
     assert max(report.active_set_rounds) > 1  # constraints came and went
+    if options.max_iterations == 30 and options.energy_tolerance == 0:
+        assert 0.0 in report.step_fractions  # a strand stayed where no trial lowered its merit
 
 
 def test_a_strand_at_its_minimum_stops_after_one_iteration_unmoved(sphere, groom):
@@ -128,6 +130,43 @@ def test_a_strand_solved_alone_or_in_any_chunk_gives_the_same_result(sphere, eng
     for half, rows in [problem.strand_run(0, 4), problem.strand_run(4, problem.n_strands)]:
         chunked, _ = solve_strands(half, body, engine=engine)
         np.testing.assert_array_equal(chunked, together[rows])
+
+
+class RepellingStart:
+    """A :class:`BodyDistance` stand-in under which only the given points are outside (1 m off a body below
+    them); any other point is 1 m deep: every trial step of the line search raises the merit."""
+
+    query = None
+
+    def __init__(self, start):
+        self.start = start
+
+    def __call__(self, points):
+        at_start = (points[:, None, :] == self.start[None, :, :]).all(axis=2).any(axis=1)
+        normal = np.zeros_like(points)
+        normal[:, 1] = 1.0
+        return np.where(at_start, 1.0, -1.0), normal, np.ones(len(points), dtype=bool)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_strand_without_a_better_trial_stays_and_stops(groom, engine):
+    problem, first = groom
+    points, report = solve_strands(problem, RepellingStart(first), start=first, engine=engine)
+    np.testing.assert_array_equal(points, first)  # the shortest step is not taken anyway
+    assert report.converged and report.iterations == 2  # two failed line searches in a row: stalled
+    assert report.step_fractions == [0.0, 0.0] and report.max_step == [0.0, 0.0]
+    assert report.open_groups == [problem.n_strands, problem.n_strands - 1]  # the one at its minimum left at once
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_strand_stops_after_one_small_decrease_its_model_predicted(sphere, groom, engine):
+    """With a tolerance no decrease can beat, every iteration is small: an uncoupled strand stops after one,
+    where the QP's prediction is small too (coupled ones need two: test_active_set)."""
+    _, query = sphere
+    problem, first = groom
+    _, report = solve_strands(problem, BodyDistance(query), start=first, engine=engine,
+                              options=SolveOptions(eps_c=EPS_C, energy_tolerance=1.0))
+    assert report.converged and report.iterations == 1
 
 
 def test_cancel_stops_the_compiled_loop(sphere, groom):
