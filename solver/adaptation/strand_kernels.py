@@ -38,28 +38,55 @@ BAND_REACH = 5
 
 
 @kernel
-def _cross(a, b, out):
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
+def _cross(a0, a1, a2, b0, b1, b2):
+    """``a x b`` of two vectors given by their components."""
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @kernel
-def _norm(v) -> float:
-    return np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-
-
-@kernel
-def _normal_to(v, out):
-    """A unit vector normal to ``v (3,)``: ``v x e_k`` with ``k`` its smallest component (as numpy's argmin)."""
+def _normal_to(v0, v1, v2):
+    """A vector normal to ``v``: ``v x e_k`` with ``k`` its smallest component (numpy's argmin: the first on ties)."""
     k = 0
-    if abs(v[1]) < abs(v[k]):
+    if abs(v1) < abs(v0):
         k = 1
-    if abs(v[2]) < abs(v[k]):
+    if abs(v2) < abs(v1 if k == 1 else v0):
         k = 2
-    axis = np.zeros(3)
-    axis[k] = 1.0
-    _cross(v, axis, out)
+    if k == 0:
+        return _cross(v0, v1, v2, 1.0, 0.0, 0.0)
+    if k == 1:
+        return _cross(v0, v1, v2, 0.0, 1.0, 0.0)
+    return _cross(v0, v1, v2, 0.0, 0.0, 1.0)
+
+
+@kernel
+def _clamped_block(u0, u1, u2, d0, d1, d2, floor, parallel_sine, out):
+    """:func:`clamped_direction_hessian` on components (no array is allocated)."""
+    c = u0 * d0 + u1 * d1 + u2 * d2
+    e0, e1, e2 = d0 - c * u0, d1 - c * u1, d2 - c * u2
+    s = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if s < parallel_sine:
+        e0, e1, e2 = _normal_to(u0, u1, u2)
+    e_norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    e0, e1, e2 = e0 / e_norm, e1 / e_norm, e2 / e_norm
+    w0, w1, w2 = _cross(u0, u1, u2, e0, e1, e2)
+    low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
+    q0, q1, q2 = s * u0 + low * e0, s * u1 + low * e1, s * u2 + low * e2
+    q_norm = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
+    if q_norm > 0:
+        q0, q1, q2 = q0 / q_norm, q1 / q_norm, q2 / q_norm
+    else:
+        q0, q1, q2 = e0, e1, e2
+    raise_low = max(low, -floor) - low
+    raise_w = max(c, -floor) - c
+    u = (u0, u1, u2)
+    d = (d0, d1, d2)
+    q = (q0, q1, q2)
+    w = (w0, w1, w2)
+    for a in range(3):
+        for b in range(3):
+            identity = 1.0 if a == b else 0.0
+            exact = (u[a] * d[b] + u[b] * d[a]) + c * (identity - 3.0 * u[a] * u[b])
+            out[a, b] = (exact + raise_low * q[a] * q[b]) + raise_w * w[a] * w[b]
 
 
 @kernel
@@ -77,32 +104,7 @@ def clamped_direction_hessian(unit, direction, floor, parallel_sine, out):
     out : (3, 3) float64
         Receives the block.
     """
-    c = unit[0] * direction[0] + unit[1] * direction[1] + unit[2] * direction[2]
-    e = np.empty(3)
-    for a in range(3):
-        e[a] = direction[a] - c * unit[a]
-    s = _norm(e)
-    if s < parallel_sine:
-        _normal_to(unit, e)
-    e_norm = _norm(e)
-    for a in range(3):
-        e[a] /= e_norm
-    w = np.empty(3)
-    _cross(unit, e, w)
-    low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
-    q = np.empty(3)
-    for a in range(3):
-        q[a] = s * unit[a] + low * e[a]
-    q_norm = _norm(q)
-    for a in range(3):
-        q[a] = q[a] / q_norm if q_norm > 0 else e[a]
-    raise_low = max(low, -floor) - low
-    raise_w = max(c, -floor) - c
-    for a in range(3):
-        for b in range(3):
-            identity = 1.0 if a == b else 0.0
-            exact = (unit[a] * direction[b] + unit[b] * direction[a]) + c * (identity - 3.0 * unit[a] * unit[b])
-            out[a, b] = (exact + raise_low * q[a] * q[b]) + raise_w * w[a] * w[b]
+    _clamped_block(unit[0], unit[1], unit[2], direction[0], direction[1], direction[2], floor, parallel_sine, out)
 
 
 @kernel
@@ -132,19 +134,18 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
     diagonal[:] = 0.0
     upper[:] = 0.0
     gradient[:] = 0.0
-    unit = np.empty(3)
     block = np.empty((3, 3))
     for j in range(count - 1):
         i = first + j
-        for a in range(3):
-            unit[a] = points[i + 1, a] - points[i, a]
-        length = max(_norm(unit), min_length)
-        for a in range(3):
-            unit[a] /= length
-        d = source_directions[i]
+        e0 = points[i + 1, 0] - points[i, 0]
+        e1 = points[i + 1, 1] - points[i, 1]
+        e2 = points[i + 1, 2] - points[i, 2]
+        length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
+        unit = (e0 / length, e1 / length, e2 / length)
+        d = (source_directions[i, 0], source_directions[i, 1], source_directions[i, 2])
         cosine = unit[0] * d[0] + unit[1] * d[1] + unit[2] * d[2]
         floor = curvature_share * beta * min(gamma[i], gamma[i + 1]) * length**2
-        clamped_direction_hessian(unit, d, floor, parallel_sine, block)
+        _clamped_block(unit[0], unit[1], unit[2], d[0], d[1], d[2], floor, parallel_sine, block)
         for a in range(3):
             for b in range(3):
                 value = 2.0 * (block[a, b] + damping * unit[a] * unit[b]) / length**2
@@ -168,17 +169,14 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
 @kernel
 def contact_frame(normal, frame):
     """The rotation ``(3, 3)`` whose columns are the unit ``normal (3,)`` and two tangents (:func:`.active_set.normal_frames`)."""
-    t1 = np.empty(3)
-    _normal_to(normal, t1)
-    t1_norm = _norm(t1)
-    for a in range(3):
-        t1[a] /= t1_norm
-    t2 = np.empty(3)
-    _cross(normal, t1, t2)
-    for a in range(3):
-        frame[a, 0] = normal[a]
-        frame[a, 1] = t1[a]
-        frame[a, 2] = t2[a]
+    n0, n1, n2 = normal[0], normal[1], normal[2]
+    t0, t1, t2 = _normal_to(n0, n1, n2)
+    t_norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    t0, t1, t2 = t0 / t_norm, t1 / t_norm, t2 / t_norm
+    b0, b1, b2 = _cross(n0, n1, n2, t0, t1, t2)
+    frame[0, 0], frame[1, 0], frame[2, 0] = n0, n1, n2
+    frame[0, 1], frame[1, 1], frame[2, 1] = t0, t1, t2
+    frame[0, 2], frame[1, 2], frame[2, 2] = b0, b1, b2
 
 
 @kernel
@@ -214,9 +212,9 @@ def rotate_strand(rotated, frames, diagonal, upper, gradient):
         if rotated[i]:
             _left_transposed(frames[i], diagonal[i], work)
             _right(work, frames[i], diagonal[i])
-            g = gradient[i].copy()
+            g0, g1, g2 = gradient[i, 0], gradient[i, 1], gradient[i, 2]
             for a in range(3):
-                gradient[i, a] = frames[i, 0, a] * g[0] + frames[i, 1, a] * g[1] + frames[i, 2, a] * g[2]
+                gradient[i, a] = frames[i, 0, a] * g0 + frames[i, 1, a] * g1 + frames[i, 2, a] * g2
         if i + 1 < m:
             if rotated[i]:
                 _left_transposed(frames[i], upper[i], work)
@@ -342,29 +340,44 @@ def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, 
         if constrained[i]:
             values[i] = lower[i]
     band = np.empty((3 * m, BAND_REACH + 1))
-    start = np.zeros((m, 3))
-    product = np.empty((m, 3))
+    start = np.zeros(m)  # the pinned first unknowns' values: only they are nonzero in the pinned start
     rhs = np.empty(3 * m)
     rounds = 0
     for rounds in range(1, max_rounds + 1):
         for i in range(m):
             pinned[i, 0] = fixed[i] or active[i]
-            start[i, 0] = values[i] if pinned[i, 0] else 0.0
-        block_matvec(diagonal, upper, start, product)
+            start[i] = values[i] if pinned[i, 0] else 0.0
+        # rhs = -g - H start on the free unknowns (start has a first component only)
         for i in range(m):
             for a in range(3):
-                rhs[3 * i + a] = 0.0 if pinned[i, a] else -gradient[i, a] - product[i, a]
+                if pinned[i, a]:
+                    rhs[3 * i + a] = 0.0
+                    continue
+                product = diagonal[i, a, 0] * start[i]
+                if i + 1 < m:
+                    product += upper[i, a, 0] * start[i + 1]
+                if i > 0:
+                    product += upper[i - 1, 0, a] * start[i - 1]
+                rhs[3 * i + a] = -gradient[i, a] - product
         pinned_band(diagonal, upper, pinned, band)
         if not band_cholesky(band):
             return -1
         band_solve(band, rhs)
         for i in range(m):
-            for a in range(3):
-                step[i, a] = start[i, a] + (0.0 if pinned[i, a] else rhs[3 * i + a])
-        block_matvec(diagonal, upper, step, product)
+            step[i, 0] = start[i] + (0.0 if pinned[i, 0] else rhs[3 * i])
+            for a in range(1, 3):
+                step[i, a] = 0.0 if pinned[i, a] else rhs[3 * i + a]
         changed = False
         for i in range(m):
-            multipliers[i] = product[i, 0] + gradient[i, 0] if active[i] else 0.0
+            if active[i]:  # (H y + g) of the first unknown
+                product = diagonal[i, 0, 0] * step[i, 0] + diagonal[i, 0, 1] * step[i, 1] + diagonal[i, 0, 2] * step[i, 2]
+                if i + 1 < m:
+                    product += upper[i, 0, 0] * step[i + 1, 0] + upper[i, 0, 1] * step[i + 1, 1] + upper[i, 0, 2] * step[i + 1, 2]
+                if i > 0:
+                    product += upper[i - 1, 0, 0] * step[i - 1, 0] + upper[i - 1, 1, 0] * step[i - 1, 1] + upper[i - 1, 2, 0] * step[i - 1, 2]
+                multipliers[i] = product + gradient[i, 0]
+            else:
+                multipliers[i] = 0.0
             next_active = (constrained[i] and not fixed[i]
                            and multipliers[i] + diagonal[i, 0, 0] * (values[i] - step[i, 0]) > 0)
             if next_active != active[i]:
