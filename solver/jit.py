@@ -64,7 +64,11 @@ def _import_kernel_modules() -> None:
 
 
 #: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = ("hairport.solver.adaptation.strand_kernels",)
+KERNEL_MODULES: tuple[str, ...] = (
+    "hairport.solver.adaptation.band_kernels",
+    "hairport.solver.adaptation.strand_kernels",
+    "hairport.solver.adaptation.line_search_kernels",
+)
 
 
 def warm_up() -> dict[str, float]:

@@ -3,13 +3,14 @@
 When ``K`` is diagonal (Eq. 14's fine level) every strand is its own problem with its own
 line search, damping, merit penalty and convergence test. This loop does what the numpy
 reference in :mod:`.active_set` does, iteration for iteration, but never copies the problem:
-the kernels of :mod:`.strand_kernels` take the chunk's arrays and the list of open strands,
-each strand's QP runs in one compiled pass over its own particles (strands in parallel on
-numba's threads), and only the particles of strands still backtracking are packed for the
-batched distance query of each line-search attempt.
+the kernels of :mod:`.strand_kernels` and :mod:`.line_search_kernels` take the chunk's
+arrays and the list of open strands, each strand's QP runs in one compiled pass over its own
+particles (strands in parallel on numba's threads), and only the particles of strands still
+backtracking are packed for the batched distance query of each line-search attempt.
 
-Working memory beyond the problem's arrays: the iterate's distance, normal and flags, the
-step (about 80 bytes per particle) and the packed trial points of one attempt (about 60).
+Working memory beyond the problem's arrays: the iterate, its distance, normal and flags, the
+step (about 110 bytes per particle), the packed trial points of one attempt (about 60) and
+the distance query's temporaries (about 280 on a whole-chunk batch, measured at 10^5).
 
 Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``).
 """
@@ -22,7 +23,7 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.adaptation import strand_kernels
+from hairport.solver.adaptation import line_search_kernels, strand_kernels
 from hairport.solver.adaptation.constraints import BodyDistance, push_out_short
 from hairport.solver.adaptation.energies import NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, EnergyWeights
 from hairport.solver.adaptation.options import (
@@ -119,6 +120,8 @@ def solve_uncoupled(
         fixed=np.ascontiguousarray(problem.fixed, dtype=np.bool_),
     )
     fixed = arrays["fixed"]
+    # the merit kernels' problem arguments, in their order
+    problem_arrays = (arrays["source_directions"], arrays["initial"], pull_weight, arrays["features"], arrays["gamma"])
     alpha, beta, eps_c = float(weights.alpha), float(weights.beta), float(options.eps_c)
     n_strands = problem.n_strands
     points = np.array(problem.initial if start is None else start, dtype=np.float64, order="C")
@@ -148,11 +151,13 @@ def solve_uncoupled(
             strand_kernels.newton_qp_steps(
                 open_strands, offsets, points, dist, normal, near, arrays["source_directions"], arrays["initial"],
                 pull_weight, arrays["features"], arrays["gamma"], fixed, alpha, beta, eps_c, damping, penalty,
-                active, step, rounds, predicted, merit_now, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE,
-                PARALLEL_SINE, MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
+                active, step, rounds, predicted, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
+                MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
             )
         finally:
             set_threads(all_threads)
+        line_search_kernels.strand_merits(open_strands, offsets, offsets[open_strands], points, dist, *problem_arrays,
+                                          fixed, alpha, beta, penalty, eps_c, MIN_SEGMENT_LENGTH, merit_now)
         if np.any(rounds < 0):
             raise np.linalg.LinAlgError("a strand's Newton system is not positive definite")
         report.active_set_rounds.append(int(rounds.max()))
@@ -169,8 +174,8 @@ def solve_uncoupled(
             packed = _packed_offsets(offsets, strands)
             moved = np.empty((packed[-1], 3))
             free = np.empty(packed[-1], dtype=bool)
-            strand_kernels.gather_trial_points(strands, offsets, packed, points, step, fraction[todo], fixed,
-                                               moved, free)
+            line_search_kernels.gather_trial_points(strands, offsets, packed, points, step, fraction[todo], fixed,
+                                                    moved, free)
             d, nrm, nr = distance(moved)
             d, nrm, nr = (np.ascontiguousarray(d, dtype=np.float64), np.ascontiguousarray(nrm, dtype=np.float64),
                           np.ascontiguousarray(nr, dtype=np.bool_))
@@ -180,15 +185,14 @@ def solve_uncoupled(
                 moved[short] += (eps_c - d[short])[:, None] * nrm[short]
                 d[short], nrm[short], nr[short] = distance(moved[short])
             todo_merit = np.zeros(len(todo))
-            strand_kernels.trial_merits(strands, offsets, packed, moved, d, arrays["source_directions"],
-                                        arrays["initial"], pull_weight, arrays["features"], arrays["gamma"], fixed,
-                                        alpha, beta, penalty, eps_c, MIN_SEGMENT_LENGTH, todo_merit)
+            line_search_kernels.strand_merits(strands, offsets, packed[:-1], moved, d, *problem_arrays, fixed, alpha,
+                                              beta, penalty, eps_c, MIN_SEGMENT_LENGTH, todo_merit)
             merit_trial[todo] = todo_merit
             if attempt == 0:
                 damping[open_strands] = adapt_damping(damping[open_strands], merit_trial - merit_now, predicted)
             now_accepted = todo_merit <= merit_now[todo]
             todo_step, todo_short, todo_clearance = np.zeros(len(todo)), np.zeros(len(todo)), np.zeros(len(todo))
-            strand_kernels.commit_trial_points(
+            line_search_kernels.commit_trial_points(
                 strands, offsets, packed, now_accepted, moved, d, nrm, nr, fixed, eps_c, points, dist, normal, near,
                 todo_step, todo_short, todo_clearance,
             )
@@ -204,7 +208,7 @@ def solve_uncoupled(
         if failed.any():
             stuck = open_strands[failed]
             stuck_short, stuck_clearance = np.zeros(len(stuck)), np.zeros(len(stuck))
-            strand_kernels.strand_clearances(stuck, offsets, dist, fixed, eps_c, stuck_short, stuck_clearance)
+            line_search_kernels.strand_clearances(stuck, offsets, dist, fixed, eps_c, stuck_short, stuck_clearance)
             shortfall[failed], min_clearance[failed] = stuck_short, stuck_clearance
             max_step[failed], fraction[failed], merit_trial[failed] = 0.0, 0.0, merit_now[failed]
         report.merit.append(float(merit_trial.sum()))

@@ -5,8 +5,10 @@
    the coupled solver of :mod:`.coupled`.
 3. Fine level (Eq. 14): every other ("normal") particle takes its kNN from guide particles
    only; with the guides adapted, these neighbours are constants and all normal strands
-   are independent (:mod:`.active_set`). They are solved in chunks of whole strands, so
-   memory stays bounded, optionally in parallel processes.
+   are independent (:mod:`.active_set`; compiled per-strand kernels, :mod:`.fine_solve`).
+   They are solved in chunks of whole strands, so memory stays bounded, in this process on
+   numba's threads, or optionally in worker processes (measured slower at 10^5 on two cores,
+   and each process holds ~0.5 GB: bench/fine_stage.py).
 
 Convention: particles ``(N, 3) float64`` in meters, CSR strands
 (:mod:`hairport.solver.model.hair`); guide ids are strand indices into the full hairstyle.
@@ -14,7 +16,6 @@ Convention: particles ``(N, 3) float64`` in meters, CSR strands
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -38,7 +39,10 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair, particle_indices
 from hairport.solver.model.progress import ProgressFn, rescaled
 
-#: particles per fine-level chunk: bounds the fine solve's working memory (~1 kB per particle)
+#: particles per fine-level chunk: bounds the fine solve's working memory, measured at 10^5
+#: particles (tracemalloc's peak over a chunk's solve): ~470 B a chunk particle for the compiled
+#: loop, ~280 of them the distance query's temporaries on a whole-chunk batch (1.6 kB for the
+#: numpy reference)
 DEFAULT_CHUNK_PARTICLES = 200_000
 #: particles outside the body and farther than this from it (by the distance grid's bound)
 #: get no exact closest-point query and no Eq. 13 constraint in an iteration (m); it exceeds
@@ -153,11 +157,6 @@ class MultiscaleReport:
     @property
     def pushed_out(self) -> int:
         return (self.coarse.pushed_out if self.coarse else 0) + sum(f.pushed_out for f in self.fine)
-
-
-def default_workers() -> int:
-    """Processes for the fine level: the CPUs this process may use."""
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 
 
 def chunk_strands(counts: np.ndarray, chunk_particles: int) -> list[np.ndarray]:

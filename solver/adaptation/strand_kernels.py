@@ -1,40 +1,28 @@
-"""Compiled per-strand kernels of the uncoupled active-set loop (Eq. 14's fine level).
+"""Compiled per-strand kernels of the uncoupled active-set loop (Eq. 14's fine level): the Newton model and its QP.
 
-When ``K`` is diagonal every strand is its own problem (:mod:`.active_set`): these kernels do
-one strand's share of an outer iteration in one pass over its particles, a strand per
-``prange`` iteration, with scratch arrays of the strand's size only:
-
-* :func:`newton_qp_steps`: Eq. 1's Newton model (:func:`.strand_problem.newton_system`:
-  Eq. 7's clamped exact blocks, Eq. 10's diagonal pull, Eq. 11, the radial damping), its
-  rotation into the contact frames of the constrained particles (:class:`.active_set.Frames`),
-  the primal-dual active-set rounds of :func:`.active_set.solve_qp`, each a banded Cholesky
-  solve of the pinned system (:func:`.banded.solve_with_fixed`), then the step, the strand's
-  merit penalty (its own running maximum of the multipliers), the model's predicted change and
-  the merit at the iterate;
-* :func:`gather_trial_points`, :func:`trial_merits`, :func:`commit_trial_points`,
-  :func:`strand_clearances`: the line search's trial points of the strands still
-  backtracking (packed for one batched distance query), their merits
-  (:func:`.strand_problem.group_energies`), the accepted ones written back with their step
-  length and clearance, and the clearance of strands that stay. These are serial: a few passes over
-  memory cost less than waking a second thread, whose barrier on a busy machine can wait a
-  scheduler quantum (measured at 10^5 particles on two shared cores: 0.2 s serial in all,
-  2-3 s in parallel).
+When ``K`` is diagonal every strand is its own problem (:mod:`.active_set`).
+:func:`newton_qp_steps` does one strand's QP of an outer iteration in one pass over its
+particles, a strand per ``prange`` iteration, with scratch arrays of the strand's size only:
+Eq. 1's Newton model (:func:`assemble_strand`, as :func:`.strand_problem.newton_system`:
+Eq. 7's clamped exact blocks, Eq. 10's diagonal pull, Eq. 11, the radial damping), its
+rotation into the contact frames of the constrained particles (:func:`contact_frame`,
+:func:`rotate_strand`, as :class:`.active_set.Frames`), the primal-dual active-set rounds
+(:func:`active_set_qp`, as :func:`.active_set.solve_qp`), each a banded Cholesky solve of
+the pinned system (:mod:`.band_kernels`), then the step, the strand's merit penalty (its own
+running maximum of the multipliers) and the model's predicted change. The line search's
+kernels are :mod:`.line_search_kernels`'.
 
 The numpy functions named above are the tested references. Strands are CSR runs
-(``offsets (S+1,) int64``) of a chunk's particle arrays; a "packed" array holds the rows of
-a list of strands back to back (``packed_offsets (T+1,) int64``). Every setting the kernels
-read is an argument: numba's on-disk cache does not notice a changed constant of another module.
+(``offsets (S+1,) int64``) of a chunk's particle arrays. Every setting the kernels read is
+an argument: numba's on-disk cache does not notice a changed constant of another module.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from hairport.solver.adaptation.band_kernels import BAND_REACH, band_cholesky, band_solve, block_matvec, pinned_band
 from hairport.solver.jit import kernel, parallel_kernel, prange, warms
-
-#: rows of one strand's band storage of the 3m x 3m pinned system: the diagonal and the 5
-#: super-diagonals a particle's unknowns reach (as :data:`.banded.BANDS`)
-BAND_REACH = 5
 
 
 @kernel
@@ -225,86 +213,6 @@ def rotate_strand(rotated, frames, diagonal, upper, gradient):
 
 
 @kernel
-def block_matvec(diagonal, upper, x, out):
-    """``out = A x`` for a block-tridiagonal ``A`` (:func:`.banded.matvec`); ``x, out (m, 3)``."""
-    m = len(x)
-    for i in range(m):
-        for a in range(3):
-            value = diagonal[i, a, 0] * x[i, 0] + diagonal[i, a, 1] * x[i, 1] + diagonal[i, a, 2] * x[i, 2]
-            if i + 1 < m:
-                value += upper[i, a, 0] * x[i + 1, 0] + upper[i, a, 1] * x[i + 1, 1] + upper[i, a, 2] * x[i + 1, 2]
-            if i > 0:
-                value += upper[i - 1, 0, a] * x[i - 1, 0] + upper[i - 1, 1, a] * x[i - 1, 1] + upper[i - 1, 2, a] * x[i - 1, 2]
-            out[i, a] = value
-
-
-@kernel
-def pinned_band(diagonal, upper, pinned, band):
-    """Band storage of the block-tridiagonal matrix with pinned unknowns' rows and columns replaced by identity.
-
-    Parameters
-    ----------
-    diagonal, upper : (m, 3, 3) float64
-    pinned : (m, 3) bool
-    band : (3m, 6) float64
-        Receives ``band[r, k] = A[r, r + k]`` (:func:`.banded.with_fixed_unknowns` of :func:`.banded.to_bands`,
-        row-major per unknown).
-    """
-    m = len(diagonal)
-    band[:] = 0.0
-    for i in range(m):
-        for a in range(3):
-            row = 3 * i + a
-            if pinned[i, a]:
-                band[row, 0] = 1.0
-                continue
-            for b in range(a, 3):
-                if not pinned[i, b]:
-                    band[row, b - a] = diagonal[i, a, b]
-            if i + 1 < m:
-                for b in range(3):
-                    if not pinned[i + 1, b]:
-                        band[row, 3 + b - a] = upper[i, a, b]
-
-
-@kernel
-def band_cholesky(band) -> bool:
-    """``A = U^T U`` in place (``band[r, k] = U[r, r + k]`` after); False if ``A`` is not positive definite."""
-    n = band.shape[0]
-    for j in range(n):
-        pivot = band[j, 0]
-        if not pivot > 0.0:
-            return False
-        pivot = np.sqrt(pivot)
-        band[j, 0] = pivot
-        reach = min(BAND_REACH, n - 1 - j)
-        for k in range(1, reach + 1):
-            band[j, k] /= pivot
-        for k in range(1, reach + 1):
-            factor = band[j, k]
-            if factor != 0.0:
-                for step in range(k, reach + 1):
-                    band[j + k, step - k] -= factor * band[j, step]
-    return True
-
-
-@kernel
-def band_solve(band, x):
-    """Solve ``U^T U x = b`` in place (``x (3m,)`` holds ``b``) with the factor of :func:`band_cholesky`."""
-    n = band.shape[0]
-    for j in range(n):
-        value = x[j]
-        for k in range(1, min(BAND_REACH, j) + 1):
-            value -= band[j - k, k] * x[j - k]
-        x[j] = value / band[j, 0]
-    for j in range(n - 1, -1, -1):
-        value = x[j]
-        for k in range(1, min(BAND_REACH, n - 1 - j) + 1):
-            value -= band[j, k] * x[j + k]
-        x[j] = value / band[j, 0]
-
-
-@kernel
 def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, max_rounds, step, multipliers):
     """:func:`.active_set.solve_qp` of one strand, in its contact frames (rotated ``H'``, ``g'``).
 
@@ -388,57 +296,11 @@ def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, 
     return rounds
 
 
-@kernel
-def strand_merit(first, count, points, distance, rows, source_directions, initial, pull_weight, features, gamma,
-                 fixed, alpha, beta, penalty, eps_c, min_length) -> float:
-    """One strand's merit: Eq. 1 plus ``penalty`` times its clearance short of ``eps_c`` (:func:`.strand_problem.group_energies`).
-
-    Parameters
-    ----------
-    first, count : int
-        The strand's first particle in the chunk's arrays and its particle count.
-    points : (P, 3) float64
-        Positions, the strand's at rows ``rows + j`` (the chunk's, or packed trial points).
-    distance : (P,) float64
-        Signed distances of those rows.
-    rows : int
-        The strand's first row in ``points`` and ``distance``.
-    source_directions, initial, features : (N, 3) float64
-    pull_weight, gamma : (N,) float64
-    fixed : (N,) bool
-    alpha, beta, penalty, eps_c, min_length : float
-    """
-    total = 0.0
-    for j in range(count):
-        i = first + j
-        r = rows + j
-        value = 0.0
-        if j + 1 < count:
-            e0 = points[r + 1, 0] - points[r, 0]
-            e1 = points[r + 1, 1] - points[r, 1]
-            e2 = points[r + 1, 2] - points[r, 2]
-            length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
-            d = source_directions[i]
-            value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
-        w = pull_weight[i]
-        inter = 0.0
-        body = 0.0
-        for a in range(3):
-            inter += (w * points[r, a] - features[i, a]) ** 2
-            body += (points[r, a] - initial[i, a]) ** 2
-        value += alpha * gamma[i] * inter
-        value += beta * gamma[i] * body
-        if penalty > 0 and not fixed[i]:
-            value += penalty * max(eps_c - distance[r], 0.0)
-        total += value
-    return total
-
-
 @parallel_kernel
 def newton_qp_steps(strands, offsets, points, distance, normal, near, source_directions, initial, pull_weight,
                     features, gamma, fixed, alpha, beta, eps_c, damping, penalty, active, step, rounds, predicted,
-                    merit, min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
-    """One outer iteration's QP of every listed strand, the step, and the merit at the iterate.
+                    min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
+    """One outer iteration's QP of every listed strand: the step, the raised merit penalty, the model's change.
 
     Parameters
     ----------
@@ -467,8 +329,6 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
         Receives the active-set rounds (-1: a pinned system was not positive definite).
     predicted : (T,) float64
         Receives the quadratic model's change along the step.
-    merit : (T,) float64
-        Receives the merit at the iterate (with the raised penalty).
     min_length, curvature_share, parallel_sine, penalty_factor : float
     max_rounds : int
     """
@@ -514,124 +374,6 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
                     step[i, a] = y[j, a]
         predicted[t] = change
         penalty[s] = max(penalty[s], penalty_factor * largest)
-        merit[t] = strand_merit(first, count, points, distance, first, source_directions, initial, pull_weight,
-                                features, gamma, fixed, alpha, beta, penalty[s], eps_c, min_length)
-
-
-@kernel
-def gather_trial_points(strands, offsets, packed_offsets, points, step, fraction, fixed, moved, free):
-    """The listed strands' trial points ``p + fraction * step``, packed.
-
-    Parameters
-    ----------
-    strands : (T,) int64
-    offsets : (S+1,) int64
-    packed_offsets : (T+1,) int64
-    points, step : (N, 3) float64
-    fraction : (T,) float64
-        Step length per listed strand.
-    fixed : (N,) bool
-    moved : (P, 3) float64
-        Receives the trial points.
-    free : (P,) bool
-        Receives ``~fixed`` of those rows.
-    """
-    for t in range(len(strands)):
-        first = offsets[strands[t]]
-        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
-            r = packed_offsets[t] + j
-            for a in range(3):
-                moved[r, a] = points[first + j, a] + fraction[t] * step[first + j, a]
-            free[r] = not fixed[first + j]
-
-
-@kernel
-def trial_merits(strands, offsets, packed_offsets, moved, moved_distance, source_directions, initial, pull_weight,
-                 features, gamma, fixed, alpha, beta, penalty, eps_c, min_length, merit):
-    """The merit (:func:`strand_merit`) of each listed strand at its packed trial points.
-
-    Parameters
-    ----------
-    strands : (T,) int64
-    offsets : (S+1,) int64
-    packed_offsets : (T+1,) int64
-    moved : (P, 3) float64
-    moved_distance : (P,) float64
-    penalty : (S,) float64
-    merit : (T,) float64
-        Receives the merits.
-    """
-    for t in range(len(strands)):
-        s = strands[t]
-        merit[t] = strand_merit(offsets[s], offsets[s + 1] - offsets[s], moved, moved_distance, packed_offsets[t],
-                                source_directions, initial, pull_weight, features, gamma, fixed, alpha, beta,
-                                penalty[s], eps_c, min_length)
-
-
-@kernel
-def commit_trial_points(strands, offsets, packed_offsets, take, moved, moved_distance, moved_normal, moved_near,
-                        fixed, eps_c, points, distance, normal, near, max_step, shortfall, min_clearance):
-    """Write the trial points of the strands that ``take (T,) bool`` says into the chunk's arrays.
-
-    Parameters
-    ----------
-    strands : (T,) int64
-    offsets : (S+1,) int64
-    packed_offsets : (T+1,) int64
-    take : (T,) bool
-    moved, moved_normal : (P, 3) float64
-    moved_distance : (P,) float64
-    moved_near : (P,) bool
-    fixed : (N,) bool
-    eps_c : float
-    points, normal : (N, 3) float64
-    distance : (N,) float64
-    near : (N,) bool
-        Updated in place for the taken strands.
-    max_step, shortfall, min_clearance : (T,) float64
-        Receive, per taken strand, the longest particle move (m), the largest ``eps_c - distance``
-        of a free particle (-inf without one), and the smallest distance of a free particle (inf without one).
-    """
-    for t in range(len(strands)):
-        if not take[t]:
-            continue
-        first = offsets[strands[t]]
-        longest = 0.0
-        short = -np.inf
-        closest = np.inf
-        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
-            r = packed_offsets[t] + j
-            i = first + j
-            e0 = moved[r, 0] - points[i, 0]
-            e1 = moved[r, 1] - points[i, 1]
-            e2 = moved[r, 2] - points[i, 2]
-            longest = max(longest, np.sqrt(e0 * e0 + e1 * e1 + e2 * e2))
-            if not fixed[i]:
-                short = max(short, eps_c - moved_distance[r])
-                closest = min(closest, moved_distance[r])
-            for a in range(3):
-                points[i, a] = moved[r, a]
-                normal[i, a] = moved_normal[r, a]
-            distance[i] = moved_distance[r]
-            near[i] = moved_near[r]
-        max_step[t] = longest
-        shortfall[t] = short
-        min_clearance[t] = closest
-
-
-@kernel
-def strand_clearances(strands, offsets, distance, fixed, eps_c, shortfall, clearance):
-    """Per listed strand ``(T,) int64``: the largest ``eps_c - distance`` of a free particle (-inf without one)
-    into ``shortfall (T,)``, and the smallest distance of a free particle (inf without one) into ``clearance (T,)``."""
-    for t in range(len(strands)):
-        short = -np.inf
-        closest = np.inf
-        for i in range(offsets[strands[t]], offsets[strands[t] + 1]):
-            if not fixed[i]:
-                short = max(short, eps_c - distance[i])
-                closest = min(closest, distance[i])
-        shortfall[t] = short
-        clearance[t] = closest
 
 
 @warms("hairport.solver.adaptation.strand_kernels")
@@ -647,21 +389,7 @@ def _warm() -> None:
     normal = np.zeros((n, 3))
     normal[:, 0] = 1.0
     near = np.isfinite(distance)
-    weight, gamma = np.ones(n), np.ones(n)
-    strands = np.arange(2, dtype=np.int64)
-    active = np.zeros(n, dtype=bool)
-    step = np.zeros((n, 3))
-    penalty = np.zeros(2)
-    rounds = np.zeros(2, dtype=np.int64)
-    predicted, merit = np.zeros(2), np.zeros(2)
-    newton_qp_steps(strands, offsets, points, distance, normal, near, directions, points, weight, points, gamma,
-                    fixed, 3e3, 1e3, 5e-4, np.ones(2), penalty, active, step, rounds, predicted, merit,
+    newton_qp_steps(np.arange(2, dtype=np.int64), offsets, points, distance, normal, near, directions, points,
+                    np.ones(n), points, np.ones(n), fixed, 3e3, 1e3, 5e-4, np.ones(2), np.zeros(2),
+                    np.zeros(n, dtype=np.bool_), np.zeros((n, 3)), np.zeros(2, dtype=np.int64), np.zeros(2),
                     1e-9, 0.2, 1e-12, 2.0, 50)
-    moved, free = np.empty((n, 3)), np.empty(n, dtype=bool)
-    gather_trial_points(strands, offsets, offsets, points, step, np.ones(2), fixed, moved, free)
-    trial_merits(strands, offsets, offsets, moved, distance, directions, points, weight, points, gamma, fixed,
-                 3e3, 1e3, penalty, 5e-4, 1e-9, merit)
-    commit_trial_points(strands, offsets, offsets, np.ones(2, dtype=bool), moved, distance, normal, near, fixed,
-                        5e-4, points, distance.copy(), normal.copy(), near.copy(), np.zeros(2), np.zeros(2),
-                        np.zeros(2))
-    strand_clearances(strands, offsets, distance, fixed, 5e-4, np.zeros(2), np.zeros(2))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.adaptation import banded, strand_kernels
+from hairport.solver.adaptation import strand_kernels
 from hairport.solver.adaptation.active_set import Frames, solve_qp
 from hairport.solver.adaptation.energies import (
     NEGATIVE_CURVATURE_SHARE,
@@ -12,7 +12,7 @@ from hairport.solver.adaptation.energies import (
     EnergyWeights,
     clamped_direction_hessians,
 )
-from hairport.solver.adaptation.strand_problem import StrandProblem, group_energies, newton_system
+from hairport.solver.adaptation.strand_problem import StrandProblem, newton_system
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 from tests.solver.adaptation.test_banded import random_block_tridiagonal
 
@@ -103,37 +103,6 @@ def test_contact_frames_and_rotation_match_the_frames_class():
     np.testing.assert_allclose(gradient, expected_gradient, rtol=0, atol=1e-14)
 
 
-@pytest.mark.parametrize("n", [1, 2, 8])
-def test_pinned_band_cholesky_solve_matches_banded(n):
-    rng = np.random.default_rng(3 + n)
-    diagonal, upper, _ = random_block_tridiagonal(n, rng)
-    rhs = rng.normal(size=(n, 3))
-    pinned = rng.random((n, 3)) < 0.3
-    pinned[0] = True
-    values = rng.normal(size=(n, 3))
-    expected = banded.solve_with_fixed(diagonal, upper, rhs, pinned, values)
-    # the kernel's pinned solve as active_set_qp does it: residual of the pinned values, then the free unknowns
-    start = np.where(pinned, values, 0.0)
-    product = np.empty((n, 3))
-    strand_kernels.block_matvec(diagonal, upper, start, product)
-    np.testing.assert_allclose(product, banded.matvec(diagonal, upper, start), rtol=0, atol=1e-13)
-    x = np.where(pinned, 0.0, rhs - product).ravel()
-    band = np.empty((3 * n, 6))
-    strand_kernels.pinned_band(diagonal, upper, pinned, band)
-    assert strand_kernels.band_cholesky(band)
-    strand_kernels.band_solve(band, x)
-    np.testing.assert_allclose(start + x.reshape(n, 3), expected, rtol=0, atol=1e-12)
-
-
-def test_band_cholesky_refuses_an_indefinite_matrix():
-    rng = np.random.default_rng(4)
-    diagonal, upper, _ = random_block_tridiagonal(4, rng)
-    diagonal[2] *= -1.0
-    band = np.empty((12, 6))
-    strand_kernels.pinned_band(diagonal, upper, np.zeros((4, 3), dtype=bool), band)
-    assert not strand_kernels.band_cholesky(band)
-
-
 def test_active_set_qp_of_a_strand_matches_solve_qp():
     """One strand's rotated QP by the kernel against :func:`active_set.solve_qp` (several constraints active)."""
     rng = np.random.default_rng(5)
@@ -164,8 +133,8 @@ def test_active_set_qp_of_a_strand_matches_solve_qp():
     np.testing.assert_allclose(kernel_multipliers, multipliers, rtol=0, atol=1e-9 * np.abs(multipliers).max())
 
 
-def test_newton_qp_steps_give_the_steps_predictions_and_merits_of_the_numpy_model():
-    """The fused kernel over a list of strands: steps, raised penalties, predicted change and merit per strand."""
+def test_newton_qp_steps_give_the_steps_and_predictions_of_the_numpy_model():
+    """The fused kernel over a list of strands: steps, active sets, raised penalties, predicted change per strand."""
     rng = np.random.default_rng(6)
     problem, points = random_problem(rng)
     n, s = problem.n_particles, problem.n_strands
@@ -180,11 +149,11 @@ def test_newton_qp_steps_give_the_steps_predictions_and_merits_of_the_numpy_mode
     active = np.zeros(n, dtype=bool)
     step = np.zeros((n, 3))
     rounds = np.zeros(4, dtype=np.int64)
-    predicted, merit = np.zeros(4), np.zeros(4)
+    predicted = np.zeros(4)
     strand_kernels.newton_qp_steps(
         strands, problem.offsets, points, distance, normal, near, problem.source_directions, problem.initial,
         problem.coupling.diagonal(), problem.features, problem.gamma, problem.fixed, WEIGHTS.alpha, WEIGHTS.beta,
-        eps_c, damping, penalty, active, step, rounds, predicted, merit, MIN_SEGMENT_LENGTH,
+        eps_c, damping, penalty, active, step, rounds, predicted, MIN_SEGMENT_LENGTH,
         NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, 2.0, 50)
     for t, strand in enumerate(strands):
         sub, rows = problem.strand_run(int(strand), int(strand) + 1)
@@ -200,63 +169,6 @@ def test_newton_qp_steps_give_the_steps_predictions_and_merits_of_the_numpy_mode
         assert predicted[t] == pytest.approx(expected_change, rel=1e-9, abs=1e-15)
         raised = max([0.0, 5.0, 7.0, 1e6, 0.0][strand], 2.0 * np.abs(multipliers).max(initial=0.0))
         assert penalty[strand] == pytest.approx(raised, rel=1e-9)
-        expected_merit = group_energies(sub, points[rows], WEIGHTS, np.zeros(m, dtype=np.int64), 1, raised,
-                                        distance[rows], eps_c)[0]
-        assert merit[t] == pytest.approx(expected_merit, rel=1e-12)
     assert np.all(step[problem.offsets[2]:problem.offsets[3]] == 0.0) and penalty[2] == 7.0
     assert penalty[3] == 1e6  # a running maximum
     assert (rounds >= 1).all() and active.any()
-
-
-def test_line_search_kernels_gather_price_and_commit_trial_points():
-    rng = np.random.default_rng(7)
-    problem, points = random_problem(rng)
-    n = problem.n_particles
-    step = rng.normal(scale=1e-3, size=(n, 3))
-    strands = np.array([0, 3, 4], dtype=np.int64)
-    fraction = np.array([1.0, 0.5, 0.25])
-    packed = np.concatenate([[0], np.cumsum(np.diff(problem.offsets)[strands])]).astype(np.int64)
-    index = np.concatenate([np.arange(problem.offsets[s], problem.offsets[s + 1]) for s in strands])
-    moved, free = np.empty((packed[-1], 3)), np.empty(packed[-1], dtype=bool)
-    strand_kernels.gather_trial_points(strands, problem.offsets, packed, points, step, fraction, problem.fixed,
-                                       moved, free)
-    per_particle = np.repeat(fraction, np.diff(packed))
-    np.testing.assert_array_equal(moved, points[index] + per_particle[:, None] * step[index])
-    np.testing.assert_array_equal(free, ~problem.fixed[index])
-
-    moved_distance = rng.normal(scale=1e-3, size=len(index))
-    moved_distance[::4] = np.inf
-    penalty = rng.uniform(0.0, 10.0, problem.n_strands)
-    merit = np.zeros(3)
-    strand_kernels.trial_merits(strands, problem.offsets, packed, moved, moved_distance, problem.source_directions,
-                                problem.initial, problem.coupling.diagonal(), problem.features, problem.gamma,
-                                problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, penalty, 5e-4, MIN_SEGMENT_LENGTH, merit)
-    trial = points.copy()
-    trial[index] = moved
-    trial_distance = np.full(n, np.inf)
-    trial_distance[index] = moved_distance
-    expected = group_energies(problem, trial, WEIGHTS, problem.strand_of, problem.n_strands,
-                              penalty[problem.strand_of], trial_distance, 5e-4)
-    np.testing.assert_allclose(merit, expected[strands], rtol=1e-13)
-
-    take = np.array([True, False, True])
-    committed, distance, normal, near = points.copy(), np.zeros(n), np.zeros((n, 3)), np.zeros(n, dtype=bool)
-    moved_normal, moved_near = unit(rng.normal(size=(len(index), 3))), np.isfinite(moved_distance)
-    max_step, shortfall, clearance = np.zeros(3), np.zeros(3), np.zeros(3)
-    strand_kernels.commit_trial_points(strands, problem.offsets, packed, take, moved, moved_distance, moved_normal,
-                                       moved_near, problem.fixed, 5e-4, committed, distance, normal, near,
-                                       max_step, shortfall, clearance)
-    for t, s in enumerate(strands):
-        rows = slice(problem.offsets[s], problem.offsets[s + 1])
-        mine = slice(packed[t], packed[t + 1])
-        if not take[t]:
-            np.testing.assert_array_equal(committed[rows], points[rows])
-            continue
-        np.testing.assert_array_equal(committed[rows], moved[mine])
-        np.testing.assert_array_equal(distance[rows], moved_distance[mine])
-        np.testing.assert_array_equal(normal[rows], moved_normal[mine])
-        np.testing.assert_array_equal(near[rows], moved_near[mine])
-        assert max_step[t] == pytest.approx(np.linalg.norm(moved[mine] - points[rows], axis=1).max(), rel=1e-15)
-        free_distance = moved_distance[mine][~problem.fixed[rows]]
-        assert shortfall[t] == 5e-4 - free_distance.min()
-        assert clearance[t] == free_distance.min()
