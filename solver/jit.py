@@ -87,6 +87,9 @@ KERNEL_MODULES: tuple[str, ...] = (
     "hairport.solver.transfer.smoothing",
     "hairport.solver.mesh.closest_kernels",
     "hairport.solver.mesh.distance_grid",
+    "hairport.solver.adaptation.band_kernels",
+    "hairport.solver.adaptation.strand_kernels",
+    "hairport.solver.adaptation.line_search_kernels",
 )
 
 

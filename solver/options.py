@@ -115,8 +115,9 @@ class RetargetOptions:
     """Target-side parameters (Table 1, meters) and the method.
 
     ``method`` is ``multiscale`` (Sec. 5), ``global`` (Eq. 1 over all strands coupled) or a
-    baseline name, optionally with the ``+pushout`` suffix. ``workers`` processes share the
-    multi-scale fine level (``None``: the CPUs available), in chunks of ``chunk_particles``.
+    baseline name, optionally with the ``+pushout`` suffix. The multi-scale fine level runs in
+    chunks of ``chunk_particles``, in this process on numba's threads (``workers`` ``None`` or
+    1), or in ``workers`` processes.
     ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
     active-set method of :mod:`~hairport.solver.adaptation.active_set` or OSQP. ``hairline`` edits the front
     hairline (Sec. 6; solver methods only).

@@ -23,7 +23,7 @@ from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.multiscale import MultiscaleReport, default_workers, multiscale_model, solve_multiscale
+from hairport.solver.adaptation.multiscale import MultiscaleReport, multiscale_model, solve_multiscale
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
@@ -274,7 +274,7 @@ def adapt_shape(
         grid = DistanceGrid.build(target_query, region=reach)
     points, report = solve_multiscale(
         hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
-        weights, solve_options, gamma=gamma, start=start, workers=options.workers or default_workers(),
+        weights, solve_options, gamma=gamma, start=start, workers=options.workers or 1,
         chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
         progress=solver_progress, should_stop=should_stop,
     )

@@ -52,7 +52,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
     p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))
     p.add_argument("--max-iterations", type=option_type("max_iterations"), default=_DEFAULTS.max_iterations, help=option_help("max_iterations"))
-    p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: CPUs"))
+    p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: 1, this process on its threads"))
     p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
     add_hairline_arguments(p)

@@ -48,12 +48,17 @@ from hairport.solver.adaptation import banded
 from hairport.solver.adaptation.constraints import BodyDistance, fixed_coordinates, linearised_clearance, push_out_short
 from hairport.solver.adaptation.coupled_kernels import RotatedHessian, reference_pinned_solve
 from hairport.solver.adaptation.energies import EnergyWeights
+from hairport.solver.adaptation.fine_solve import pull_weights, solve_uncoupled
 from hairport.solver.adaptation.options import (
     BACKTRACK_FACTOR,
+    ENGINE_COMPILED,
+    ENGINES,
     INITIAL_RADIAL_DAMPING,
+    MAX_ACTIVE_SET_ROUNDS,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
     SOLVE_STAGE,
+    STALLED_ITERATIONS,
     Cancelled,
     SolveOptions,
     SolveReport,
@@ -64,11 +69,6 @@ from hairport.solver.model.progress import ProgressFn
 
 #: this backend's name in :data:`.coupled.QP_BACKENDS` and in its reports
 BACKEND = "active-set"
-#: active-set rounds per QP before the last iterate is taken (they converge in a few)
-MAX_ACTIVE_SET_ROUNDS = 50
-#: a group stops once this many iterations in a row lowered its merit by less than the energy
-#: tolerance: one short, backtracked step says little about the minimum
-STALLED_ITERATIONS = 2
 #: conjugate gradients stop at this residual relative to the zero step's (the pinned values alone) ...
 CG_RELATIVE_TOLERANCE = 1e-6
 #: ... or at this one in the rounds of a coupled QP whose active set is still changing: their
@@ -332,6 +332,7 @@ def solve_strands(
     start: np.ndarray | None = None,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    engine: str = ENGINE_COMPILED,
 ) -> tuple[np.ndarray, SolveReport]:
     """Minimise Eq. 1 under Eq. 12-13 by sequential QPs (Sec. 4.6).
 
@@ -339,7 +340,17 @@ def solve_strands(
     Eq. 1 plus an l1 penalty on clearance short of ``eps_c``, with a second-order correction
     (particles a step leaves short of ``eps_c`` are projected back out along the normal:
     the linearised half-spaces ignore the body's curvature, and without it the loop zig-zags
-    along the surface). Uncoupled strands each run this loop on their own.
+    along the surface). Uncoupled strands each run this loop on their own, with their own
+    merit penalty (so a strand's result does not depend on the strands solved with it); with
+    a diagonal ``K`` the compiled loop of :mod:`.fine_solve` runs it unless ``engine`` asks
+    for this numpy code, its reference.
+
+    A group stops when no particle moved more than ``step_tolerance`` or its merit fell by
+    less than ``energy_tolerance`` (relative) in :data:`.options.STALLED_ITERATIONS`
+    iterations in a row, with its clearance kept. An uncoupled strand also stops after one
+    such iteration when its QP predicted a decrease below the tolerance too (the model agrees
+    the minimum is near), and when no trial of its line search lowered the merit it stays where
+    it is, which counts as such an iteration.
 
     Parameters
     ----------
@@ -355,6 +366,9 @@ def solve_strands(
         ``progress("solve", fraction, message)`` after every outer iteration.
     should_stop : callable() -> bool, optional
         Polled once per outer iteration; True raises :class:`.options.Cancelled`.
+    engine : str
+        One of :data:`.options.ENGINES`: ``"compiled"`` (a diagonal ``K`` only; others take
+        the numpy path) or ``"numpy"``.
 
     Returns
     -------
@@ -362,6 +376,12 @@ def solve_strands(
     report : SolveReport
         With the active-set fields (``groups``, ``active_set_rounds``, ...).
     """
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
+    if engine == ENGINE_COMPILED and pull_weights(problem.coupling) is not None:
+        points, report = solve_uncoupled(problem, distance, weights, options, start, progress, should_stop)
+        report.backend = BACKEND
+        return points, report
     began = time.perf_counter()
     points = np.array(problem.initial if start is None else start, dtype=np.float64)
     coupled = problem.coupled
@@ -374,7 +394,7 @@ def solve_strands(
     open_groups = np.arange(n_groups)
     small_steps = np.zeros(n_groups, dtype=np.int64)  # consecutive iterations below the energy tolerance
     dist_all, normal_all, near_all = distance(points)
-    penalty = 0.0
+    penalty = np.zeros(n_groups)  # the merit's l1 penalty, each group's own running maximum
     for iteration in range(options.max_iterations):
         if len(open_groups) == 0:
             break
@@ -399,13 +419,16 @@ def solve_strands(
         report.active_set_rounds.append(rounds)
         report.cg_steps.append(cg_steps)
         report.open_groups.append(k)
-        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(multipliers), initial=0.0)))
-        merit_now = group_energies(sub, p, weights, group, k, penalty, dist, options.eps_c)
+        largest = np.zeros(k)
+        np.maximum.at(largest, group, np.abs(multipliers))
+        penalty[open_groups] = np.maximum(penalty[open_groups], MERIT_PENALTY_FACTOR * largest)
+        particle_penalty = penalty[open_groups][group]
+        merit_now = group_energies(sub, p, weights, group, k, particle_penalty, dist, options.eps_c)
         model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
         strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
         # uncoupled, a group is a strand: the per-strand merits are the group merits
         strand_merit_now = merit_now if not coupled else group_energies(
-            sub, p, weights, sub.strand_of, sub.n_strands, penalty, dist, options.eps_c)
+            sub, p, weights, sub.strand_of, sub.n_strands, particle_penalty, dist, options.eps_c)
 
         fraction = np.ones(k)
         accepted = np.zeros(k, dtype=bool)
@@ -422,16 +445,25 @@ def solve_strands(
                 d[short], nrm[short], nr[short] = d2, nrm2, nr2
             trial[todo] = moved
             trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
-            merit_trial = group_energies(sub, trial, weights, group, k, penalty, trial_dist, options.eps_c)
+            merit_trial = group_energies(sub, trial, weights, group, k, particle_penalty, trial_dist, options.eps_c)
             if attempt == 0:
                 strand_merit_trial = merit_trial if not coupled else group_energies(
-                    sub, trial, weights, sub.strand_of, sub.n_strands, penalty, trial_dist, options.eps_c)
+                    sub, trial, weights, sub.strand_of, sub.n_strands, particle_penalty, trial_dist, options.eps_c)
                 damping[strands] = adapt_damping(
                     damping[strands], strand_merit_trial - strand_merit_now, strand_predicted)
             accepted |= merit_trial <= merit_now
             if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
             fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
+        # uncoupled, a strand whose every trial raised the merit stays where it is (and the iteration
+        # counts towards its stall): the shortest step taken anyway made such strands oscillate
+        # until the cap; coupled, the shortest step is taken
+        failed = ~accepted if not coupled else np.zeros(k, dtype=bool)
+        if failed.any():
+            stay = failed[group]
+            trial[stay], trial_dist[stay], trial_normal[stay], trial_near[stay] = p[stay], dist[stay], normal[stay], near[stay]
+            merit_trial = np.where(failed, merit_now, merit_trial)
+            fraction = np.where(failed, 0.0, fraction)
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial
@@ -441,11 +473,15 @@ def solve_strands(
         np.maximum.at(max_step, group, moved_by)
         shortfall = np.full(k, -np.inf)
         np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
+        threshold = options.energy_tolerance * np.abs(merit_now)
         decrease = merit_now - merit_trial
-        small = (decrease >= 0) & (decrease < options.energy_tolerance * np.abs(merit_now))
+        small = ((decrease >= 0) & (decrease < threshold)) | failed
         small_steps[open_groups] = np.where(small, small_steps[open_groups] + 1, 0)
         stalled = small_steps[open_groups] >= STALLED_ITERATIONS
-        done = ((max_step < options.step_tolerance) | stalled) & (shortfall <= options.clearance_tolerance)
+        if not coupled:
+            # one small decrease suffices where the QP's model also predicted a small one
+            stalled |= small & (-strand_predicted < threshold)
+        done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))

@@ -5,8 +5,10 @@
    the coupled solver of :mod:`.coupled`.
 3. Fine level (Eq. 14): every other ("normal") particle takes its kNN from guide particles
    only; with the guides adapted, these neighbours are constants and all normal strands
-   are independent (:mod:`.active_set`). They are solved in chunks of whole strands, so
-   memory stays bounded, optionally in parallel processes.
+   are independent (:mod:`.active_set`; compiled per-strand kernels, :mod:`.fine_solve`).
+   They are solved in chunks of whole strands, so memory stays bounded, in this process on
+   numba's threads, or optionally in worker processes (measured slower at 10^5 on two cores,
+   and each process holds ~0.5 GB: bench/fine_stage.py).
 
 Convention: particles ``(N, 3) float64`` in meters, CSR strands
 (:mod:`hairport.solver.model.hair`); guide ids are strand indices into the full hairstyle.
@@ -14,7 +16,6 @@ Convention: particles ``(N, 3) float64`` in meters, CSR strands
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -30,14 +31,18 @@ from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
 from hairport.solver.adaptation.guides import select_guides
 from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator, neighbour_average
-from hairport.solver.adaptation.options import SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
+from hairport.solver.adaptation.options import ENGINE_COMPILED, SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import StrandProblem
+from hairport.solver.jit import set_threads, threads
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair, particle_indices
 from hairport.solver.model.progress import ProgressFn, rescaled
 
-#: particles per fine-level chunk: bounds the fine solve's working memory (~1 kB per particle)
+#: particles per fine-level chunk: bounds the fine solve's working memory, measured at 10^5
+#: particles (tracemalloc's peak over a chunk's solve): ~470 B a chunk particle for the compiled
+#: loop, ~280 of them the distance query's temporaries on a whole-chunk batch (1.6 kB for the
+#: numpy reference)
 DEFAULT_CHUNK_PARTICLES = 200_000
 #: particles outside the body and farther than this from it (by the distance grid's bound)
 #: get no exact closest-point query and no Eq. 13 constraint in an iteration (m); it exceeds
@@ -159,11 +164,6 @@ class MultiscaleReport:
         return (self.coarse.pushed_out if self.coarse else 0) + sum(f.pushed_out for f in self.fine)
 
 
-def default_workers() -> int:
-    """Processes for the fine level: the CPUs this process may use."""
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
-
-
 def chunk_strands(counts: np.ndarray, chunk_particles: int) -> list[np.ndarray]:
     """Split strands with ``counts (R,)`` particles into consecutive runs of at most ``chunk_particles`` particles
     (a strand longer than that is a chunk of its own)."""
@@ -188,9 +188,122 @@ def _labelled(progress: ProgressFn, label: str) -> ProgressFn:
 
 
 def _solve_chunk(args) -> tuple[np.ndarray, SolveReport]:
-    problem, start, query, grid, weights, options = args
+    problem, start, query, grid, weights, options, engine, threads = args
+    set_threads(threads)
     distance = BodyDistance(query, CONTACT_BAND, grid)
-    return solve_strands(problem, distance, weights, options, start=start)
+    return solve_strands(problem, distance, weights, options, start=start, engine=engine)
+
+
+def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: np.ndarray, initial: np.ndarray,
+                 gamma: np.ndarray) -> StrandProblem:
+    """Eq. 14 over the normal strands, with the guides where ``points`` has them.
+
+    Each normal particle is pulled towards its guide neighbours' weighted mean plus its source
+    offset from them (``K`` diagonal: every strand is its own problem).
+
+    Parameters
+    ----------
+    hair : Hair
+    model : MultiscaleModel
+    fine : FineSource
+    points : (N, 3) float64
+        The whole hairstyle; only the guides' rows are read.
+    initial : (N, 3) float64
+        ``p-hat`` of the whole hairstyle.
+    gamma : (N,) float64
+        Eq. 21's weights.
+
+    Returns
+    -------
+    problem : StrandProblem
+        Over ``fine.particles`` (``len(fine.strands)`` strands).
+    """
+    nb = model.fine_neighbours
+    pull_target = neighbour_average(nb, points) + fine.source_features
+    counts = hair.counts[fine.strands]
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return StrandProblem(
+        offsets, fine.source_directions, initial[fine.particles], sp.diags(fine.pull_weight, format="csr"),
+        pull_target, gamma[fine.particles], hair.is_root[fine.particles],
+    )
+
+
+def solve_fine_level(
+    problem: StrandProblem,
+    start: np.ndarray,
+    target: MeshQuery,
+    weights: EnergyWeights = EnergyWeights(),
+    options: SolveOptions = SolveOptions(),
+    grid: DistanceGrid | None = None,
+    workers: int = 1,
+    chunk_particles: int = DEFAULT_CHUNK_PARTICLES,
+    engine: str = ENGINE_COMPILED,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray, list[SolveReport], int]:
+    """Eq. 14's independent strands, in chunks of whole strands (:func:`chunk_strands`).
+
+    Parameters
+    ----------
+    problem : StrandProblem
+        :func:`fine_problem`.
+    start : (n, 3) float64
+        First iterate of its particles.
+    target : MeshQuery
+    weights : EnergyWeights
+    options : SolveOptions
+    grid : DistanceGrid, optional
+        Broad phase of the target's distance.
+    workers : int
+        1: the chunks one after the other in this process, each on all of numba's threads;
+        more: that many processes (each with its share of the threads).
+    chunk_particles : int
+        Particles per chunk: bounds the working memory.
+    engine : str
+        :data:`.options.ENGINES`: the compiled loop or its numpy reference.
+    progress : ProgressFn, optional
+        ``strands: chunk i/n`` after each chunk.
+    should_stop : callable() -> bool, optional
+        Polled once per outer iteration in this process, after every chunk with workers.
+
+    Returns
+    -------
+    points : (n, 3) float64
+    reports : list of SolveReport
+        One per chunk.
+    workers : int
+        Processes used (1: this one).
+    """
+    points = np.array(start, dtype=np.float64)
+    counts = np.diff(problem.offsets)
+    chunks = chunk_strands(counts, chunk_particles)
+    workers = max(1, min(workers, len(chunks)))
+    reports: list[SolveReport] = []
+
+    def store(number: int, rows: slice, solved: np.ndarray, chunk_report: SolveReport) -> None:
+        points[rows] = solved
+        reports.append(chunk_report)
+        if progress is not None:
+            progress(SOLVE_STAGE, (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
+
+    # chunks are runs of consecutive strands: their problems are views, not copies
+    pieces = [problem.strand_run(int(chunk[0]), int(chunk[-1]) + 1) for chunk in chunks]
+    if workers == 1:
+        distance = BodyDistance(target, CONTACT_BAND, grid)
+        for number, (piece, rows) in enumerate(pieces):
+            store(number, rows, *solve_strands(piece, distance, weights, options, start=start[rows],
+                                               should_stop=should_stop, engine=engine))
+        return points, reports, workers
+    # the query pickles without its trees (rebuilt in the worker), with its inside test
+    threads_each = max(1, threads() // workers)
+    jobs = ((piece, start[rows], target, grid, weights, options, engine, threads_each) for piece, rows in pieces)
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+        for number, result in enumerate(pool.map(_solve_chunk, jobs)):
+            store(number, pieces[number][1], *result)
+            if should_stop is not None and should_stop():
+                pool.shutdown(cancel_futures=True)
+                raise Cancelled("solve cancelled")
+    return points, reports, workers
 
 
 def solve_multiscale(
@@ -210,6 +323,7 @@ def solve_multiscale(
     backend: str = "active-set",
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    engine: str = ENGINE_COMPILED,
 ) -> tuple[np.ndarray, MultiscaleReport]:
     """Eq. 1 by the two levels of Sec. 5.
 
@@ -233,7 +347,7 @@ def solve_multiscale(
         First iterate (``initial`` by default); the roots stay where it puts them (Eq. 12,
         relocated roots after a hairline edit).
     workers : int
-        Processes for the fine level (1: in this process).
+        Processes for the fine level (1: in this process, on numba's threads).
     chunk_particles : int
         Particles per fine-level chunk.
     grid : DistanceGrid, optional
@@ -244,7 +358,11 @@ def solve_multiscale(
         The coarse level's iterations as ``guides: ...`` in ``[0, COARSE_PROGRESS_SHARE]``,
         then ``strands: chunk i/n`` up to 1.
     should_stop : callable() -> bool, optional
-        Polled by the coarse level once per iteration, by the fine level per chunk.
+        Polled once per outer iteration of either level (per chunk when the fine level runs
+        in worker processes).
+    engine : str
+        How the fine level's loop runs (:data:`.options.ENGINES`): compiled kernels, or the
+        numpy reference.
 
     Returns
     -------
@@ -275,48 +393,11 @@ def solve_multiscale(
 
     began = time.perf_counter()
     if len(fine.strands):
-        nb = model.fine_neighbours
-        pull_target = neighbour_average(nb, points) + fine.source_features
-        is_root = hair.is_root[fine.particles]
-        counts = hair.counts[fine.strands]
-        offsets = np.concatenate([[0], np.cumsum(counts)])
-        problem = StrandProblem(
-            offsets, fine.source_directions, initial[fine.particles], sp.diags(fine.pull_weight, format="csr"),
-            pull_target, gamma_all[fine.particles], is_root,
+        problem = fine_problem(hair, model, fine, points, initial, gamma_all)
+        points[fine.particles], report.fine, report.workers = solve_fine_level(
+            problem, first[fine.particles], target, weights, options, grid, workers, chunk_particles, engine,
+            fine_progress, should_stop,
         )
-        chunks = chunk_strands(counts, chunk_particles)
-        report.chunks = len(chunks)
-        report.workers = max(1, min(workers, len(chunks)))
-        indices: list[np.ndarray] = []
-
-        fine_start = first[fine.particles]
-
-        def pieces():
-            # one chunk's copy at a time in this process (the pool keeps its own queue)
-            for chunk in chunks:
-                piece, index = problem.subset(chunk)
-                indices.append(index)
-                yield piece, fine_start[index]
-
-        def store(number: int, solved: np.ndarray, fine_report: SolveReport) -> None:
-            points[fine.particles[indices[number]]] = solved
-            report.fine.append(fine_report)
-            fine_progress(SOLVE_STAGE, (number + 1) / len(chunks), f"strands: chunk {number + 1}/{len(chunks)}")
-
-        if report.workers == 1:
-            distance = BodyDistance(target, CONTACT_BAND, grid)
-            for number, (piece, piece_start) in enumerate(pieces()):
-                store(number, *solve_strands(piece, distance, weights, options, start=piece_start,
-                                             should_stop=should_stop))
-        else:
-            # the query pickles without its trees (rebuilt in the worker), with its inside test
-            jobs = ((piece, piece_start, target, grid, weights, options)
-                    for piece, piece_start in pieces())
-            with ProcessPoolExecutor(report.workers, mp_context=get_context("spawn")) as pool:
-                for number, result in enumerate(pool.map(_solve_chunk, jobs)):
-                    store(number, *result)
-                    if should_stop is not None and should_stop():
-                        pool.shutdown(cancel_futures=True)
-                        raise Cancelled("solve cancelled")
+        report.chunks = len(report.fine)
     report.fine_seconds = time.perf_counter() - began
     return points, report

@@ -14,6 +14,12 @@ BACKTRACK_FACTOR = 0.5
 #: ... and after this many tries the shortest step is taken anyway
 MAX_BACKTRACKS = 6
 
+#: active-set rounds per QP before the last iterate is taken (they converge in a few)
+MAX_ACTIVE_SET_ROUNDS = 50
+#: a group stops once this many iterations in a row lowered its merit by less than the energy
+#: tolerance: one short, backtracked step says little about the minimum
+STALLED_ITERATIONS = 2
+
 #: radial damping of Eq. 7's curvature model (see energies.shape_blocks): start, bounds, factor
 INITIAL_RADIAL_DAMPING = 1.0
 MIN_RADIAL_DAMPING = 1e-4
@@ -24,6 +30,12 @@ DAMPING_FACTOR = 4.0
 DAMPING_RAISE_BELOW = 0.25
 #: ... and one above this share lowers it
 DAMPING_LOWER_ABOVE = 0.75
+
+#: how the active-set loop runs over uncoupled strands (a diagonal ``K``, Eq. 14's fine level):
+#: on compiled per-strand kernels (:mod:`.fine_solve`), or in numpy, the readable reference
+ENGINE_COMPILED = "compiled"
+ENGINE_NUMPY = "numpy"
+ENGINES = (ENGINE_COMPILED, ENGINE_NUMPY)
 
 #: the stage under which the solvers report progress (``progress(stage, fraction, message)``)
 SOLVE_STAGE = "solve"

@@ -110,6 +110,27 @@ class StrandProblem:
         )
 
 
+    def strand_run(self, first: int, stop: int) -> tuple["StrandProblem", slice]:
+        """The problem over the consecutive strands ``first .. stop - 1`` and their particles' slice.
+
+        Its arrays are views of this problem's (no copy); only meaningful for an uncoupled problem
+        (couplings to other strands are dropped).
+        """
+        rows = slice(int(self.offsets[first]), int(self.offsets[stop]))
+        return (
+            StrandProblem(
+                self.offsets[first:stop + 1] - self.offsets[first],
+                self.source_directions[rows],
+                self.initial[rows],
+                self.coupling[rows, rows].tocsr(),
+                self.features[rows],
+                self.gamma[rows],
+                self.fixed[rows],
+            ),
+            rows,
+        )
+
+
 def problem_from_shape_model(
     model: ShapeModel, offsets: np.ndarray, initial: np.ndarray, fixed: np.ndarray, gamma: np.ndarray | None = None
 ) -> StrandProblem:
@@ -126,11 +147,12 @@ def problem_from_shape_model(
 
 def group_energies(
     problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, group: np.ndarray, n_groups: int,
-    penalty: float = 0.0, distance: np.ndarray | None = None, eps_c: float = 0.0,
+    penalty: float | np.ndarray = 0.0, distance: np.ndarray | None = None, eps_c: float = 0.0,
 ) -> np.ndarray:
     """Eq. 1 summed per group ``(n_groups,)`` of particles (``group (N,)``), plus ``penalty``
-    times the clearance short of ``eps_c`` (:func:`.constraints.clearance_violation`) when
-    ``distance (N,)`` is given: the active-set line search's merit."""
+    (a number, or one per particle ``(N,)``) times the clearance short of ``eps_c``
+    (:func:`.constraints.clearance_violation`) when ``distance (N,)`` is given: the
+    active-set line search's merit."""
     seg = problem.segment_starts
     _, unit = unit_rows(points[seg + 1] - points[seg])
     per_particle = np.zeros(problem.n_particles)
@@ -138,7 +160,7 @@ def group_energies(
     residual = problem.coupling @ points - problem.features
     per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
     per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
-    if distance is not None and penalty > 0:
+    if distance is not None and np.any(np.asarray(penalty) > 0):
         per_particle += penalty * clearance_violation(distance, eps_c, problem.fixed)
     return np.bincount(group, per_particle, minlength=n_groups)
 
