@@ -12,8 +12,8 @@ the runs plus the largest worker's), the largest distance between the engines' r
 and the strands still open per iteration. ``--workers`` adds the compiled engine in that
 many processes (the process pool).
 
-    python bench/fine_stage.py [--size 1e5] [--guides 300] [--runs 3] [--engines numpy compiled] [--workers 2]
-                               [--chunk-particles 20000]
+    python bench/fine_stage.py [--size 1e5] [--guides 300] [--style long] [--runs 3] [--engines numpy compiled]
+                               [--workers 2] [--chunk-particles 20000]
 
 Prints figures; not a test. Times are wall-clock seconds on this machine.
 """
@@ -77,6 +77,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", default="1e5", help="particles of the groom")
     parser.add_argument("--guides", type=int, default=300)
+    parser.add_argument("--style", default=STYLE, help="groom style (the fringe's strands converge slowest)")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--engines", nargs="+", default=["numpy", "compiled"])
     parser.add_argument("--workers", type=int, default=1, help="also run the compiled engine in this many processes")
@@ -87,7 +88,7 @@ def main() -> None:
     from hairport.solver.jit import threads, warm_up
 
     warm_up()
-    problem, start, body, grid, weights, options = fine_level_case(int(float(args.size)), args.guides)
+    problem, start, body, grid, weights, options = fine_level_case(int(float(args.size)), args.guides, args.style)
     n = problem.n_particles
     print(f"fine level: {n} particles, {problem.n_strands} strands, {threads()} numba threads, "
           f"median of {args.runs}")
