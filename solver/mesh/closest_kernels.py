@@ -121,12 +121,8 @@ def build_nodes(centroids, lower, upper, leaf_faces):
             for k in range(1, 3):
                 if high[k] - low[k] > high[axis] - low[axis]:
                     axis = k
-            part = order[start:stop].copy()
-            keys = np.empty(stop - start)
-            for i in range(stop - start):
-                keys[i] = centroids[part[i], axis]
-            order[start:stop] = part[np.argsort(keys, kind="mergesort")]
             middle = (start + stop) // 2
+            _select(centroids, order, start, stop, axis, middle)
         left = nodes
         nodes += 2
         child[node] = left
@@ -137,6 +133,31 @@ def build_nodes(centroids, lower, upper, leaf_faces):
         top += 1
         todo_node[top], todo_start[top], todo_stop[top], todo_depth[top] = left, start, middle, depth + 1
     return boxes[:nodes].copy(), child[:nodes].copy(), first[:nodes].copy(), count[:nodes].copy(), order
+
+
+@kernel
+def _select(centroids, order, start, stop, axis, middle):
+    """Reorder ``order[start:stop]`` so that no centroid before ``middle`` lies above, and none
+    after it below, the one at ``middle`` along ``axis`` (Hoare's selection)."""
+    lo, hi = start, stop - 1
+    while lo < hi:
+        pivot = centroids[order[(lo + hi) // 2], axis]
+        i, j = lo, hi
+        while i <= j:
+            while centroids[order[i], axis] < pivot:
+                i += 1
+            while centroids[order[j], axis] > pivot:
+                j -= 1
+            if i <= j:
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        if middle <= j:
+            hi = j
+        elif middle >= i:
+            lo = i
+        else:
+            break
 
 
 @kernel
@@ -473,6 +494,19 @@ def _within(found, limit, out_triangles, out_squared):
     return kept
 
 
+@kernel
+def _sort_pairs(keys, values, n):
+    """Sort the first ``n`` ``keys`` increasing, ``values`` alongside (insertion sort: a cell's
+    few candidates)."""
+    for i in range(1, n):
+        key, value = keys[i], values[i]
+        j = i - 1
+        while j >= 0 and keys[j] > key:
+            keys[j + 1], values[j + 1] = keys[j], values[j]
+            j -= 1
+        keys[j + 1], values[j + 1] = key, value
+
+
 @parallel_kernel
 def fill_cells(keys, origin, size, half_diagonal, boxes, child, first, count, rank, table,
                out_triangles, out_squared, out_found):
@@ -488,10 +522,7 @@ def fill_cells(keys, origin, size, half_diagonal, boxes, child, first, count, ra
         found = _candidates(cx, cy, cz, reach, boxes, child, first, count, table, stack, stack_squared,
                             out_triangles[cell], out_squared[cell])
         out_found[cell] = found
-        if found > 1:
-            order = np.argsort(out_squared[cell, :found])
-            out_triangles[cell, :found] = out_triangles[cell, :found][order]
-            out_squared[cell, :found] = out_squared[cell, :found][order]
+        _sort_pairs(out_squared[cell], out_triangles[cell], found)
 
 
 @kernel
