@@ -322,6 +322,8 @@ def _search(px, py, pz, hint, boxes, child, first, count, rank, table, stack_nod
 @parallel_kernel
 def closest_kernel(points, hints, boxes, child, first, count, faces, rank, table,
                     out_faces, out_closest, out_coordinates, out_squared):
+    """Per point (parallel): the face holding its closest point (``-1`` if not finite), the point,
+    its ``(v, w)`` and squared distance, into the outputs (see :func:`.bvh.closest_points`)."""
     n = len(points)
     hinted = len(hints) == n
     tasks = (n + POINTS_PER_TASK - 1) // POINTS_PER_TASK
@@ -375,6 +377,7 @@ def _lookup(key, slots):
 
 @kernel
 def lookup_all(keys, slots):
+    """:func:`_lookup` of each key."""
     out = np.empty(len(keys), dtype=np.int64)
     for i in range(len(keys)):
         out[i] = _lookup(keys[i], slots)
@@ -383,6 +386,7 @@ def lookup_all(keys, slots):
 
 @kernel
 def insert_cells(keys, values, slots):
+    """Store ``values[i]`` under ``keys[i]`` (linear probing; the table must have room)."""
     capacity = len(slots)
     for i in range(len(keys)):
         slot = _hash_slot(keys[i], capacity)
@@ -421,6 +425,7 @@ def _cell_key(px, py, pz, origin, inverse_size):
 
 @kernel
 def cell_keys(points, origin, inverse_size):
+    """:func:`_cell_key` of each point."""
     out = np.empty(len(points), dtype=np.int64)
     for i in range(len(points)):
         out[i] = _cell_key(points[i, 0], points[i, 1], points[i, 2], origin, inverse_size)
@@ -572,6 +577,10 @@ def _cached_scan(px, py, pz, origin, size, inverse_size, half_diagonal, slots, c
 def signed_kernel(points, hints, pseudonormals, boxes, child, first, count, faces, rank, table,
                    use_cells, fill_missing, origin, size, half_diagonal, slots, candidates, bounds,
                    out_distance, out_closest, out_normal, out_faces, out_feature):
+    """Per point (parallel): the signed distance by the pseudonormal of the closest feature
+    (see :func:`.signed_distance.signed_distance`), the closest face from the cells when
+    ``use_cells`` (a point whose cell is not cached yet gets face :data:`MISSING` and nothing
+    else when ``fill_missing``, else the tree's answer), from the tree otherwise."""
     n = len(points)
     hinted = len(hints) == n
     inverse_size = 1.0 / size
