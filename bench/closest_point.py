@@ -19,7 +19,8 @@ run, so load from other processes hits them alike; the ratio is igl's median ove
 method's. The CPU column is process time over all threads.
 
 With ``--compile``, two fresh processes over an empty numba cache time the warm-up of the
-kernel module: the first compiles and saves, the second loads the cache.
+kernel module (wall, and the process's CPU time with its imports): the first compiles and
+saves, the second loads the cache.
 
 With ``--retarget N``, multi-scale retargets (MakeHuman average female -> heavy male, a
 ``long`` groom of about N particles, one process: ``workers=1``) run round-robin with the
@@ -81,16 +82,18 @@ def check(reference, result, label):
 
 
 def compile_times():
-    """Seconds of the warm-up of WARM_MODULES in a first process (compiles) and a second (loads)."""
+    """(wall, CPU) seconds of the warm-up of WARM_MODULES in a first fresh process over an
+    empty numba cache (compiles) and in a second (loads the cache)."""
     code = (
         "import importlib, time; began = time.perf_counter()\n"
         f"for name in {WARM_MODULES!r}: importlib.import_module(name)._warm()\n"
-        "print(time.perf_counter() - began)"
+        "print(time.perf_counter() - began, time.process_time())"
     )
     with tempfile.TemporaryDirectory(prefix="numba-cache-") as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        return [float(subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True,
-                                     text=True).stdout) for _ in range(2)]
+        return [tuple(map(float, subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                                                capture_output=True, text=True).stdout.split()))
+                for _ in range(2)]
 
 
 def retargets(size, runs):
@@ -164,9 +167,10 @@ def main():
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     if args.compile:
-        first, second = compile_times()
-        print(f"kernel warm-up ({', '.join(m.rsplit('.', 1)[1] for m in WARM_MODULES)}): "
-              f"compile {first:.1f} s, cached load in a second process {second:.2f} s\n")
+        (first, first_cpu), (second, second_cpu) = compile_times()
+        print(f"kernel warm-up ({', '.join(m.rsplit('.', 1)[1] for m in WARM_MODULES)}): compile {first:.1f} s "
+              f"(process CPU {first_cpu:.1f} s), cached load in a second process {second:.2f} s (CPU {second_cpu:.2f} s, "
+              f"the process's imports included)\n")
 
     character = build_character(PRESETS["heavy-male"])
     vertices, faces = np.asarray(character.vertices, float), np.asarray(character.faces, np.int64)

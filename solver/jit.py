@@ -16,11 +16,19 @@ numpy implementation of the same step stays beside each kernel as the tested ref
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numba
+#: idle kernel threads sleep: by default libgomp (numba's OpenMP layer) spins for
+#: milliseconds after every parallel kernel, taking a core from the numpy code between
+#: kernel calls (measured: a 10^5 multi-scale retarget used 27 s of CPU against 21 s, its
+#: distance queries 7-12 s against 3 s of wall, ``bench/closest_point.py --retarget``).
+#: Read when numba starts its threads (the first parallel kernel call); an explicit setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numba  # noqa: E402 - after the thread policy
 
 #: numba options shared by every kernel: on-disk cache, no GIL (callable from threads),
 #: numpy's semantics for division by zero (inf/nan, no exception) so kernels match their

@@ -5,9 +5,9 @@ grid anchored at the mesh's lower corner, cell ``(i, j, k)`` centred at
 ``origin + size * (i + 1/2, j + 1/2, k + 1/2)``.
 
 Why: a solver asks for the closest points of the same particles every iteration, and they
-move little. A search down the tree (:mod:`.bvh`) visits ~20 nodes and ~10 triangles per
+move little. A search down the tree (:mod:`.bvh`) visits ~25 nodes and ~10 triangles per
 point (~1 us); a cell that remembers which faces can hold the closest point of any point in
-it answers with a few triangle tests.
+it answers with 3-4 triangle tests (2-4x faster, ``bench/closest_point.py``).
 
 Which faces: let ``c`` be the centre of a cell, ``r`` its half-diagonal and ``u`` the
 unsigned distance to the mesh. For a point ``p`` in the cell, its closest face ``f`` has
@@ -20,7 +20,8 @@ A cell with more than :data:`MAX_CANDIDATES` such faces (deep inside a body, far
 sends its points to the tree.
 
 Cells are filled on demand: the first query of a point in a cell not yet seen finds its
-candidates (a closest-point and a ball search in the tree), later ones reuse them. A cache
+candidates (one nearest-first search of the tree whose reach shrinks with the nearest face
+found, ~3 us), later ones reuse them. A cache
 belongs to one solve (:class:`~hairport.solver.adaptation.constraints.BodyDistance`), so
 it holds the cells its hair visits; :data:`MAX_CACHED_CANDIDATES` bounds it (it starts
 over when full). The kernels are in :mod:`.closest_kernels`.
@@ -44,17 +45,19 @@ from hairport.solver.mesh.closest_kernels import (
     z_order,
 )
 
-#: default cell edge (m): hair 0-2 cm from the body scans ~3-6 faces per point at 3 mm
-#: (``bench/closest_point.py``); smaller cells mean more cells to fill
+#: default cell edge (m): at 3 mm a point scans 2.7 faces on a groom's particles within 2 cm
+#: of the MakeHuman body, 3.8 on a 10^5 retarget's queries (9-11 candidates per cell);
+#: smaller cells scan fewer but need more filling, larger the reverse (2-5 mm measured
+#: within 10 % of one another on that retarget's queries)
 DEFAULT_CELL_SIZE = 3e-3
 
 #: candidates a cell keeps at most (below :data:`~.closest_kernels.COUNT_FACTOR` - 1); a cell
 #: that would need more answers by the tree
 MAX_CANDIDATES = 64
 
-#: candidates over all cells of one cache at most (8 bytes each: 64 MiB; a 10^6-particle
-#: groom's fine level visits ~3 M, ``bench/closest_point.py``); the cache starts over when a
-#: fill would pass it
+#: candidates over all cells of one cache at most (8 bytes each: 64 MiB; the particles of a
+#: 10^6 "long" groom within 2 cm of the body fill 0.53 M, a 10^5 retarget's fine level 0.6 M);
+#: the cache starts over when a fill would pass it
 MAX_CACHED_CANDIDATES = 1 << 23
 
 #: cells filled per call of the fill kernel (bounds its (cells, MAX_CANDIDATES) buffers)

@@ -121,12 +121,8 @@ def build_nodes(centroids, lower, upper, leaf_faces):
             for k in range(1, 3):
                 if high[k] - low[k] > high[axis] - low[axis]:
                     axis = k
-            part = order[start:stop].copy()
-            keys = np.empty(stop - start)
-            for i in range(stop - start):
-                keys[i] = centroids[part[i], axis]
-            order[start:stop] = part[np.argsort(keys, kind="mergesort")]
             middle = (start + stop) // 2
+            _select(centroids, order, start, stop, axis, middle)
         left = nodes
         nodes += 2
         child[node] = left
@@ -137,6 +133,31 @@ def build_nodes(centroids, lower, upper, leaf_faces):
         top += 1
         todo_node[top], todo_start[top], todo_stop[top], todo_depth[top] = left, start, middle, depth + 1
     return boxes[:nodes].copy(), child[:nodes].copy(), first[:nodes].copy(), count[:nodes].copy(), order
+
+
+@kernel
+def _select(centroids, order, start, stop, axis, middle):
+    """Reorder ``order[start:stop]`` so that no centroid before ``middle`` lies above, and none
+    after it below, the one at ``middle`` along ``axis`` (Hoare's selection)."""
+    lo, hi = start, stop - 1
+    while lo < hi:
+        pivot = centroids[order[(lo + hi) // 2], axis]
+        i, j = lo, hi
+        while i <= j:
+            while centroids[order[i], axis] < pivot:
+                i += 1
+            while centroids[order[j], axis] > pivot:
+                j -= 1
+            if i <= j:
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        if middle <= j:
+            hi = j
+        elif middle >= i:
+            lo = i
+        else:
+            break
 
 
 @kernel
@@ -301,6 +322,8 @@ def _search(px, py, pz, hint, boxes, child, first, count, rank, table, stack_nod
 @parallel_kernel
 def closest_kernel(points, hints, boxes, child, first, count, faces, rank, table,
                     out_faces, out_closest, out_coordinates, out_squared):
+    """Per point (parallel): the face holding its closest point (``-1`` if not finite), the point,
+    its ``(v, w)`` and squared distance, into the outputs (see :func:`.bvh.closest_points`)."""
     n = len(points)
     hinted = len(hints) == n
     tasks = (n + POINTS_PER_TASK - 1) // POINTS_PER_TASK
@@ -354,6 +377,7 @@ def _lookup(key, slots):
 
 @kernel
 def lookup_all(keys, slots):
+    """:func:`_lookup` of each key."""
     out = np.empty(len(keys), dtype=np.int64)
     for i in range(len(keys)):
         out[i] = _lookup(keys[i], slots)
@@ -362,6 +386,7 @@ def lookup_all(keys, slots):
 
 @kernel
 def insert_cells(keys, values, slots):
+    """Store ``values[i]`` under ``keys[i]`` (linear probing; the table must have room)."""
     capacity = len(slots)
     for i in range(len(keys)):
         slot = _hash_slot(keys[i], capacity)
@@ -400,6 +425,7 @@ def _cell_key(px, py, pz, origin, inverse_size):
 
 @kernel
 def cell_keys(points, origin, inverse_size):
+    """:func:`_cell_key` of each point."""
     out = np.empty(len(points), dtype=np.int64)
     for i in range(len(points)):
         out[i] = _cell_key(points[i, 0], points[i, 1], points[i, 2], origin, inverse_size)
@@ -473,6 +499,19 @@ def _within(found, limit, out_triangles, out_squared):
     return kept
 
 
+@kernel
+def _sort_pairs(keys, values, n):
+    """Sort the first ``n`` ``keys`` increasing, ``values`` alongside (insertion sort: a cell's
+    few candidates)."""
+    for i in range(1, n):
+        key, value = keys[i], values[i]
+        j = i - 1
+        while j >= 0 and keys[j] > key:
+            keys[j + 1], values[j + 1] = keys[j], values[j]
+            j -= 1
+        keys[j + 1], values[j + 1] = key, value
+
+
 @parallel_kernel
 def fill_cells(keys, origin, size, half_diagonal, boxes, child, first, count, rank, table,
                out_triangles, out_squared, out_found):
@@ -488,10 +527,7 @@ def fill_cells(keys, origin, size, half_diagonal, boxes, child, first, count, ra
         found = _candidates(cx, cy, cz, reach, boxes, child, first, count, table, stack, stack_squared,
                             out_triangles[cell], out_squared[cell])
         out_found[cell] = found
-        if found > 1:
-            order = np.argsort(out_squared[cell, :found])
-            out_triangles[cell, :found] = out_triangles[cell, :found][order]
-            out_squared[cell, :found] = out_squared[cell, :found][order]
+        _sort_pairs(out_squared[cell], out_triangles[cell], found)
 
 
 @kernel
@@ -541,6 +577,10 @@ def _cached_scan(px, py, pz, origin, size, inverse_size, half_diagonal, slots, c
 def signed_kernel(points, hints, pseudonormals, boxes, child, first, count, faces, rank, table,
                    use_cells, fill_missing, origin, size, half_diagonal, slots, candidates, bounds,
                    out_distance, out_closest, out_normal, out_faces, out_feature):
+    """Per point (parallel): the signed distance by the pseudonormal of the closest feature
+    (see :func:`.signed_distance.signed_distance`), the closest face from the cells when
+    ``use_cells`` (a point whose cell is not cached yet gets face :data:`MISSING` and nothing
+    else when ``fill_missing``, else the tree's answer), from the tree otherwise."""
     n = len(points)
     hinted = len(hints) == n
     inverse_size = 1.0 / size

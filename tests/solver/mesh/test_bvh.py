@@ -117,3 +117,35 @@ def test_non_finite_points_get_nan_and_no_face():
 def test_a_tree_needs_a_face():
     with pytest.raises(ValueError):
         bvh.build_tree(np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64))
+
+
+def test_coincident_centroids_split_at_the_median():
+    """Forty copies of one triangle and a few others: no binned split separates the copies,
+    the median split does; the tree stays valid and finds the right points."""
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 2, 2], [3, 2, 2], [2, 3, 2]])
+    faces = np.array([[0, 1, 2]] * 40 + [[3, 4, 5]] * 3)
+    tree = bvh.build_tree(vertices, faces)
+    np.testing.assert_array_equal(np.sort(tree.faces), np.arange(len(faces)))
+    assert tree.count[tree.child < 0].max() <= bvh.LEAF_FACES
+    points = np.array([[0.2, 0.2, 1.0], [2.2, 2.2, 1.5], [-1.0, -1.0, 0.0]])
+    found, closest, _, squared = bvh.closest_points(tree, points)
+    np.testing.assert_allclose(squared, [1.0, 0.25, 2.0], rtol=1e-15)
+    assert (found[[0, 2]] < 40).all() and found[1] >= 40
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_selection_puts_the_median_in_place(seed):
+    from hairport.solver.mesh.closest_kernels import _select
+
+    rng = np.random.default_rng(seed)
+    centroids = np.round(rng.normal(size=(501, 3)), 1)  # many equal values
+    order = rng.permutation(501)
+    start, stop = 17, 480
+    before = order.copy()
+    middle = (start + stop) // 2
+    _select(centroids, order, start, stop, 2, middle)
+    np.testing.assert_array_equal(np.sort(order[start:stop]), np.sort(before[start:stop]))
+    np.testing.assert_array_equal(order[:start], before[:start])
+    np.testing.assert_array_equal(order[stop:], before[stop:])
+    keys = centroids[order, 2]
+    assert (keys[start:middle] <= keys[middle]).all() and (keys[middle + 1:stop] >= keys[middle]).all()
