@@ -22,7 +22,8 @@ and the process's resident high-water mark during the stage (``VmHWM`` after a r
 ``/proc/self/clear_refs``, the median over the runs). ``peak`` is the largest of these (plus,
 with ``--solve``, the fine level's workers at the largest one's peak each), ``B/p`` that
 over the particle count, ``B/p above base`` the same above the process before the groom was
-made (interpreter, libraries, the two characters).
+made (interpreter, libraries, the two characters, the compiled kernels: each process first
+loads them from numba's on-disk cache, as a worker does at start, ``kernels warm-up``).
 
 ``--baseline-python`` runs every size also under another interpreter (e.g. a venv with an
 older checkout installed) in the same invocation, alternating, and prints both tables and
@@ -135,11 +136,15 @@ def measure_size(size: str, solve: bool, workers: int | None) -> dict:
     import numpy as np
 
     from hairport import solver
+    from hairport.solver.jit import warm_up
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
     strands, per_strand = groom_shape(int(float(size)))
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
+    began = time.perf_counter()
+    warm_up()  # the compiled kernels, from numba's on-disk cache (compiled there if missing), as a worker at start
+    warm_seconds = time.perf_counter() - began
     base = _status_bytes("VmRSS")
     hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
     groom = _status_bytes("VmRSS")
@@ -174,6 +179,7 @@ def measure_size(size: str, solve: bool, workers: int | None) -> dict:
         "preprocess": preprocess,
         "stages": stages,
         "base": base,
+        "warm_up": warm_seconds,
         "groom": groom,
         "process_peak": process_peak,
         "peak": process_peak + worker_peak * used_workers,
@@ -240,7 +246,7 @@ def _median_runs(runs: list[dict]) -> dict:
         for name in first["stages"]
     }
     out = {key: first[key] for key in ("particles", "strands", "workers", "penetrating")}
-    for key in ("preprocess", "base", "groom", "process_peak", "peak"):
+    for key in ("preprocess", "base", "warm_up", "groom", "process_peak", "peak"):
         out[key] = statistics.median(run[key] for run in runs)
     out["stages"] = stages
     return out
@@ -274,6 +280,10 @@ def _print_table(label: str, rows: list[dict]) -> None:
     line = f"{'peak':>18}"
     for row in rows:
         line += f" {'':>7} {'':>6} {row['peak'] / 1e6:>6.0f} {row['peak'] / row['particles']:>5.0f}"
+    print(line)
+    line = f"{'kernels warm-up':>18}"
+    for row in rows:
+        line += f" {row['warm_up']:>7.2f} {'':>6} {'':>6} {'':>5}"
     print(line)
     line = f"{'B/p above base':>18}"
     for row in rows:

@@ -38,7 +38,8 @@ class AdaptableHairstyle:
     # (cached_property writes the instance __dict__ directly, which a frozen dataclass allows)
     @cached_property
     def neighbours(self) -> Neighbours:
-        """Eq. 8-9 over all strands (the coupled ``global`` solve only)."""
+        """Eq. 8-9 over all strands: the metrics' inter-strand figures, and the coupled ``global`` solve's ``K``
+        (``(N, k)`` int32 indices and float64 weights, built on the first retarget)."""
         return knn_other_strands(self.hair.points, self.hair.strand_of, self.options.k)
 
     @cached_property
@@ -53,7 +54,7 @@ class AdaptableHairstyle:
 
     @cached_property
     def shape_model(self) -> ShapeModel:
-        """Eq. 7/10 operators of the whole hairstyle."""
+        """Eq. 7/10 operators of the whole hairstyle (the coupled ``global`` solve only)."""
         n = self.hair.n_particles
         K = laplacian_operator(self.neighbours, np.arange(n), n)
         return ShapeModel.build(self.hair.points, self.hair.segments, K)

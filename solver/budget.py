@@ -10,18 +10,24 @@ from __future__ import annotations
 from hairport.solver.model.errors import InputError
 
 #: peak resident bytes per particle of preprocessing plus a multi-scale retarget, with the
-#: default k. Measured with ``bench/table4.py`` (MakeHuman average female -> heavy male, "long"
-#: grooms, 300 guides, k = 5, peak = the retarget process plus its largest fine-level worker):
-#: 369 MB at 10^5 particles and 2,726 MB at 10^6, i.e. 2,619 B per added particle over a
-#: ~107 MB base; rounded up to 3,000 B to cover the base at 10^6 and the toy-to-MakeHuman
-#: spread of body sizes.
+#: default k, counting every process. Measured with ``bench/preprocess.py --solve`` (MakeHuman
+#: average female -> heavy male, "long" groom, 300 guides, k = 5, two fine-level workers of
+#: 200,000-particle chunks): 2,566 MB at 10^6 particles, of which the retarget's process 914 MB
+#: (preprocessing, initial transfer, metrics and the solve's arrays: 701 B per particle over a
+#: 213 MB base of interpreter, libraries, compiled kernels and bodies) and the two workers
+#: 826 MB each, a figure that depends on the chunk size, not on the groom. Without the solve,
+#: the process peaked at 843 MB at 10^6 and 1,901 MB at 3x10^6 (563 B per particle above its
+#: base). The workers' share per particle falls as grooms grow, so 10^6 particles is where this
+#: figure is tightest: 2,566 B rounded up by 17 % to 3,000 B (the margin covers the spread of
+#: body sizes and of strand layouts, e.g. fewer, longer strands than the benchmark's 100 points).
 BYTES_PER_PARTICLE = 3_000
 #: the k the figure above was measured with
 MEASURED_K = 5
-#: bytes per particle per neighbour beyond MEASURED_K: the two kNN sets (Eq. 8-9) keep an
-#: int64 index and a float64 weight per neighbour (16 B each, x2 sets), doubled for the
-#: temporaries of the query; counted from the arrays, not measured
-BYTES_PER_NEIGHBOUR = 64
+#: bytes per particle per neighbour beyond MEASURED_K: the two kNN sets kept per particle (the
+#: fine level's, Eq. 14, and the metrics' over all strands, Eq. 8-9) hold an int32 index and
+#: a float64 weight per neighbour (12 B each, x2 sets), doubled for the temporaries of the
+#: query; counted from the arrays, not measured
+BYTES_PER_NEIGHBOUR = 48
 #: the code of an input whose estimated need is above the budget
 OVER_MEMORY_BUDGET = "over_memory_budget"
 
