@@ -155,7 +155,8 @@ class CellCache:
                 capacity *= 2
             old = self.slots[self.slots[:, 0] != EMPTY]
             self.slots = np.full((capacity, 2), EMPTY, dtype=np.int64)
-            insert_cells(old[:, 0], old[:, 1], self.slots)
+            # contiguous columns: the kernel's one compiled (and warmed) signature
+            insert_cells(np.ascontiguousarray(old[:, 0]), np.ascontiguousarray(old[:, 1]), self.slots)
         insert_cells(keys, begin * COUNT_FACTOR + found + 1, self.slots)
 
 
