@@ -64,7 +64,7 @@ def _import_kernel_modules() -> None:
 
 
 #: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = ("hairport.solver.adaptation.kdtree", "hairport.solver.adaptation.neighbours", "hairport.solver.transfer.bone_rays",
+KERNEL_MODULES: tuple[str, ...] = ("hairport.solver.adaptation.kdtree", "hairport.solver.adaptation.neighbours", "hairport.solver.transfer.bone_rays", "hairport.solver.metrics",
                                    "hairport.solver.transfer.smoothing")
 
 
