@@ -98,6 +98,7 @@ KERNEL_MODULES: tuple[str, ...] = (
     "hairport.solver.adaptation.band_kernels",
     "hairport.solver.adaptation.strand_kernels",
     "hairport.solver.adaptation.line_search_kernels",
+    "hairport.solver.metrics",
 )
 
 

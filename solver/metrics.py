@@ -12,6 +12,7 @@ import numpy as np
 
 from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, unit_rows
 from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
+from hairport.solver.jit import parallel_kernel, prange, warms
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair
 
@@ -110,10 +111,47 @@ def interstrand_residual(neighbours: Neighbours, points: np.ndarray, source_poin
     return residual
 
 
+def interstrand_residual_norms(neighbours: Neighbours, points: np.ndarray, source_points: np.ndarray) -> np.ndarray:
+    """``|| (K p)_i - L-bar_i ||`` per particle (m) without ``(N, 3)`` temporaries (compiled;
+    the norms of :func:`interstrand_residual`, the reference).
+
+    Returns
+    -------
+    norms : (N,) float64
+    """
+    norms = np.empty(len(points))
+    _residual_norms(np.ascontiguousarray(neighbours.index), np.ascontiguousarray(neighbours.weight),
+                    np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(source_points, dtype=np.float64),
+                    norms)
+    return norms
+
+
+@parallel_kernel
+def _residual_norms(index, weight, points, source_points, norms):
+    for i in prange(index.shape[0]):
+        total = 0.0
+        x = y = z = 0.0
+        for j in range(index.shape[1]):
+            w, p = weight[i, j], index[i, j]
+            total += w
+            x += w * (points[p, 0] - source_points[p, 0])
+            y += w * (points[p, 1] - source_points[p, 1])
+            z += w * (points[p, 2] - source_points[p, 2])
+        x = total * (points[i, 0] - source_points[i, 0]) - x
+        y = total * (points[i, 1] - source_points[i, 1]) - y
+        z = total * (points[i, 2] - source_points[i, 2]) - z
+        norms[i] = np.sqrt(x * x + y * y + z * z)
+
+
+@warms("metrics")
+def _warm() -> None:
+    for dtype in (np.int32, np.int64):
+        _residual_norms(np.zeros((1, 2), dtype), np.ones((1, 2)), np.ones((1, 3)), np.zeros((1, 3)), np.empty(1))
+
+
 def interstrand_error(neighbours: Neighbours, points: np.ndarray, source_points: np.ndarray) -> float:
     """Mean ``|| L_i(p) - L-bar_i ||`` over particles (m): how much neighbourhoods changed."""
-    residual = interstrand_residual(neighbours, points, source_points)
-    return float(np.mean(np.sqrt(np.einsum("ij,ij->i", residual, residual)))) if len(residual) else 0.0
+    return float(np.mean(interstrand_residual_norms(neighbours, points, source_points))) if len(points) else 0.0
 
 
 @dataclass(frozen=True)
@@ -194,12 +232,9 @@ def hairstyle_metrics(
     is_root = source.is_root
     pen = penetration(points, is_root, query if body is None else body, eps_c)
     segments = segment_figures(points, source.points, source.offsets)
-    residual = interstrand_residual(neighbours, points, source.points)
-    residual_norm = np.sqrt(np.einsum("ij,ij->i", residual, residual))
-    del residual
-    offset = points - initial
-    hair_body = float(np.einsum("ij,ij->", offset, offset))
-    del offset
+    residual_norm = interstrand_residual_norms(neighbours, points, source.points)
+    hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))
+                    for rows in (slice(start, start + METRICS_CHUNK) for start in range(0, n, METRICS_CHUNK)))
     terms = EnergyTerms(segments.strand_shape, float(np.sum(residual_norm**2)), hair_body)
     metrics = {
         "particles": n,

@@ -33,6 +33,8 @@ LEAF_SIZE = 8
 MAX_DEPTH = 48
 #: queries per block of the parallel loop (each block allocates its scratch once)
 QUERY_BLOCK = 256
+#: storage of the points' ids and groups (particle and strand indices stay far below 2^31)
+ID_DTYPE = np.int32
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,9 +45,9 @@ class KdTree:
     ----------
     points : (P, 3) float64
         The points in tree order (each leaf's points contiguous).
-    ids : (P,) int64
+    ids : (P,) int32
         What each point in tree order stands for (the caller's index).
-    groups : (P,) int64
+    groups : (P,) int32
         Each point's group (its strand), in tree order.
     start, end : (M,) int64
         Each node's range of points.
@@ -90,8 +92,8 @@ def build_tree(points: np.ndarray, ids: np.ndarray, groups: np.ndarray) -> KdTre
     end[0] = count
     for level in range(depth):
         _split_level(points, order, start, end, axis, split, (1 << level) - 1, (1 << (level + 1)) - 1)
-    return KdTree(np.ascontiguousarray(points[order]), np.ascontiguousarray(np.asarray(ids, dtype=np.int64)[order]),
-                  np.ascontiguousarray(np.asarray(groups, dtype=np.int64)[order]), start, end, axis, split)
+    return KdTree(np.ascontiguousarray(points[order]), np.ascontiguousarray(np.asarray(ids)[order], dtype=ID_DTYPE),
+                  np.ascontiguousarray(np.asarray(groups)[order], dtype=ID_DTYPE), start, end, axis, split)
 
 
 def query_tree(tree: KdTree, queries: np.ndarray, groups: np.ndarray, index: np.ndarray, distance: np.ndarray,

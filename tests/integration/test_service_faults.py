@@ -92,7 +92,7 @@ def faults(tmp_path_factory):
 
         def start_worker(name: str, folder: Path = storage) -> subprocess.Popen:
             process = subprocess.Popen(
-                [sys.executable, "-m", "hairport.cli", "worker", "--concurrency", "1", "--hostname", f"{name}@%h",
+                [sys.executable, "-m", "hairport.cli", "worker", "--no-warmup", "--concurrency", "1", "--hostname", f"{name}@%h",
                  "--loglevel", "WARNING"], env=_env(folder, server.url), stdout=subprocess.DEVNULL,
                 stderr=open(storage / f"{name}.log", "wb"), start_new_session=True)
             workers[name] = process

@@ -11,6 +11,7 @@ from hairport.solver.metrics import (
     hairstyle_metrics,
     interstrand_error,
     interstrand_residual,
+    interstrand_residual_norms,
     mean_particle_distance,
     mean_segment_angle,
     penetration,
@@ -107,3 +108,12 @@ def test_segment_figures_equal_the_per_segment_angles_and_eq7_in_any_block_size(
     assert figures.angle_sum == pytest.approx(angles.sum(), rel=1e-13) and figures.angle_max == angles.max() > 0.05
     assert figures.strand_shape == pytest.approx(energy_terms(model_of(hair, k=2), bent, hair.points).strand_shape,
                                                  rel=1e-13)
+
+
+def test_the_compiled_residual_norms_equal_the_numpy_residual_s():
+    hair = parallel_strands(n_strands=5, n_points=7)
+    nb = knn_other_strands(hair.points, hair.strand_of, 3)
+    moved = hair.points + np.random.default_rng(1).normal(scale=1e-3, size=hair.points.shape)
+    reference = np.linalg.norm(interstrand_residual(nb, moved, hair.points), axis=1)
+    np.testing.assert_allclose(interstrand_residual_norms(nb, moved, hair.points), reference, rtol=1e-14, atol=1e-18)
+    assert reference.min() > 0
