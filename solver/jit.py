@@ -93,6 +93,7 @@ KERNEL_MODULES: tuple[str, ...] = (
     "hairport.solver.adaptation.neighbours",
     "hairport.solver.transfer.bone_rays",
     "hairport.solver.transfer.smoothing",
+    "hairport.solver.mesh.bvh_build",
     "hairport.solver.mesh.closest_kernels",
     "hairport.solver.mesh.distance_grid",
     "hairport.solver.adaptation.band_kernels",

@@ -8,7 +8,7 @@ AABB ~35-50 ms); :func:`closest_points` the repeated query, parallel over the po
 The tree
 --------
 Binary, top down: a node's faces are split by the surface area heuristic over binned
-centroids (:func:`.closest_kernels.build_nodes`; 20 % less CPU per query than median splits
+centroids (:func:`.bvh_build.build_nodes`; 20 % less CPU per query than median splits
 on hair near the MakeHuman body and on far points), until at most :data:`LEAF_FACES` remain.
 Siblings are adjacent (``child`` and ``child + 1``). Each triangle is stored once, in leaf order, as the
 12 numbers Ericson's closest-point test needs (:func:`~.query._triangle_table`'s rows).
@@ -36,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.mesh.closest_kernels import build_nodes, closest_kernel
+from hairport.solver.mesh.bvh_build import build_nodes
+from hairport.solver.mesh.closest_kernels import closest_kernel
 
 #: faces per leaf at most (measured on the MakeHuman body: 2 and 4 the fastest, 1 and 8 ~10 % slower)
 LEAF_FACES = 4

@@ -63,10 +63,7 @@ from hairport.solver.mesh.backends import _PARALLEL, _closest_face_index, _Embre
 from hairport.solver.mesh.cells import CellCache
 from hairport.solver.mesh.closest_kernels import FEATURE_EPSILON, ON_SURFACE_DISTANCE
 from hairport.solver.mesh.inside import InsideTest, manifold_closed, shell_count
-
-#: from this many points on, queries are sorted along a Z-curve before the tree search
-SORT_QUERIES_FROM = 2048
-
+from hairport.solver.mesh.space_order import search_in_space_order
 
 #: on an open body's collision surface, points closer to a manifold part of it than this
 #: fraction of the mesh's bounding-box diagonal (20 um on a 2 m body) take the pseudonormal's
@@ -269,7 +266,7 @@ class MeshQuery:
     def _signed_steps(self, index, points: np.ndarray):
         """The numpy reference steps (libigl's or fcpw's face): closest, faces, feature,
         length, and the pseudonormal's sign."""
-        faces, closest = _search_in_space_order(index, points)
+        faces, closest = search_in_space_order(index, points)
         if closest is None:
             closest, feature = _closest_on_table(points, self._triangles, faces)
         else:
@@ -281,7 +278,7 @@ class MeshQuery:
             # crease: redo those few points with the float64 tree
             near = np.flatnonzero(length < self._exact_band)
             if len(near):
-                faces[near], closest[near] = _search_in_space_order(self._exact_index(), points[near])
+                faces[near], closest[near] = search_in_space_order(self._exact_index(), points[near])
                 feature[near] = _feature_of(closest[near], self._triangles, faces[near])
                 offset[near] = points[near] - closest[near]
                 length[near] = np.sqrt(np.einsum("ij,ij->i", offset[near], offset[near]))
@@ -494,41 +491,3 @@ def _sum_rows(index: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
 def _normalized(vectors: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(vectors, axis=1, keepdims=True)
     return vectors / np.where(length > 0, length, 1.0)
-
-
-def _search_in_space_order(index, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """``index.closest(points)``, the points visited in Morton (Z-curve) order.
-
-    Consecutive queries then walk the same BVH nodes: 1.5-3x faster for scattered points
-    (see ``bench/geometry.py``) for ~0.1 s per 10^6 points of sorting.
-    """
-    if len(points) < SORT_QUERIES_FROM:
-        return index.closest(points)
-    order = np.argsort(_morton_keys(points))
-    faces_sorted, closest_sorted = index.closest(points[order])
-    faces = np.empty(len(points), dtype=np.int64)
-    faces[order] = faces_sorted
-    if closest_sorted is None:
-        return faces, None
-    closest = np.empty_like(points)
-    closest[order] = closest_sorted
-    return faces, closest
-
-
-def _morton_keys(points: np.ndarray) -> np.ndarray:
-    """30-bit Z-order keys of the points on a 1024^3 grid over their bounding box."""
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    scale = 1023.0 / np.where(hi > lo, hi - lo, 1.0)
-    cells = np.nan_to_num((points - lo) * scale).clip(0, 1023).astype(np.int64)
-    return _MORTON_SPREAD[cells[:, 0]] | (_MORTON_SPREAD[cells[:, 1]] << 1) | (_MORTON_SPREAD[cells[:, 2]] << 2)
-
-
-def _spread_bits(x: np.ndarray) -> np.ndarray:
-    """Bit i of x moved to bit 3i (10-bit inputs)."""
-    out = np.zeros_like(x)
-    for bit in range(10):
-        out |= ((x >> bit) & 1) << (3 * bit)
-    return out
-
-
-_MORTON_SPREAD = _spread_bits(np.arange(1024, dtype=np.int64))

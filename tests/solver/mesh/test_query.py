@@ -13,6 +13,7 @@ import pytest
 import trimesh
 
 from hairport.solver.mesh import query as mesh_query
+from hairport.solver.mesh import space_order
 from hairport.solver.mesh.query import ON_SURFACE_DISTANCE, MeshQuery
 from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
 from tests.solver.mesh.meshes import (
@@ -213,9 +214,9 @@ def test_z_order_sorting_does_not_change_results(backend, monkeypatch):
     vertices, faces = icosphere()
     query = query_with(vertices, faces, backend)
     points = sample_near_features(vertices, faces, np.random.default_rng(11), n=3000)
-    monkeypatch.setattr(mesh_query, "SORT_QUERIES_FROM", 1)
+    monkeypatch.setattr(space_order, "SORT_QUERIES_FROM", 1)
     sorted_ = query.signed_distance(points)
-    monkeypatch.setattr(mesh_query, "SORT_QUERIES_FROM", 10**12)
+    monkeypatch.setattr(space_order, "SORT_QUERIES_FROM", 10**12)
     plain = query.signed_distance(points)
     for field in ("distance", "closest", "normal", "faces"):
         np.testing.assert_array_equal(getattr(sorted_, field), getattr(plain, field))
