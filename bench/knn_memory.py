@@ -26,28 +26,12 @@ import subprocess
 import sys
 import time
 
+from table4 import _reset_peak, _status_bytes  # bench/table4.py, beside this script
+
 #: points per strand of the ordinary groom (the benchmark grooms of bench/table4.py at 10^5)
 ORDINARY_PER_STRAND = 50
 SOURCE = "average-female"
 CASES = ("single strand", "ordinary groom")
-
-
-def _status_bytes(field: str) -> int:
-    """A memory figure of this process from /proc/self/status (``VmHWM``: peak, ``VmRSS``: now)."""
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith(f"{field}:"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _reset_peak() -> bool:
-    try:
-        with open("/proc/self/clear_refs", "w") as handle:
-            handle.write("5")
-        return True
-    except OSError:
-        return False
 
 
 def shape(case: str, particles: int) -> tuple[int, int]:

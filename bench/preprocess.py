@@ -46,36 +46,9 @@ import sys
 import time
 from contextlib import contextmanager
 
-#: particles per strand of the benchmark grooms (as bench/table4.py)
-PARTICLES_PER_STRAND = 100
-#: below this size, strands get fewer particles so that there are still >= 1000 strands
-SMALL_GROOM = 200_000
-STYLE = "long"
-SOURCE, TARGET = "average-female", "heavy-male"
+from table4 import SOURCE, STYLE, TARGET, _reset_peak, _status_bytes, groom_shape  # bench/table4.py, beside this script
+
 GUIDES = 300
-
-
-def groom_shape(particles: int) -> tuple[int, int]:
-    per_strand = 50 if particles < SMALL_GROOM else PARTICLES_PER_STRAND
-    return max(1, round(particles / per_strand)), per_strand
-
-
-def _status_bytes(field: str) -> int:
-    """A memory figure of this process from /proc/self/status (``VmHWM``: peak, ``VmRSS``: now)."""
-    with open("/proc/self/status") as status:
-        for line in status:
-            if line.startswith(f"{field}:"):
-                return int(line.split()[1]) * 1024
-    return 0
-
-
-def _reset_peak() -> bool:
-    try:
-        with open("/proc/self/clear_refs", "w") as handle:
-            handle.write("5")
-        return True
-    except OSError:
-        return False
 
 
 class StageMeter:
