@@ -13,7 +13,7 @@ from hairport.solver.model.errors import InputError
 #: default k, counting every process. Measured with ``bench/preprocess.py --solve`` on the
 #: solver as merged for issue 13 (the fine level on numba's threads in the retarget's process,
 #: the default), MakeHuman average female -> heavy male, "long" groom, 300 guides, k = 5:
-#: 798 MB at 10^6 particles and 1,677 MB at 3x10^6 (559 B per particle; 484 above the 225 MB
+#: 798 MB at 10^6 particles and 1,649 MB at 3x10^6 (550 B per particle; 475 above the 224 MB
 #: base of interpreter, libraries, compiled kernels and bodies); ``bench/table4.py`` measured
 #: 906 B per particle at 10^6. The base's share per particle falls as grooms grow, so 10^6 is
 #: where the figure is tightest: 906 B rounded up by 21 % to 1,100 B (the margin covers the
