@@ -10,17 +10,16 @@ from __future__ import annotations
 from hairport.solver.model.errors import InputError
 
 #: peak resident bytes per particle of preprocessing plus a multi-scale retarget, with the
-#: default k, counting every process. Measured with ``bench/preprocess.py --solve`` (MakeHuman
-#: average female -> heavy male, "long" groom, 300 guides, k = 5, two fine-level workers of
-#: 200,000-particle chunks): 2,566 MB at 10^6 particles, of which the retarget's process 914 MB
-#: (preprocessing, initial transfer, metrics and the solve's arrays: 701 B per particle over a
-#: 213 MB base of interpreter, libraries, compiled kernels and bodies) and the two workers
-#: 826 MB each, a figure that depends on the chunk size, not on the groom. Without the solve,
-#: the process peaked at 843 MB at 10^6 and 1,901 MB at 3x10^6 (563 B per particle above its
-#: base). The workers' share per particle falls as grooms grow, so 10^6 particles is where this
-#: figure is tightest: 2,566 B rounded up by 17 % to 3,000 B (the margin covers the spread of
-#: body sizes and of strand layouts, e.g. fewer, longer strands than the benchmark's 100 points).
-BYTES_PER_PARTICLE = 3_000
+#: default k, counting every process. Measured with ``bench/preprocess.py --solve`` on the
+#: solver as merged for issue 13 (the fine level on numba's threads in the retarget's process,
+#: the default), MakeHuman average female -> heavy male, "long" groom, 300 guides, k = 5:
+#: 798 MB at 10^6 particles and 1,649 MB at 3x10^6 (550 B per particle; 475 above the 224 MB
+#: base of interpreter, libraries, compiled kernels and bodies); ``bench/table4.py`` measured
+#: 906 B per particle at 10^6. The base's share per particle falls as grooms grow, so 10^6 is
+#: where the figure is tightest: 906 B rounded up by 21 % to 1,100 B (the margin covers the
+#: spread of body sizes and strand layouts). Fine-level worker processes (``workers`` > 1) add
+#: about 0.5 GB each, not covered here. Before issue 13 it was 3,000 B (2,726 MB at 10^6).
+BYTES_PER_PARTICLE = 1_100
 #: the k the figure above was measured with
 MEASURED_K = 5
 #: bytes per particle per neighbour beyond MEASURED_K: the two kNN sets kept per particle (the

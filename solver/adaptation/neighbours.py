@@ -112,7 +112,10 @@ def knn_other_strands(
     distance = np.full((len(queries), k), np.inf)
     if len(pool) == 0 or k == 0 or len(queries) == 0:
         return Neighbours(index, np.zeros((len(queries), k)))
-    tree = build_tree(points[pool], pool, strand_of[pool])
+    if candidates is None:  # the whole hairstyle: no gathered copies (the tree keeps its own, in tree order)
+        tree = build_tree(points, pool, strand_of)
+    else:
+        tree = build_tree(points[pool], pool, strand_of[pool])
     complete = np.empty(len(queries), dtype=bool)
     for first in range(0, len(queries), KNN_QUERY_CHUNK):  # bounds the gathered query points
         rows = slice(first, first + KNN_QUERY_CHUNK)
