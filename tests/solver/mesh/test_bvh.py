@@ -135,7 +135,7 @@ def test_coincident_centroids_split_at_the_median():
 
 @pytest.mark.parametrize("seed", range(5))
 def test_selection_puts_the_median_in_place(seed):
-    from hairport.solver.mesh.closest_kernels import _select
+    from hairport.solver.mesh.bvh_build import _select
 
     rng = np.random.default_rng(seed)
     centroids = np.round(rng.normal(size=(501, 3)), 1)  # many equal values
