@@ -58,11 +58,11 @@ from hairport.solver.adaptation.options import (
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
     SOLVE_STAGE,
-    STALLED_ITERATIONS,
     Cancelled,
     SolveOptions,
     SolveReport,
     adapt_damping,
+    groups_done,
 )
 from hairport.solver.adaptation.strand_problem import NewtonSystem, StrandProblem, group_energies, newton_system
 from hairport.solver.model.progress import ProgressFn
@@ -473,15 +473,10 @@ def solve_strands(
         np.maximum.at(max_step, group, moved_by)
         shortfall = np.full(k, -np.inf)
         np.maximum.at(shortfall, group, np.where(sub.fixed, -np.inf, options.eps_c - trial_dist))
-        threshold = options.energy_tolerance * np.abs(merit_now)
-        decrease = merit_now - merit_trial
-        small = ((decrease >= 0) & (decrease < threshold)) | failed
-        small_steps[open_groups] = np.where(small, small_steps[open_groups] + 1, 0)
-        stalled = small_steps[open_groups] >= STALLED_ITERATIONS
-        if not coupled:
+        done, small_steps[open_groups] = groups_done(
+            options, merit_now, merit_trial, failed, small_steps[open_groups], max_step, shortfall,
             # one small decrease suffices where the QP's model also predicted a small one
-            stalled |= small & (-strand_predicted < threshold)
-        done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
+            None if coupled else strand_predicted)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))

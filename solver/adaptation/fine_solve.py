@@ -33,11 +33,11 @@ from hairport.solver.adaptation.options import (
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
     SOLVE_STAGE,
-    STALLED_ITERATIONS,
     Cancelled,
     SolveOptions,
     SolveReport,
     adapt_damping,
+    groups_done,
 )
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.jit import set_threads, threads
@@ -213,12 +213,8 @@ def solve_uncoupled(
             max_step[failed], fraction[failed], merit_trial[failed] = 0.0, 0.0, merit_now[failed]
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
-        threshold = options.energy_tolerance * np.abs(merit_now)
-        decrease = merit_now - merit_trial
-        small = ((decrease >= 0) & (decrease < threshold)) | failed
-        small_steps[open_strands] = np.where(small, small_steps[open_strands] + 1, 0)
-        stalled = (small_steps[open_strands] >= STALLED_ITERATIONS) | (small & (-predicted < threshold))
-        done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
+        done, small_steps[open_strands] = groups_done(
+            options, merit_now, merit_trial, failed, small_steps[open_strands], max_step, shortfall, predicted)
         report.converged_groups += int(done.sum())
         report.max_step.append(float(max_step.max(initial=0.0)))
         report.min_clearance.append(float(min_clearance.min(initial=np.inf)))

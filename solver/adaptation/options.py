@@ -160,3 +160,51 @@ def adapt_damping(damping: np.ndarray | float, actual: np.ndarray | float, predi
         np.minimum(MAX_RADIAL_DAMPING, damping * DAMPING_FACTOR),
         np.where(ratio > DAMPING_LOWER_ABOVE, np.maximum(MIN_RADIAL_DAMPING, damping / DAMPING_FACTOR), damping),
     )
+
+
+def groups_done(
+    options: SolveOptions,
+    merit_now: np.ndarray,
+    merit_trial: np.ndarray,
+    failed: np.ndarray,
+    small_steps: np.ndarray,
+    max_step: np.ndarray,
+    shortfall: np.ndarray,
+    predicted: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The outer loop's stopping rule for the open groups (strands, or the coupled hairstyle).
+
+    A group is done when its clearance holds (``shortfall <= clearance_tolerance``) and either
+    its step was below ``step_tolerance`` (and its line search did not fail), or it stalled:
+    :data:`STALLED_ITERATIONS` small merit decreases in a row (below ``energy_tolerance`` of the
+    merit; a failed line search counts as one), or, given the QP's ``predicted`` change
+    (uncoupled strands), one small decrease that the model also predicted small.
+
+    Parameters
+    ----------
+    merit_now, merit_trial : (G,) float64
+        Merit before and after the step.
+    failed : (G,) bool
+        Groups whose line search found no lower merit.
+    small_steps : (G,) int64
+        Consecutive small decreases so far.
+    max_step, shortfall : (G,) float64
+        Longest particle move (m), most clearance short of ``eps_c`` (m).
+    predicted : (G,) float64, optional
+        The QP model's merit change.
+
+    Returns
+    -------
+    done : (G,) bool
+    small_steps : (G,) int64
+        Updated.
+    """
+    threshold = options.energy_tolerance * np.abs(merit_now)
+    decrease = merit_now - merit_trial
+    small = ((decrease >= 0) & (decrease < threshold)) | failed
+    small_steps = np.where(small, small_steps + 1, 0)
+    stalled = small_steps >= STALLED_ITERATIONS
+    if predicted is not None:
+        stalled |= small & (-predicted < threshold)
+    done = (((max_step < options.step_tolerance) & ~failed) | stalled) & (shortfall <= options.clearance_tolerance)
+    return done, small_steps

@@ -10,7 +10,6 @@ from hairport.solver.adaptation.active_set import (
     BACKEND,
     CG_RELATIVE_TOLERANCE,
     MAX_ACTIVE_SET_ROUNDS,
-    STALLED_ITERATIONS,
     Frames,
     normal_frames,
     rotated_matrix,
@@ -20,7 +19,7 @@ from hairport.solver.adaptation.active_set import (
 from hairport.solver.adaptation.constraints import BodyDistance, linearised_clearance
 from hairport.solver.adaptation.coupled_kernels import reference_product
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
-from hairport.solver.adaptation.options import Cancelled, SolveOptions
+from hairport.solver.adaptation.options import STALLED_ITERATIONS, Cancelled, SolveOptions
 from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
 from hairport.solver.adaptation.strand_problem import StrandProblem, newton_system, problem_from_shape_model
 from hairport.solver.mesh.query import MeshQuery
