@@ -121,6 +121,7 @@ class RetargetOptionsIn(BaseModel):
     eps_s: float = ranged("eps_s", _RETARGET.eps_s)
     max_iterations: int = ranged("max_iterations", _RETARGET.max_iterations)
     step_tolerance: float = ranged("step_tolerance", _RETARGET.step_tolerance)
+    energy_tolerance: float = ranged("energy_tolerance", _RETARGET.energy_tolerance)
     qp_backend: Literal[solver.QP_BACKENDS] = _RETARGET.qp_backend
 
 

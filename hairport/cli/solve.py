@@ -52,6 +52,8 @@ def add_retarget(sub) -> None:
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
     p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))
     p.add_argument("--max-iterations", type=option_type("max_iterations"), default=_DEFAULTS.max_iterations, help=option_help("max_iterations"))
+    p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
+                   help=option_help("energy_tolerance", "0 runs every strand to the step tolerance or the cap"))
     p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: 1, this process on its threads"))
     p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
@@ -124,7 +126,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     if args.hair:
         solver.format_for_path(args.hair)
     options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
-                                     max_iterations=args.max_iterations, workers=args.workers,
+                                     max_iterations=args.max_iterations, energy_tolerance=args.energy_tolerance,
+                                     workers=args.workers,
                                      qp_backend=args.qp_backend, hairline=hairline_edit(args))
     options.validate()
     adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)

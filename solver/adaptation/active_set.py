@@ -26,8 +26,12 @@ sparse LU factorisation of ``R^T H R`` instead (:data:`DIRECT_SOLVE_MAX_PARTICLE
 
 When no entry of ``K`` links two strands every strand is its own problem: each gets its own
 backtracking line search, damping and convergence test, and leaves the loop when done.
-Coupled problems take one step length for all. The constraints are those of
-:mod:`.constraints`, shared with the OSQP backend.
+Coupled problems solve one QP for all strands but still backtrack strand by strand, on each
+strand's share of the merit (its particles' terms of Eq. 1, the coupling included): with one
+step length for all, a few overshooting strands cut every step to a quarter or less, and at
+10^6 particles (300 guides of 100) the guides ended the 30 iterations at merit 901 where
+per-strand steps reach 888, 18 % faster. The constraints are those of :mod:`.constraints`,
+shared with the OSQP backend.
 
 Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``),
 vectors particle-major.
@@ -340,7 +344,8 @@ def solve_strands(
     Eq. 1 plus an l1 penalty on clearance short of ``eps_c``, with a second-order correction
     (particles a step leaves short of ``eps_c`` are projected back out along the normal:
     the linearised half-spaces ignore the body's curvature, and without it the loop zig-zags
-    along the surface). Uncoupled strands each run this loop on their own, with their own
+    along the surface); each strand backtracks on its own share of the merit, and a strand
+    whose every trial raised it stays where it is. Uncoupled strands each run this loop on their own, with their own
     merit penalty (so a strand's result does not depend on the strands solved with it); with
     a diagonal ``K`` the compiled loop of :mod:`.fine_solve` runs it unless ``engine`` asks
     for this numpy code, its reference.
@@ -387,8 +392,8 @@ def solve_strands(
     coupled = problem.coupled
     n_groups = 1 if coupled else problem.n_strands
     report = SolveReport(backend=BACKEND, groups=n_groups)
-    # the damping is per strand even when strands share one step length: one strand that
-    # turns far must not stiffen every other strand's segments
+    # the damping is per strand, coupled or not: one strand that turns far must not stiffen
+    # every other strand's segments
     damping = np.full(problem.n_strands, INITIAL_RADIAL_DAMPING)
     active_set = np.zeros(problem.n_particles, dtype=bool)
     open_groups = np.arange(n_groups)
@@ -430,13 +435,17 @@ def solve_strands(
         strand_merit_now = merit_now if not coupled else group_energies(
             sub, p, weights, sub.strand_of, sub.n_strands, particle_penalty, dist, options.eps_c)
 
-        fraction = np.ones(k)
-        accepted = np.zeros(k, dtype=bool)
+        # the line search backtracks each strand on its own merit, coupled or not: one strand whose
+        # Newton step overshoots must not shorten every other strand's step (coupled, a strand's
+        # merit holds its share of the coupling, and a strand whose neighbours' backtracking
+        # raised it backtracks in turn; all strands' merits down means the total is down)
+        fraction = np.ones(sub.n_strands)
+        accepted = np.zeros(sub.n_strands, dtype=bool)
         trial = p.copy()
         trial_dist, trial_normal, trial_near = dist.copy(), normal.copy(), near.copy()
         for attempt in range(MAX_BACKTRACKS):
-            todo = ~accepted[group]
-            moved = p[todo] + fraction[group][todo, None] * step[todo]
+            todo = ~accepted[sub.strand_of]
+            moved = p[todo] + fraction[sub.strand_of][todo, None] * step[todo]
             d, nrm, nr = distance(moved)
             short = nr & (d < options.eps_c) & ~sub.fixed[todo]
             if short.any():
@@ -445,25 +454,28 @@ def solve_strands(
                 d[short], nrm[short], nr[short] = d2, nrm2, nr2
             trial[todo] = moved
             trial_dist[todo], trial_normal[todo], trial_near[todo] = d, nrm, nr
-            merit_trial = group_energies(sub, trial, weights, group, k, particle_penalty, trial_dist, options.eps_c)
+            strand_merit_trial = group_energies(
+                sub, trial, weights, sub.strand_of, sub.n_strands, particle_penalty, trial_dist, options.eps_c)
             if attempt == 0:
-                strand_merit_trial = merit_trial if not coupled else group_energies(
-                    sub, trial, weights, sub.strand_of, sub.n_strands, particle_penalty, trial_dist, options.eps_c)
                 damping[strands] = adapt_damping(
                     damping[strands], strand_merit_trial - strand_merit_now, strand_predicted)
-            accepted |= merit_trial <= merit_now
+            lowered = strand_merit_trial <= strand_merit_now
+            accepted = lowered if coupled else accepted | lowered
             if accepted.all() or attempt == MAX_BACKTRACKS - 1:
                 break
             fraction = np.where(accepted, fraction, BACKTRACK_FACTOR * fraction)
-        # uncoupled, a strand whose every trial raised the merit stays where it is (and the iteration
-        # counts towards its stall): the shortest step taken anyway made such strands oscillate
-        # until the cap; coupled, the shortest step is taken
-        failed = ~accepted if not coupled else np.zeros(k, dtype=bool)
-        if failed.any():
-            stay = failed[group]
+        # a strand whose every trial raised its merit stays where it is (and, uncoupled, the
+        # iteration counts towards its stall): the shortest step taken anyway made such strands
+        # oscillate until the cap
+        stays = ~accepted
+        if stays.any():
+            stay = stays[sub.strand_of]
             trial[stay], trial_dist[stay], trial_normal[stay], trial_near[stay] = p[stay], dist[stay], normal[stay], near[stay]
-            merit_trial = np.where(failed, merit_now, merit_trial)
-            fraction = np.where(failed, 0.0, fraction)
+            fraction = np.where(stays, 0.0, fraction)
+            strand_merit_trial = np.where(stays, strand_merit_now, strand_merit_trial) if not coupled else group_energies(
+                sub, trial, weights, sub.strand_of, sub.n_strands, particle_penalty, trial_dist, options.eps_c)
+        failed = stays if not coupled else np.array([fraction.max() == 0.0])
+        merit_trial = np.array([strand_merit_trial.sum()]) if coupled else strand_merit_trial
         report.merit.append(float(merit_trial.sum()))
         report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial

@@ -22,9 +22,11 @@ arithmetic and stopping rule), equal to it to rounding.
 * :class:`RotatedHessian`: one QP's arrays, with the pinned solve and product built on them;
 * :func:`reference_pinned_solve`, :func:`reference_product`: the numpy reference.
 
-The strands are not split among threads: a CG step is a few milliseconds of memory-bound
-work, and two cores shared with the fine level's processes (or other jobs) gain less from
-threads than the launches and waits cost.
+A CG step's product and preconditioner split the particles and the strands among numba's
+threads (:func:`rotated_product`, :func:`solve_bands`; each output is summed in the
+serial order, so the result does not depend on the thread count): at 300 guides of 100
+particles a step took 3 ms on one core, and the two halves 1.0 + 0.6 ms on two against 2.0 +
+0.95 (``bench/coarse_stage.py``). The dot products stay serial, for the same reason.
 
 Convention: ``n`` particles, 3 unknowns each, particle-major; ``(n, 3)`` arrays float64 and
 C-contiguous; ``(n, 3, 3)`` blocks act on a particle's 3 unknowns.
@@ -37,7 +39,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from hairport.solver.adaptation import banded
-from hairport.solver.jit import kernel, warms
+from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 
 #: super-diagonals of the strand-banded part (a particle's first unknown reaches the next particle's last)
 BANDWIDTH = 5
@@ -134,54 +136,6 @@ def factor_bands(rotated_diagonal, rotated_upper, pinned, runs, which, factor):
 
 
 @kernel
-def solve_bands(factor, pinned, rhs, out):
-    """``out = (U^T U)^{-1} rhs`` (:func:`factor_bands`), then 0 at ``pinned``; ``rhs, out (n, 3)``."""
-    b = rhs.ravel()
-    x = out.ravel()
-    size = b.size
-    # the nearest unknown last: each one waits for its predecessor's product only
-    for r in range(size):  # U^T z = b
-        value = b[r]
-        for m in range(min(BANDWIDTH, r), 0, -1):
-            value -= factor[r - m, m] * x[r - m]
-        x[r] = value * factor[r, 0]
-    for r in range(size - 1, -1, -1):  # U x = z
-        value = x[r]
-        for m in range(min(BANDWIDTH, size - 1 - r), 0, -1):
-            value -= factor[r, m] * x[r + m]
-        x[r] = value * factor[r, 0]
-    flat_pinned = pinned.ravel()
-    for r in range(size):
-        if flat_pinned[r]:
-            x[r] = 0.0
-
-
-@kernel
-def rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, pinned, y, world, out):
-    """``out = H' y = B' y + R^T C R y``, then 0 at ``pinned``; ``world (n, 3)`` is scratch."""
-    n = y.shape[0]
-    for i in range(n):
-        for a in range(3):
-            world[i, a] = R[i, a, 0] * y[i, 0] + R[i, a, 1] * y[i, 1] + R[i, a, 2] * y[i, 2]
-    for i in range(n):
-        c0 = c1 = c2 = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            c0 += data[k] * world[j, 0]
-            c1 += data[k] * world[j, 1]
-            c2 += data[k] * world[j, 2]
-        for a in range(3):
-            value = R[i, 0, a] * c0 + R[i, 1, a] * c1 + R[i, 2, a] * c2
-            for b in range(3):
-                value += rotated_diagonal[i, a, b] * y[i, b]
-                if i < n - 1:
-                    value += rotated_upper[i, a, b] * y[i + 1, b]
-                if i > 0:
-                    value += rotated_upper[i - 1, b, a] * y[i - 1, b]
-            out[i, a] = 0.0 if pinned[i, a] else value
-
-
-@kernel
 def sparse_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, rows, x, out):
     """``out = H' x`` for an ``x (n, 3)`` that is zero off ``rows (k,) int64``, in time linear in ``k``
     (``C`` is symmetric: row ``j`` of it lists the rows that column ``j`` reaches)."""
@@ -202,6 +156,57 @@ def sparse_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, ro
                     out[j - 1, a] += rotated_upper[j - 1, a, b] * x[j, b]
                 if j < n - 1:
                     out[j + 1, a] += rotated_upper[j, b, a] * x[j, b]
+
+
+@parallel_kernel
+def rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, y, world, out):
+    """``out = H' y = B' y + R^T C R y``; ``world (n, 3)`` is scratch. Particles split among
+    numba's threads (each output row summed in one order whatever their number)."""
+    n = y.shape[0]
+    for i in prange(n):
+        for a in range(3):
+            world[i, a] = R[i, a, 0] * y[i, 0] + R[i, a, 1] * y[i, 1] + R[i, a, 2] * y[i, 2]
+    for i in prange(n):
+        c0 = c1 = c2 = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            c0 += data[k] * world[j, 0]
+            c1 += data[k] * world[j, 1]
+            c2 += data[k] * world[j, 2]
+        for a in range(3):
+            value = R[i, 0, a] * c0 + R[i, 1, a] * c1 + R[i, 2, a] * c2
+            for b in range(3):
+                value += rotated_diagonal[i, a, b] * y[i, b]
+                if i < n - 1:
+                    value += rotated_upper[i, a, b] * y[i + 1, b]
+                if i > 0:
+                    value += rotated_upper[i - 1, b, a] * y[i - 1, b]
+            out[i, a] = value
+
+
+@parallel_kernel
+def solve_bands(factor, pinned, runs, rhs, out):
+    """``out = (U^T U)^{-1} rhs`` (:func:`factor_bands`), then 0 at ``pinned``; ``rhs, out (n, 3)``.
+    Run by run (:func:`band_runs`: the factor has no entry across two), the runs split among
+    numba's threads."""
+    b = rhs.ravel()
+    x = out.ravel()
+    flat_pinned = pinned.ravel()
+    for run in prange(len(runs) - 1):
+        lo, hi = 3 * runs[run], 3 * runs[run + 1]
+        for r in range(lo, hi):  # U^T z = b
+            value = b[r]
+            for m in range(min(BANDWIDTH, r - lo), 0, -1):
+                value -= factor[r - m, m] * x[r - m]
+            x[r] = value * factor[r, 0]
+        for r in range(hi - 1, lo - 1, -1):  # U x = z
+            value = x[r]
+            for m in range(min(BANDWIDTH, hi - 1 - r), 0, -1):
+                value -= factor[r, m] * x[r + m]
+            x[r] = value * factor[r, 0]
+        for r in range(lo, hi):
+            if flat_pinned[r]:
+                x[r] = 0.0
 
 
 @kernel
@@ -228,7 +233,7 @@ def _free_norm(x, pinned):
 
 
 @kernel
-def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, pinned, x, residual,
+def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, data, factor, runs, pinned, x, residual,
                         target, max_steps):
     """Preconditioned CG on the free unknowns of ``H' y = rhs``, in place on ``x`` and ``residual``.
 
@@ -239,6 +244,8 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
         The coupling ``C`` (CSR, no diagonal).
     factor : (3n, 6) float64
         :func:`factor_bands` of ``B'`` with these pins.
+    runs : (r + 1,) int64
+        :func:`band_runs`: the product and the preconditioner split among threads by them.
     pinned : (n, 3) bool
     x : (n, 3) float64
         In: pinned values at ``pinned``, a first guess elsewhere. Out: the solution.
@@ -259,8 +266,7 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     world = np.empty((n, 3))
     product = np.empty((n, 3))
     z = np.empty((n, 3))
-    no_pins = np.zeros((n, 3), dtype=np.bool_)
-    solve_bands(factor, pinned, residual, z)
+    solve_bands(factor, pinned, runs, residual, z)
     direction = z.copy()
     rz = _dot(residual, z)
     flat_x, flat_r, flat_z = x.ravel(), residual.ravel(), z.ravel()
@@ -269,12 +275,12 @@ def conjugate_gradients(R, rotated_diagonal, rotated_upper, indptr, indices, dat
     for steps in range(1, max_steps + 1):
         if _free_norm(residual, pinned) <= target or rz <= 0.0:
             break
-        rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, no_pins, direction, world, product)
+        rotated_product(R, rotated_diagonal, rotated_upper, indptr, indices, data, direction, world, product)
         step = rz / _dot(direction, product)
         for k in range(flat_x.size):
             flat_x[k] += step * flat_d[k]
             flat_r[k] -= step * flat_q[k]
-        solve_bands(factor, pinned, residual, z)
+        solve_bands(factor, pinned, runs, residual, z)
         rz_next = _dot(residual, z)
         ratio = rz_next / rz
         for k in range(flat_d.size):
@@ -323,8 +329,7 @@ class RotatedHessian:
         """``H' y`` for ``y (n, 3)``."""
         out, C = np.empty_like(y), self.coupling
         rotated_product(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
-                        np.zeros(y.shape, dtype=np.bool_), np.ascontiguousarray(y, dtype=np.float64),
-                        np.empty_like(y), out)
+                         np.ascontiguousarray(y, dtype=np.float64), np.empty_like(y), out)
         return out
 
     def factor(self, pinned: np.ndarray) -> np.ndarray:
@@ -389,7 +394,7 @@ class RotatedHessian:
             y = np.where(pinned, values, guess)
             residual = rhs - self.product(y)
         steps = conjugate_gradients(self.R, self.rotated_diagonal, self.rotated_upper, C.indptr, C.indices, C.data,
-                                    factor, pinned, y, residual, target, max_steps)
+                                    factor, self.runs, pinned, y, residual, target, max_steps)
         return y, steps, residual
 
 def reference_product(hessian: RotatedHessian, y: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 MERIT_PENALTY_FACTOR = 2.0
 #: each backtracking step of the line search shortens the step by this factor ...
 BACKTRACK_FACTOR = 0.5
-#: ... and after this many tries the shortest step is taken anyway
+#: ... at most this many times (a strand whose every try raised its merit then stays where it is)
 MAX_BACKTRACKS = 6
 
 #: active-set rounds per QP before the last iterate is taken (they converge in a few)

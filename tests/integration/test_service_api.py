@@ -449,7 +449,7 @@ def test_a_job_survives_its_worker_dying(service, uploaded):
     spare = service["start_worker"]("w2")
     job_id = client.post("/v1/retargets", headers=AUTH, json={
         "hairstyle_id": uploaded["hairstyle"], "target_character_ids": [uploaded["tall"]],
-        "options": {"method": "global", "max_iterations": 40, "step_tolerance": 0}}).json()["jobs"][0]["id"]
+        "options": {"method": "global", "max_iterations": 40, "step_tolerance": 0, "energy_tolerance": 0}}).json()["jobs"][0]["id"]
     running = wait_for(client, f"/v1/jobs/{job_id}", lambda b: b["state"] == "running" and b["stage"] == "solve")
     by_name = dict(service["workers"])
     victim = by_name[running["worker"].split("@")[0]]

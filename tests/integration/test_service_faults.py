@@ -134,7 +134,7 @@ def retarget(client, body: dict, headers=AUTH):
 
 def slow_job(hairstyle_id: str, target: str) -> dict:
     return {"hairstyle_id": hairstyle_id, "target_character_ids": [target],
-            "options": {"method": "global", "max_iterations": 40, "step_tolerance": 0}}
+            "options": {"method": "global", "max_iterations": 40, "step_tolerance": 0, "energy_tolerance": 0}}
 
 
 def job_record(storage: Path, job_id: str) -> dict:

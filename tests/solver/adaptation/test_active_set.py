@@ -222,6 +222,25 @@ def test_a_group_stops_after_two_iterations_in_a_row_below_the_energy_tolerance(
     assert loose.iterations > STALLED_ITERATIONS
 
 
+def test_coupled_strands_backtrack_on_their_own_and_the_merit_never_rises(sphere):
+    """Coupled strands share one QP but each backtracks on its share of the merit: strands
+    that overshoot stay or step short while the others take their full step, and (with the
+    penalty fixed once it stops growing) the merit falls every iteration."""
+    source, query = sphere
+    hair = outward_strands(source, n_strands=40, n_points=10, seed=3)
+    start = tilt_into_surface(hair, query, np.radians(95.0))
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, start, hair.is_root)
+    assert problem.coupled
+    points, report = solve_strands(problem, BodyDistance(query), options=SolveOptions(max_iterations=40, eps_c=5e-4))
+    merits = np.array(report.merit)
+    assert len(merits) >= 5
+    assert np.all(np.diff(merits[2:]) <= 1e-9 * merits[2:-1])
+    assert min(report.step_fractions) < 1.0  # some strand backtracked ...
+    assert report.max_step[-1] < report.max_step[0]
+    sd = query.signed_distance(points[~problem.fixed])
+    assert sd.distance.min() >= 5e-4 - 1e-5
+
+
 def coupled_qp(sphere, n_strands=40):
     """The first QP of a kNN-coupled hairstyle tilted into the sphere (many constraints active)."""
     source, query = sphere

@@ -67,7 +67,7 @@ def test_band_factor_and_solve_are_lapacks_with_pinned_identity_rows():
         np.testing.assert_allclose(factor[rows[:-m], m], reference[BANDWIDTH - m, rows[m:]], rtol=0, atol=1e-14)
     rhs = np.random.default_rng(1).normal(size=(n, 3))
     out = np.empty((n, 3))
-    solve_bands(factor, pinned, rhs, out)
+    solve_bands(factor, pinned, runs, rhs, out)
     expected = scipy.linalg.cho_solve_banded((reference, False), rhs.ravel()).reshape(n, 3)
     expected[pinned] = 0.0
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
