@@ -3,23 +3,23 @@
 Builds Table 4's groom (average female -> heavy male, 'long'; bench/table4.py) at one size,
 runs the initial transfer, then solves the coarse level as
 :func:`solver.adaptation.multiscale.solve_multiscale` poses it, once per path of
-:func:`.active_set.solve_qp`'s coupled rounds, all in this process (the kernels warmed up
+:func:`.contact_qp.solve_qp`'s coupled rounds, all in this process (the kernels warmed up
 first), ``--runs`` times each, interleaved:
 
 * ``before``: the numpy reference (scipy banded Cholesky, sparse products), every round's
-  conjugate gradients from zero to :data:`.active_set.CG_RELATIVE_TOLERANCE` (the path
+  conjugate gradients from zero to :data:`.contact_qp.CG_RELATIVE_TOLERANCE` (the path
   before issue 13);
 * ``compiled``: the same rounds by the compiled kernels (:mod:`.coupled_kernels`);
 * ``+warm``: ... each round's CG started from the previous round's solution;
 * ``after``: ... and rounds whose active set still changes solved to
-  :data:`.active_set.SCREENING_CG_TOLERANCE` only, with the cycle guard (the default).
+  :data:`.contact_qp.SCREENING_CG_TOLERANCE` only, with the cycle guard (the default).
 
 It prints, per path, the median wall-clock and CPU seconds of this process (less sensitive
 to other jobs on a shared machine) and their ratios to ``before``, outer iterations,
 active-set rounds, CG steps, whether it converged, the final merit, and the largest and mean
 distance of its guides from the ``before`` result. With ``--compare N`` the first N QPs are
 solved again by conjugate gradients and by the sparse direct factorisation
-(:data:`.active_set.DIRECT_SOLVE_MAX_PARTICLES`), each timed, with the largest difference
+(:data:`.contact_qp.DIRECT_SOLVE_MAX_PARTICLES`), each timed, with the largest difference
 of their steps.
 
     python bench/coarse_stage.py [--size 1e5] [--guides 300] [--runs 3] [--paths before after] [--compare 3]
@@ -56,7 +56,7 @@ def main() -> None:
 
     from hairport import solver
     from hairport.solver import jit
-    from hairport.solver.adaptation import active_set
+    from hairport.solver.adaptation import active_set, contact_qp
     from hairport.solver.adaptation.coupled import solve_hairstyle
     from hairport.solver.adaptation.energies import EnergyWeights
     from hairport.solver.adaptation.multiscale import CONTACT_BAND
@@ -91,7 +91,7 @@ def main() -> None:
     guide_roots = np.zeros(len(guide_particles), dtype=bool)
     guide_roots[guide_offsets[:-1]] = True
 
-    solve_qp = active_set.solve_qp
+    solve_qp = contact_qp.solve_qp
     qps = []
 
     def solve(path: str, record: bool = False):

@@ -12,7 +12,8 @@ the constraints of Sec. 4.6:
   (:mod:`hairport.solver.mesh.collision`), so the half-space of a particle inside pushes it out;
 * the l1 clearance violation of the line search's merit (:func:`clearance_violation`);
 * the push-out of particles short of the clearance when the iteration cap stops the loop
-  (:func:`push_out_short`): the result never breaks Eq. 13.
+  (:func:`push_out_short`): the result never breaks Eq. 13;
+* the line search's distances without a query where a bound suffices (:class:`QueryAnchors`).
 
 Convention: particles ``(N, 3) float64`` in meters; ``fixed (N,) bool`` marks the roots.
 """
@@ -26,6 +27,7 @@ from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 
 _NOT_MADE = object()
+
 
 
 class BodyDistance:
@@ -196,3 +198,89 @@ def push_out_short(
     if pushed:
         points = push_out(points, fixed, query, eps_c)
     return points, pushed
+
+
+class QueryAnchors:
+    """Each particle's last exact distance query, to bound its distance at a trial point without one.
+
+    The signed distance is 1-Lipschitz: a point ``x`` at ``delta`` from the anchor ``a`` of its
+    particle (where the query gave ``s``) has distance at least ``s - delta``. Where that bound
+    is at least ``eps_c + margin`` the line search asks no query: the merit's clearance
+    violation is 0 there, and the iterate keeps the bound as its distance with the anchor's
+    normal (``bounded``). Such a particle's Eq. 13 half-space in the next QP is slack by more
+    than ``margin``, as the exact one is; when the QP's step of every bounded particle stays
+    shorter than its slack (``distance - eps_c``), both half-spaces are inactive at that step and
+    it is the exact QP's solution too (a convex QP's KKT point does not depend on inactive
+    constraints). A strand with a step that reaches the slack gets exact queries for its bounded
+    particles and its QP solved again (:func:`reaching`). Particles the broad phase put far from
+    the body (``near`` False, distance ``inf``) are always asked again.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        The positions of the first query ...
+    distance : (N,) float64
+    normal : (N, 3) float64
+    near : (N,) bool
+        ... and its results (:class:`BodyDistance`); copied.
+
+    Attributes
+    ----------
+    bounded : (N,) bool
+        Particles whose iterate's distance is a bound, not a query.
+    """
+
+    def __init__(self, points: np.ndarray, distance: np.ndarray, normal: np.ndarray, near: np.ndarray):
+        self.points = np.array(points, dtype=np.float64)
+        self.distance = np.array(distance, dtype=np.float64)
+        self.normal = np.array(normal, dtype=np.float64)
+        self.near = np.array(near, dtype=bool)
+        self.bounded = np.zeros(len(self.points), dtype=bool)
+
+    def trial_distance(self, distance: BodyDistance, moved: np.ndarray, particles: np.ndarray, eps_c: float,
+                       margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Distances at the trial points ``moved (T, 3)`` of ``particles (T,) int64``.
+
+        Returns
+        -------
+        distance : (T,) float64
+            Exact where queried, else the bound ``s - delta``.
+        normal : (T, 3) float64
+            The query's, else the anchor's.
+        near : (T,) bool
+        queried : (T,) bool
+            Which points got an exact query.
+        """
+        delta = np.sqrt(np.sum((moved - self.points[particles]) ** 2, axis=1))
+        bound = self.distance[particles] - delta
+        queried = ~(self.near[particles] & (bound >= eps_c + margin))
+        d = np.where(queried, np.inf, bound)
+        nrm = self.normal[particles].copy()
+        nr = ~queried
+        if queried.any():
+            d[queried], nrm[queried], nr[queried] = distance(moved[queried])
+        return d, nrm, nr, queried
+
+    def commit(self, particles: np.ndarray, points: np.ndarray, distance: np.ndarray, normal: np.ndarray,
+               near: np.ndarray, queried: np.ndarray) -> None:
+        """``particles (T,)`` move to ``points (T, 3)``: the anchors of the ``queried (T,)`` ones
+        with them (exact there), the others become bounded."""
+        asked = particles[queried]
+        self.points[asked] = points[queried]
+        self.distance[asked] = distance[queried]
+        self.normal[asked] = normal[queried]
+        self.near[asked] = near[queried]
+        self.bounded[particles] = ~queried
+
+    def refresh(self, distance: BodyDistance, particles: np.ndarray,
+                points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Exact queries of ``particles (T,)`` at their iterate ``points (T, 3)``, committed: ``(distance, normal, near)``."""
+        d, nrm, nr = distance(points)
+        self.commit(particles, points, d, nrm, nr, np.ones(len(particles), dtype=bool))
+        return d, nrm, nr
+
+
+def reaching(step: np.ndarray, distance: np.ndarray, bounded: np.ndarray, eps_c: float) -> np.ndarray:
+    """Bounded particles (:class:`QueryAnchors`) whose QP step ``(N, 3)`` is at least their slack ``distance - eps_c``: ``(N,) bool``."""
+    length = np.sqrt(np.sum(step * step, axis=1))
+    return bounded & (length >= distance - eps_c)

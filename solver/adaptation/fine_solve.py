@@ -6,10 +6,12 @@ reference in :mod:`.active_set` does, iteration for iteration, but never copies 
 the kernels of :mod:`.strand_kernels` and :mod:`.line_search_kernels` take the chunk's
 arrays and the list of open strands, each strand's QP runs in one compiled pass over its own
 particles (strands in parallel on numba's threads), and only the particles of strands still
-backtracking are packed for the batched distance query of each line-search attempt.
+backtracking are packed for the batched distance query of each line-search attempt, which
+asks only about the trial points whose distance bound from their particle's last query is
+short of ``eps_c`` plus :data:`.options.QUERY_MARGIN` (:class:`.constraints.QueryAnchors`).
 
 Working memory beyond the problem's arrays: the iterate, its distance, normal and flags, the
-step (about 110 bytes per particle), the packed trial points of one attempt (about 60) and
+step, the last queries' anchors (about 170 bytes per particle), the packed trial points of one attempt (about 60) and
 the distance query's temporaries (about 280 on a whole-chunk batch, measured at 10^5).
 
 Convention: particles ``(N, 3) float64`` in meters, strands in CSR layout (``offsets``).
@@ -63,6 +65,12 @@ def _packed_offsets(offsets: np.ndarray, strands: np.ndarray) -> np.ndarray:
     packed = np.zeros(len(strands) + 1, dtype=np.int64)
     np.cumsum(offsets[strands + 1] - offsets[strands], out=packed[1:])
     return packed
+
+
+def strand_rows(offsets: np.ndarray, strands: np.ndarray) -> np.ndarray:
+    """``(P,) int64``: the particles of the listed strands ``(T,) int64``, strand after strand."""
+    packed = _packed_offsets(offsets, strands)
+    return np.arange(packed[-1], dtype=np.int64) + np.repeat(offsets[strands] - packed[:-1], np.diff(packed))
 
 
 def solve_uncoupled(
@@ -135,6 +143,9 @@ def solve_uncoupled(
     dist, normal, near = distance(points)
     dist, normal, near = (np.ascontiguousarray(dist, dtype=np.float64), np.ascontiguousarray(normal, dtype=np.float64),
                           np.ascontiguousarray(near, dtype=np.bool_))
+    anchor_points, anchor_distance, anchor_normal, anchor_near = points.copy(), dist.copy(), normal.copy(), near.copy()
+    bounded = np.zeros(problem.n_particles, dtype=bool)  # the iterate's distance is a bound (QueryAnchors)
+    least = eps_c + float(options.query_margin)
     open_strands = np.arange(n_strands, dtype=np.int64)
     all_threads = threads()
     for iteration in range(options.max_iterations):
@@ -147,13 +158,33 @@ def solve_uncoupled(
         predicted, merit_now = np.zeros(k), np.zeros(k)
         open_particles = int(np.sum(offsets[open_strands + 1] - offsets[open_strands]))
         set_threads(all_threads if open_particles >= PARALLEL_MIN_PARTICLES else 1)
+        active_before, penalty_before = active.copy(), penalty.copy()
+        qp_strands, qp_rounds, qp_predicted = open_strands, rounds, predicted
+        hit = np.zeros(len(open_strands), dtype=bool)
         try:
-            strand_kernels.newton_qp_steps(
-                open_strands, offsets, points, dist, normal, near, arrays["source_directions"], arrays["initial"],
-                pull_weight, arrays["features"], arrays["gamma"], fixed, alpha, beta, eps_c, damping, penalty,
-                active, step, rounds, predicted, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
-                MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
-            )
+            while True:
+                strand_kernels.newton_qp_steps(
+                    qp_strands, offsets, points, dist, normal, near, arrays["source_directions"], arrays["initial"],
+                    pull_weight, arrays["features"], arrays["gamma"], fixed, alpha, beta, eps_c, damping, penalty,
+                    active, step, qp_rounds, qp_predicted, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE,
+                    PARALLEL_SINE, MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
+                )
+                if qp_strands is not open_strands:
+                    rounds[hit], predicted[hit] = qp_rounds, qp_predicted
+                hit = np.zeros(len(open_strands), dtype=bool)  # a new array: the old one indexed the solve above
+                line_search_kernels.reaching_strands(open_strands, offsets, step, dist, bounded, eps_c, hit)
+                if not hit.any():
+                    break
+                # a step reaches a bounded particle's slack: that strand's bounded particles are
+                # queried and its QP solved again from the same state (see QueryAnchors)
+                qp_strands = open_strands[hit]
+                rows = strand_rows(offsets, qp_strands)
+                again = rows[bounded[rows]]
+                dist[again], normal[again], near[again] = distance(points[again])
+                anchor_points[again], anchor_distance[again] = points[again], dist[again]
+                anchor_normal[again], anchor_near[again], bounded[again] = normal[again], near[again], False
+                active[rows], penalty[qp_strands] = active_before[rows], penalty_before[qp_strands]
+                qp_rounds, qp_predicted = np.zeros(len(qp_strands), dtype=np.int64), np.zeros(len(qp_strands))
         finally:
             set_threads(all_threads)
         line_search_kernels.strand_merits(open_strands, offsets, offsets[open_strands], points, dist, *problem_arrays,
@@ -176,9 +207,12 @@ def solve_uncoupled(
             free = np.empty(packed[-1], dtype=bool)
             line_search_kernels.gather_trial_points(strands, offsets, packed, points, step, fraction[todo], fixed,
                                                     moved, free)
-            d, nrm, nr = distance(moved)
-            d, nrm, nr = (np.ascontiguousarray(d, dtype=np.float64), np.ascontiguousarray(nrm, dtype=np.float64),
-                          np.ascontiguousarray(nr, dtype=np.bool_))
+            d, nrm = np.empty(len(moved)), np.empty((len(moved), 3))
+            nr, queried = np.empty(len(moved), dtype=bool), np.empty(len(moved), dtype=bool)
+            line_search_kernels.bound_trial_distances(strands, offsets, packed, moved, anchor_points, anchor_distance,
+                                                      anchor_normal, anchor_near, least, d, nrm, nr, queried)
+            if queried.any():
+                d[queried], nrm[queried], nr[queried] = distance(moved[queried])
             short = nr & (d < eps_c) & free
             if short.any():
                 # second-order correction: the linearised half-spaces ignore the body's curvature
@@ -196,6 +230,8 @@ def solve_uncoupled(
                 strands, offsets, packed, now_accepted, moved, d, nrm, nr, fixed, eps_c, points, dist, normal, near,
                 todo_step, todo_short, todo_clearance,
             )
+            line_search_kernels.commit_anchors(strands, offsets, packed, now_accepted, queried, moved, d, nrm, nr,
+                                               anchor_points, anchor_distance, anchor_normal, anchor_near, bounded)
             max_step[todo] = todo_step
             shortfall[todo] = todo_short
             min_clearance[todo] = todo_clearance

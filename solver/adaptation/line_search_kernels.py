@@ -5,7 +5,11 @@
 * :func:`gather_trial_points`: the trial points ``p + fraction * step`` of the strands still
   backtracking, packed back to back for one batched distance query;
 * :func:`commit_trial_points`: the accepted ones written back with their step length and
-  clearance, and :func:`strand_clearances`: the clearance of strands that stay.
+  clearance, and :func:`strand_clearances`: the clearance of strands that stay;
+* :func:`bound_trial_distances`, :func:`commit_anchors`, :func:`reaching_strands`: the trial
+  points' distance bounds from each particle's last exact query, the anchors moved, and the
+  strands whose QP step reaches a bounded particle's slack (:class:`.constraints.QueryAnchors`,
+  their numpy reference).
 
 A "packed" array holds the rows of a list of strands back to back (``packed_offsets (T+1,)
 int64``). These kernels are serial: a few passes over memory cost less than waking a second
@@ -175,6 +179,82 @@ def commit_trial_points(strands, offsets, packed_offsets, take, moved, moved_dis
 
 
 @kernel
+def bound_trial_distances(strands, offsets, packed_offsets, moved, anchor_points, anchor_distance, anchor_normal,
+                          anchor_near, least, distance, normal, near, queried):
+    """Per packed trial point: the bound ``s - delta`` from its particle's anchor where it is at least ``least``, else a query is due.
+
+    Parameters
+    ----------
+    strands : (T,) int64
+    offsets : (S+1,) int64
+    packed_offsets : (T+1,) int64
+    moved : (P, 3) float64
+        Packed trial points.
+    anchor_points, anchor_normal : (N, 3) float64
+    anchor_distance : (N,) float64
+    anchor_near : (N,) bool
+        Each particle's last exact query (:class:`.constraints.QueryAnchors`).
+    least : float
+        ``eps_c + margin`` (m).
+    distance, normal, near, queried : (P,), (P, 3), (P,), (P,)
+        Receive the bound, the anchor's normal and True where the bound suffices, and
+        ``queried`` True (the others left as they are) where an exact query is due.
+    """
+    for t in range(len(strands)):
+        first = offsets[strands[t]]
+        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
+            r = packed_offsets[t] + j
+            i = first + j
+            e0 = moved[r, 0] - anchor_points[i, 0]
+            e1 = moved[r, 1] - anchor_points[i, 1]
+            e2 = moved[r, 2] - anchor_points[i, 2]
+            bound = anchor_distance[i] - np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            if anchor_near[i] and bound >= least:
+                queried[r] = False
+                distance[r] = bound
+                near[r] = True
+                for a in range(3):
+                    normal[r, a] = anchor_normal[i, a]
+            else:
+                queried[r] = True
+
+
+@kernel
+def commit_anchors(strands, offsets, packed_offsets, take, queried, moved, moved_distance, moved_normal, moved_near,
+                   anchor_points, anchor_distance, anchor_normal, anchor_near, bounded):
+    """The strands that ``take (T,) bool`` says moved to their trial points: the anchors of the
+    exactly ``queried`` ones move with them, the others become ``bounded (N,) bool``."""
+    for t in range(len(strands)):
+        if not take[t]:
+            continue
+        first = offsets[strands[t]]
+        for j in range(packed_offsets[t + 1] - packed_offsets[t]):
+            r = packed_offsets[t] + j
+            i = first + j
+            bounded[i] = not queried[r]
+            if queried[r]:
+                for a in range(3):
+                    anchor_points[i, a] = moved[r, a]
+                    anchor_normal[i, a] = moved_normal[r, a]
+                anchor_distance[i] = moved_distance[r]
+                anchor_near[i] = moved_near[r]
+
+
+@kernel
+def reaching_strands(strands, offsets, step, distance, bounded, eps_c, hit):
+    """Per listed strand ``(T,)``: does the step of a bounded particle reach its slack ``distance - eps_c``
+    (:func:`.constraints.reaching`)? Into ``hit (T,) bool``."""
+    for t in range(len(strands)):
+        reached = False
+        for i in range(offsets[strands[t]], offsets[strands[t] + 1]):
+            if bounded[i]:
+                length = np.sqrt(step[i, 0] * step[i, 0] + step[i, 1] * step[i, 1] + step[i, 2] * step[i, 2])
+                if length >= distance[i] - eps_c:
+                    reached = True
+        hit[t] = reached
+
+
+@kernel
 def strand_clearances(strands, offsets, distance, fixed, eps_c, shortfall, clearance):
     """Per listed strand ``(T,) int64``: the largest ``eps_c - distance`` of a free particle (-inf without one)
     into ``shortfall (T,)``, and the smallest distance of a free particle (inf without one) into ``clearance (T,)``."""
@@ -211,3 +291,10 @@ def _warm() -> None:
                         5e-4, points.copy(), distance.copy(), normal.copy(), near.copy(), np.zeros(2), np.zeros(2),
                         np.zeros(2))
     strand_clearances(strands, offsets, distance, fixed, 5e-4, np.zeros(2), np.zeros(2))
+    queried = np.empty(n, dtype=np.bool_)
+    bound_trial_distances(strands, offsets, offsets, moved, points, distance, normal, near, 2.5e-3, distance.copy(),
+                          normal.copy(), near.copy(), queried)
+    bounded = np.zeros(n, dtype=np.bool_)
+    commit_anchors(strands, offsets, offsets, np.ones(2, dtype=np.bool_), queried, moved, distance, normal, near,
+                   points.copy(), distance.copy(), normal.copy(), near.copy(), bounded)
+    reaching_strands(strands, offsets, np.zeros((n, 3)), distance, bounded, 5e-4, np.zeros(2, dtype=np.bool_))

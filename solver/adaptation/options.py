@@ -31,6 +31,13 @@ DAMPING_RAISE_BELOW = 0.25
 #: ... and one above this share lowers it
 DAMPING_LOWER_ABOVE = 0.75
 
+#: a trial point whose distance to the body is proven at least ``eps_c`` plus this (m) from its
+#: particle's last query gets no query of its own in the uncoupled line search
+#: (:class:`.constraints.QueryAnchors`; a QP step that reaches such a particle's slack is solved
+#: again with exact distances). On Table 4's 10^6 groom the fine level asked about 7.5 M points
+#: instead of 24 M, in 6.5 s instead of 8.6 (2 mm: 6.9 s, fewer skipped; 0.5 mm steps are common)
+QUERY_MARGIN = 1e-3
+
 #: how the active-set loop runs over uncoupled strands (a diagonal ``K``, Eq. 14's fine level):
 #: on compiled per-strand kernels (:mod:`.fine_solve`), or in numpy, the readable reference
 ENGINE_COMPILED = "compiled"
@@ -67,6 +74,10 @@ class SolveOptions:
     osqp_eps_abs, osqp_eps_rel : float
         OSQP's stopping tolerances (meters for the constraints).
     osqp_max_iter : int
+    query_margin : float
+        The uncoupled active-set line search queries a trial point's distance only where its bound from
+        the particle's last query is below ``eps_c`` plus this (m; :data:`QUERY_MARGIN`,
+        :class:`.constraints.QueryAnchors`); ``inf`` queries every one.
     """
 
     eps_c: float = 5e-4
@@ -77,6 +88,7 @@ class SolveOptions:
     osqp_eps_abs: float = 1e-7
     osqp_eps_rel: float = 1e-7
     osqp_max_iter: int = 50_000
+    query_margin: float = QUERY_MARGIN
 
 
 @dataclass

@@ -6,8 +6,8 @@ particles, a strand per ``prange`` iteration, with scratch arrays of the strand'
 Eq. 1's Newton model (:func:`assemble_strand`, as :func:`.strand_problem.newton_system`:
 Eq. 7's clamped exact blocks, Eq. 10's diagonal pull, Eq. 11, the radial damping), its
 rotation into the contact frames of the constrained particles (:func:`contact_frame`,
-:func:`rotate_strand`, as :class:`.active_set.Frames`), the primal-dual active-set rounds
-(:func:`active_set_qp`, as :func:`.active_set.solve_qp`), each a banded Cholesky solve of
+:func:`rotate_strand`, as :class:`.contact_qp.Frames`), the primal-dual active-set rounds
+(:func:`active_set_qp`, as :func:`.contact_qp.solve_qp`), each a banded Cholesky solve of
 the pinned system (:mod:`.band_kernels`), then the step, the strand's merit penalty (its own
 running maximum of the multipliers) and the model's predicted change. The line search's
 kernels are :mod:`.line_search_kernels`'.
@@ -156,7 +156,7 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
 
 @kernel
 def contact_frame(normal, frame):
-    """The rotation ``(3, 3)`` whose columns are the unit ``normal (3,)`` and two tangents (:func:`.active_set.normal_frames`)."""
+    """The rotation ``(3, 3)`` whose columns are the unit ``normal (3,)`` and two tangents (:func:`.contact_qp.normal_frames`)."""
     n0, n1, n2 = normal[0], normal[1], normal[2]
     t0, t1, t2 = _normal_to(n0, n1, n2)
     t_norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
@@ -214,7 +214,7 @@ def rotate_strand(rotated, frames, diagonal, upper, gradient):
 
 @kernel
 def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, max_rounds, step, multipliers):
-    """:func:`.active_set.solve_qp` of one strand, in its contact frames (rotated ``H'``, ``g'``).
+    """:func:`.contact_qp.solve_qp` of one strand, in its contact frames (rotated ``H'``, ``g'``).
 
     Parameters
     ----------

@@ -1,5 +1,5 @@
 """Compiled kernels of the coupled active-set rounds (solver/adaptation/coupled_kernels.py) against
-their numpy references: scipy's banded Cholesky, the block products of active_set.Frames and of
+their numpy references: scipy's banded Cholesky, the block products of contact_qp.Frames and of
 the Newton system, and the module's numpy conjugate gradients."""
 
 import numpy as np
@@ -9,8 +9,8 @@ import scipy.sparse as sp
 
 from hairport.solver import jit
 from hairport.solver.adaptation import banded
-from hairport.solver.adaptation.active_set import CG_MAX_STEPS, CG_RELATIVE_TOLERANCE, Frames
 from hairport.solver.adaptation.constraints import fixed_coordinates, linearised_clearance
+from hairport.solver.adaptation.contact_qp import CG_MAX_STEPS, CG_RELATIVE_TOLERANCE, Frames
 from hairport.solver.adaptation.coupled_kernels import (
     BANDWIDTH,
     RotatedHessian,

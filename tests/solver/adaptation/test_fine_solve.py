@@ -134,7 +134,8 @@ def test_a_strand_solved_alone_or_in_any_chunk_gives_the_same_result(sphere, eng
 
 class RepellingStart:
     """A :class:`BodyDistance` stand-in under which only the given points are outside (1 m off a body below
-    them); any other point is 1 m deep: every trial step of the line search raises the merit."""
+    them); any other point is 1 m deep: every trial step of the line search raises the merit. Not a
+    distance (not 1-Lipschitz): solves under it query every trial point (``query_margin`` inf)."""
 
     query = None
 
@@ -151,7 +152,8 @@ class RepellingStart:
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_strand_without_a_better_trial_stays_and_stops(groom, engine):
     problem, first = groom
-    points, report = solve_strands(problem, RepellingStart(first), start=first, engine=engine)
+    points, report = solve_strands(problem, RepellingStart(first), options=SolveOptions(query_margin=np.inf),
+                                   start=first, engine=engine)
     np.testing.assert_array_equal(points, first)  # the shortest step is not taken anyway
     assert report.converged and report.iterations == 2  # two failed line searches in a row: stalled
     assert report.step_fractions == [0.0, 0.0] and report.max_step == [0.0, 0.0]
@@ -202,3 +204,34 @@ def test_only_a_diagonal_coupling_takes_the_compiled_loop(sphere):
     np.testing.assert_array_equal(compiled, reference)
     with pytest.raises(ValueError, match="unknown engine"):
         solve_strands(problem, BodyDistance(query), engine="fortran")
+
+
+class CountingDistance(BodyDistance):
+    """A :class:`BodyDistance` that counts the points it was asked about."""
+
+    asked = 0
+
+    def __call__(self, points):
+        self.asked += len(points)
+        return super().__call__(points)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_trial_points_far_enough_get_no_query_and_the_result_holds(sphere, groom, engine):
+    """The line search asks only about trial points whose bound from their last query is short of eps_c
+    plus the margin, and a QP step that reaches a bounded particle's slack is taken again with exact
+    queries: fewer queries, the same iterates to rounding, the clearance kept."""
+    _, query = sphere
+    problem, first = groom
+    exact_body, lazy_body = CountingDistance(query), CountingDistance(query)
+    exact, exact_report = solve_strands(problem, exact_body, options=SolveOptions(eps_c=EPS_C, query_margin=np.inf),
+                                        start=first, engine=engine)
+    lazy, lazy_report = solve_strands(problem, lazy_body, options=SolveOptions(eps_c=EPS_C, query_margin=1e-3),
+                                      start=first, engine=engine)
+    assert lazy_body.asked < 0.8 * exact_body.asked
+    assert lazy_report.iterations == exact_report.iterations and lazy_report.open_groups == exact_report.open_groups
+    assert lazy_report.step_fractions == exact_report.step_fractions
+    np.testing.assert_allclose(lazy_report.merit, exact_report.merit, rtol=1e-9)
+    np.testing.assert_allclose(lazy, exact, rtol=0, atol=1e-9)
+    free = ~problem.fixed
+    assert query.signed_distance(lazy[free]).distance.min() >= EPS_C - SolveOptions().clearance_tolerance

@@ -5,7 +5,7 @@ import pytest
 import scipy.sparse as sp
 
 from hairport.solver.adaptation import strand_kernels
-from hairport.solver.adaptation.active_set import Frames, solve_qp
+from hairport.solver.adaptation.contact_qp import Frames, solve_qp
 from hairport.solver.adaptation.energies import (
     NEGATIVE_CURVATURE_SHARE,
     PARALLEL_SINE,
@@ -104,7 +104,7 @@ def test_contact_frames_and_rotation_match_the_frames_class():
 
 
 def test_active_set_qp_of_a_strand_matches_solve_qp():
-    """One strand's rotated QP by the kernel against :func:`active_set.solve_qp` (several constraints active)."""
+    """One strand's rotated QP by the kernel against :func:`contact_qp.solve_qp` (several constraints active)."""
     rng = np.random.default_rng(5)
     problem, points = random_problem(rng, counts=(14,))
     n = problem.n_particles
