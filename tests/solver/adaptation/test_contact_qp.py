@@ -10,16 +10,11 @@ from hairport.solver.adaptation import contact_qp
 from hairport.solver.adaptation.constraints import linearised_clearance
 from hairport.solver.adaptation.contact_qp import CG_RELATIVE_TOLERANCE, Frames, normal_frames, rotated_matrix, solve_qp
 from hairport.solver.adaptation.coupled_kernels import reference_product
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
+from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.options import MAX_ACTIVE_SET_ROUNDS, SolveOptions
 from hairport.solver.adaptation.strand_problem import StrandProblem, newton_system, problem_from_shape_model
 from hairport.solver.mesh.query import MeshQuery
 from tests.solver.hair_shapes import model_of, outward_strands, sphere_character, tilt_into_surface
-
-#: both loops converge linearly once particles slide along the faceted surface (the half-spaces
-#: carry no curvature); 1e-7 m steps are reached in < 100 iterations by both
-TIGHT = SolveOptions(max_iterations=200, step_tolerance=1e-7, osqp_eps_abs=1e-10, osqp_eps_rel=1e-10)
-
 
 
 @pytest.fixture(scope="module")
@@ -28,12 +23,6 @@ def sphere():
     return source, MeshQuery(source.vertices, source.faces)
 
 
-def shape_model_of(problem, source_points):
-    """The same energy as a :class:`ShapeModel` for the OSQP reference."""
-    seg = problem.segment_starts
-    segments = np.stack([seg, seg + 1], axis=1)
-    return ShapeModel(segments, segment_operator(segments, problem.n_particles), problem.source_directions[seg],
-                      problem.coupling, problem.features)
 
 def test_qp_solution_satisfies_kkt_and_matches_osqp():
     rng = np.random.default_rng(0)
