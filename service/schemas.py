@@ -221,9 +221,9 @@ class Problem(BaseModel):
 
 
 #: media type of a result file per hair format: the result route answers with it and the contract lists it
-#: (OBJ has a registered type; the other formats have none and are plain binary files)
+#: (OBJ and USD's text layers have registered types; the other formats have none and are plain binary files)
 RESULT_MEDIA_TYPES: dict[str, str] = {name: "application/octet-stream" for name in solver.HAIR_FORMATS} | {
-    "obj": "model/obj"}
+    "obj": "model/obj", "usda": "model/vnd.usda"}
 
 
 def result_content() -> dict:

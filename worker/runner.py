@@ -98,7 +98,7 @@ def read_source(repository: Repository, settings: Settings, hairstyle: Hairstyle
     source, source_units, character = load_character(repository, settings, hairstyle.source_character_id)
     path = blob_path(repository, hairstyle.hair)
     units = hairstyle.units if hairstyle.units not in (None, solver.AUTO) else (
-        solver.recorded_hair_units(path) if hairstyle.format == "npz" else None)
+        solver.recorded_hair_units(path, hairstyle.format))
     hair = solver.read_hair(path, units=units or "m", format=hairstyle.format,
                             limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
                                                      settings.max_file_bytes,

@@ -14,7 +14,7 @@ import warnings
 
 from hairport.solver import InputError
 
-from . import demo, ops, solve
+from . import convert, demo, ops, solve
 from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress, print_warning
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "StageProgress", "build_parser", "main"]
@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     ops.add_reindex(sub)
     ops.add_openapi(sub)
     solve.add_hairline(sub)
+    convert.add_convert(sub)
     return parser
 
 

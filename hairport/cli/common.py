@@ -106,11 +106,11 @@ def mesh_units(args: argparse.Namespace, mesh: str, skeleton: str | None) -> str
 
 
 def hair_units(args: argparse.Namespace) -> str | None:
-    """The hair's units: --hair-units, else --units, else those a .npz records, else None (inferred)."""
+    """The hair's units: --hair-units, else --units, else those the file records (.npz, USD), else None (inferred)."""
     given = args.hair_units if args.hair_units not in (None, solver.AUTO) else args.units
     if given not in (None, solver.AUTO):
         return given
-    return solver.recorded_hair_units(args.hair) if str(args.hair).lower().endswith(".npz") else None
+    return solver.recorded_hair_units(args.hair)
 
 
 def axes(args: argparse.Namespace) -> dict:

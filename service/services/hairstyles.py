@@ -64,7 +64,7 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
     hairstyle_id = owned_id(character.owner, key)
     record = repository.get(HairstyleRecord, hairstyle_id)
     if record is None:
-        stated = units if units != solver.AUTO else (solver.recorded_hair_units(blob.path) if suffix == ".npz" else None)
+        stated = units if units != solver.AUTO else solver.recorded_hair_units(blob.path)
         try:
             loaded = await validated(
                 solver.read_hair, "hair", blob.path, units=stated or "m",

@@ -66,8 +66,8 @@ def test_every_error_response_is_a_problem(client):
 
 def test_a_result_is_documented_under_the_media_type_of_each_format(client):
     result = client.get("/openapi.json").json()["paths"]["/v1/jobs/{job_id}/result"]["get"]["responses"]["200"]
-    assert set(result["content"]) == {"application/octet-stream", "model/obj"} == set(RESULT_MEDIA_TYPES.values())
-    assert "obj `model/obj`" in result["description"] and "npz `application/octet-stream`" in result["description"]
+    assert set(result["content"]) == {"application/octet-stream", "model/obj", "model/vnd.usda"} == set(RESULT_MEDIA_TYPES.values())
+    assert "obj `model/obj`" in result["description"] and "usda `model/vnd.usda`" in result["description"]
 
 
 def test_a_form_field_sent_empty_is_not_given(client, files):

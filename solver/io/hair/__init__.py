@@ -10,6 +10,8 @@ each, where its layout is described:
           :mod:`.ply_binary`).
 ``npz``   hairport's own archive (:mod:`.npz`), float64 and exact.
 ``obj``   Wavefront OBJ polylines (:mod:`.obj`).
+``usd``, ``usda``, ``usdc``  USD ``BasisCurves`` (:mod:`.usd`, through usd-core), with
+          widths and displayColor; the stage's metersPerUnit is its recorded unit.
 
 Each format module exports ``FORMAT``, a :class:`~.common.HairFormat` naming its reader,
 its writer and what the format keeps; :data:`FORMATS` below lists them, and everything else
@@ -65,6 +67,7 @@ from hairport.solver.io.hair.data import FORMAT as DATA
 from hairport.solver.io.hair.npz import FORMAT as NPZ
 from hairport.solver.io.hair.obj import FORMAT as OBJ
 from hairport.solver.io.hair.ply import FORMAT as PLY
+from hairport.solver.io.hair.usd import FORMATS as USD_FORMATS
 from hairport.solver.io.hair.yuksel import FORMAT as YUKSEL_HAIR
 from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.files import atomic_write
@@ -89,11 +92,22 @@ __all__ = [
 ]
 
 #: every format, by name, in the order the API and the docs list them
-FORMATS: dict[str, HairFormat] = {spec.name: spec for spec in (DATA, YUKSEL_HAIR, PLY, NPZ, OBJ)}
+FORMATS: dict[str, HairFormat] = {spec.name: spec for spec in (DATA, YUKSEL_HAIR, PLY, NPZ, OBJ, *USD_FORMATS)}
 SUPPORTED_FORMATS: tuple[str, ...] = tuple(FORMATS)
 EXTENSIONS: dict[str, str] = {spec.extension: name for name, spec in FORMATS.items()}
 # the formats with a text variant, as the writer names them when ascii=True is misused
 _ASCII_FORMATS = " and ".join(name.upper() for name, spec in FORMATS.items() if spec.has_ascii)
+
+
+def recorded_units(path: str | os.PathLike[str], format: str | None = None) -> str | None:
+    """The length unit a hair file of ``format`` (default: from the extension) records (an ``.npz``
+    archive's, a USD stage's ``metersPerUnit``), or None: the format records none, the file
+    cannot be read, or the format is unknown."""
+    try:
+        fmt = FORMATS[format_for_path(path, format)]
+    except InputError:
+        return None
+    return None if fmt.recorded_units is None else fmt.recorded_units(os.fspath(path))
 
 
 def format_for_path(path: str | os.PathLike[str], format: str | None = None) -> str:

@@ -198,6 +198,9 @@ class HairFormat:
         drops them).
     has_ascii : bool
         Whether the writer has a text variant (``ascii=True``).
+    recorded_units : callable or None
+        ``recorded_units(path) -> str | None``: the length unit a file of this format records
+        (None: unreadable, or none recorded); None for formats that record none.
     """
 
     name: str
@@ -206,6 +209,7 @@ class HairFormat:
     keeps_thickness: bool
     keeps_color: bool
     has_ascii: bool = False
+    recorded_units: Callable[[str], str | None] | None = None
 
     @property
     def extension(self) -> str:

@@ -250,4 +250,4 @@ def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
     np.savez(f, **arrays)
 
 
-FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True)
+FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True, recorded_units=recorded_units)

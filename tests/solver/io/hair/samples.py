@@ -23,6 +23,9 @@ WRITE_VARIANTS = [
     ("ply", True),
     ("npz", False),
     ("obj", False),
+    ("usd", False),
+    ("usda", False),
+    ("usdc", False),
 ]
 PLY_ENCODINGS = ["ascii", "binary_little_endian", "binary_big_endian"]
 
