@@ -43,7 +43,6 @@ from hairport.solver.adaptation.options import (
     INITIAL_RADIAL_DAMPING,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
-    SOLVE_STAGE,
     Cancelled,
     SolveOptions,
     SolveReport,
@@ -223,8 +222,6 @@ def solve_strands(
         anchors.commit(index[moved], trial[moved], trial_dist[moved], trial_normal[moved], trial_near[moved],
                        queried[moved])
         merit_trial = np.array([strand_merit_trial.sum()]) if coupled else strand_merit_trial
-        report.merit.append(float(merit_trial.sum()))
-        report.step_fractions.append(float(fraction.min(initial=1.0)))
         points[index] = trial
         dist_all[index], normal_all[index], near_all[index] = trial_dist, trial_normal, trial_near
         moved_by = np.linalg.norm(trial - p, axis=1)
@@ -236,17 +233,10 @@ def solve_strands(
             options, merit_now, merit_trial, failed, small_steps[open_groups], max_step, shortfall,
             # one small decrease suffices where the QP's model also predicted a small one
             None if coupled else strand_predicted)
-        report.converged_groups += int(done.sum())
-        report.max_step.append(float(max_step.max(initial=0.0)))
-        report.min_clearance.append(float(np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf)))
         open_groups = open_groups[~done]
-        report.iterations = iteration + 1
-        if progress is not None:
-            progress(
-                SOLVE_STAGE,
-                (iteration + 1) / options.max_iterations,
-                f"iteration {iteration + 1}: max step {report.max_step[-1]:.2e} m, {len(open_groups)} open",
-            )
+        report.end_iteration(iteration, merit_trial, fraction, done, max_step,
+                             np.min(np.where(sub.fixed, np.inf, trial_dist), initial=np.inf), len(open_groups),
+                             options.max_iterations, progress)
     report.converged = len(open_groups) == 0
     if not report.converged:
         points, report.pushed_out = push_out_short(

@@ -34,7 +34,6 @@ from hairport.solver.adaptation.options import (
     MAX_ACTIVE_SET_ROUNDS,
     MAX_BACKTRACKS,
     MERIT_PENALTY_FACTOR,
-    SOLVE_STAGE,
     Cancelled,
     SolveOptions,
     SolveReport,
@@ -247,21 +246,11 @@ def solve_uncoupled(
             line_search_kernels.strand_clearances(stuck, offsets, dist, fixed, eps_c, stuck_short, stuck_clearance)
             shortfall[failed], min_clearance[failed] = stuck_short, stuck_clearance
             max_step[failed], fraction[failed], merit_trial[failed] = 0.0, 0.0, merit_now[failed]
-        report.merit.append(float(merit_trial.sum()))
-        report.step_fractions.append(float(fraction.min(initial=1.0)))
         done, small_steps[open_strands] = groups_done(
             options, merit_now, merit_trial, failed, small_steps[open_strands], max_step, shortfall, predicted)
-        report.converged_groups += int(done.sum())
-        report.max_step.append(float(max_step.max(initial=0.0)))
-        report.min_clearance.append(float(min_clearance.min(initial=np.inf)))
         open_strands = open_strands[~done]
-        report.iterations = iteration + 1
-        if progress is not None:
-            progress(
-                SOLVE_STAGE,
-                (iteration + 1) / options.max_iterations,
-                f"iteration {iteration + 1}: max step {report.max_step[-1]:.2e} m, {len(open_strands)} open",
-            )
+        report.end_iteration(iteration, merit_trial, fraction, done, max_step, min_clearance.min(initial=np.inf),
+                             len(open_strands), options.max_iterations, progress)
     report.converged = len(open_strands) == 0
     if not report.converged:
         points, report.pushed_out = push_out_short(

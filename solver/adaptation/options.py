@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hairport.solver.model.progress import ProgressFn
+
 #: the l1 penalty on constraint violation in the merit function is this times the largest multiplier
 MERIT_PENALTY_FACTOR = 2.0
 #: each backtracking step of the line search shortens the step by this factor ...
@@ -141,6 +143,21 @@ class SolveReport:
     merit: list[float] = field(default_factory=list)
     osqp_status: list[str] = field(default_factory=list)
     osqp_iterations: list[int] = field(default_factory=list)
+
+    def end_iteration(self, iteration: int, merit: np.ndarray, fraction: np.ndarray, done: np.ndarray,
+                      max_step: np.ndarray, min_clearance: float, still_open: int, max_iterations: int,
+                      progress: ProgressFn | None) -> None:
+        """Record one active-set iteration (merits ``(G,)`` after the step, step lengths, the
+        groups ``done (G,) bool``, their longest moves, the smallest clearance) and report progress."""
+        self.merit.append(float(merit.sum()))
+        self.step_fractions.append(float(fraction.min(initial=1.0)))
+        self.converged_groups += int(done.sum())
+        self.max_step.append(float(max_step.max(initial=0.0)))
+        self.min_clearance.append(float(min_clearance))
+        self.iterations = iteration + 1
+        if progress is not None:
+            progress(SOLVE_STAGE, (iteration + 1) / max_iterations,
+                     f"iteration {iteration + 1}: max step {self.max_step[-1]:.2e} m, {still_open} open")
 
 
 def adapt_damping(damping: np.ndarray | float, actual: np.ndarray | float, predicted: np.ndarray | float) -> np.ndarray:
