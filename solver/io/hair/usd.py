@@ -25,12 +25,14 @@ Bad input: bytes that USD cannot open (truncated, not USD) are ``bad_header`` na
 own message; a stage without ``BasisCurves`` is ``empty_hair``; counts that disagree with the
 points, negative counts, or a prim whose width or color count fits no interpolation are
 ``bad_index``; counts are checked against :class:`~.common.ReadLimits` before the points are
-copied out of USD.
+copied out of USD. USD parses in a child process (``python -m hairport.solver.io.hair.usd``)
+under a heap limit and a time limit (:data:`CHILD_BASE_BYTES`, :data:`CHILD_SECONDS`): a
+damaged crate file whose decoding would take gigabytes is one error, and this process never
+holds more than the arrays the child hands back.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
@@ -85,27 +87,20 @@ def unit_of(meters_per_unit: float) -> str | None:
     return None
 
 
-@contextlib.contextmanager
-def _open_stage(content: bytes | memoryview, suffix: str, ctx: ReadContext, path: str | None = None):
-    """The stage of the file at ``path``, or of ``content`` written to a private temporary file
-    (USD opens files by name) that lives as long as the stage is read (crate files are read lazily)."""
+def _open_stage(path: str, ctx: ReadContext):
+    """The stage of the USD file at ``path``."""
     Usd, _, _, _, Tf = _pxr()
-    with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
-        if path is None:
-            path = os.path.join(folder, f"groom{suffix}")
-            with open(path, "wb") as handle:
-                handle.write(content)
-        try:
-            stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
-        except Tf.ErrorException as error:
-            raise ctx.error(f"not a readable USD stage: {_reason(error, path, ctx)}", "bad_header") from None
-        if stage is None:
-            raise ctx.error("not a readable USD stage", "bad_header")
-        yield stage
+    try:
+        stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+    except Tf.ErrorException as error:
+        raise ctx.error(f"not a readable USD stage: {_reason(error, ctx)}", "bad_header") from None
+    if stage is None:
+        raise ctx.error("not a readable USD stage", "bad_header")
+    return stage
 
 
-def _reason(error: Exception, path: str, ctx: ReadContext) -> str:
-    """USD's own reason (quoted after its source locations), without our temporary file's name."""
+def _reason(error: Exception, ctx: ReadContext) -> str:
+    """USD's own reason (quoted after its source locations), our temporary file's name replaced by the source's."""
     try:
         text = str(error)
     except UnicodeError:  # USD quotes the damaged bytes themselves
@@ -190,10 +185,23 @@ def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> St
     by USD in a child process with bounded memory and time."""
     with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
         source = os.path.join(folder, f"groom{suffix}")
-        result = os.path.join(folder, "strands.npz")
         with open(source, "wb") as handle:
             handle.write(content)
-        heap = CHILD_BASE_BYTES + max(CHILD_MIN_DATA_BYTES, CHILD_BYTES_PER_FILE_BYTE * len(content))
+        strands = _read_in_child(source, len(content), ctx)
+    check_finite(strands.points, strands.counts, "coordinate", ctx)
+    if strands.thickness is not None:
+        check_finite(strands.thickness, strands.counts, "width", ctx)
+    if strands.color is not None:
+        check_finite(strands.color, strands.counts, "color", ctx)
+    return strands
+
+
+def _read_in_child(source: str, size: int, ctx: ReadContext) -> Strands:
+    """:func:`_strands_of` the USD file ``source`` of ``size`` bytes, run by :func:`_child_main` under
+    its heap and time limits; the child's input errors raised here."""
+    heap = CHILD_BASE_BYTES + max(CHILD_MIN_DATA_BYTES, CHILD_BYTES_PER_FILE_BYTE * size)
+    with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
+        result = os.path.join(folder, "strands.npz")
         command = [sys.executable, "-m", "hairport.solver.io.hair.usd", source, result, ctx.units,
                    str(ctx.limits.max_strands), str(ctx.limits.max_particles), str(heap), os.path.basename(ctx.source)]
         try:
@@ -209,13 +217,7 @@ def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> St
         with np.load(result, allow_pickle=False) as arrays:
             found = {name: arrays[name] for name in arrays.files}
     warnings = [str(text) for text in found.pop("warnings")]
-    strands = Strands(found["points"], found["counts"], found.get("thickness"), found.get("color"), warnings)
-    check_finite(strands.points, strands.counts, "coordinate", ctx)
-    if strands.thickness is not None:
-        check_finite(strands.thickness, strands.counts, "width", ctx)
-    if strands.color is not None:
-        check_finite(strands.color, strands.counts, "color", ctx)
-    return strands
+    return Strands(found["points"], found["counts"], found.get("thickness"), found.get("color"), warnings)
 
 
 def _child_main(argv: list[str]) -> int:
@@ -229,13 +231,11 @@ def _child_main(argv: list[str]) -> int:
     ctx = ReadContext(name, ReadLimits(max_strands=int(max_strands), max_particles=int(max_particles)), units)
     _, _, _, _, Tf = _pxr()
     try:
-        with open(source, "rb") as handle:
-            content = handle.read()
-        with _open_stage(content, os.path.splitext(source)[1], ctx, path=source) as stage:
-            try:
-                strands = _strands_of(stage, ctx)
-            except Tf.ErrorException as error:  # a damaged value deep in the file, met on reading it
-                raise ctx.error(f"damaged USD data: {_reason(error, source, ctx)}", "bad_header") from None
+        stage = _open_stage(source, ctx)
+        try:
+            strands = _strands_of(stage, ctx)
+        except Tf.ErrorException as error:  # a damaged value deep in the file, met on reading it
+            raise ctx.error(f"damaged USD data: {_reason(error, ctx)}", "bad_header") from None
     except InputError as error:
         sys.stdout.write(json.dumps({"code": error.code, "message": error.problem}))
         return CHILD_INPUT_ERROR
@@ -284,9 +284,7 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
 
     source = os.fspath(path)
     try:
-        with open(source, "rb") as handle:
-            content = handle.read()
-        read_stage(content, ReadContext(source, ReadLimits(), RECORDED_UNITS), os.path.splitext(source)[1].lower())
+        _read_in_child(source, os.path.getsize(source), ReadContext(source, ReadLimits(), RECORDED_UNITS))
     except OSError:
         return None
     except InputError as error:
