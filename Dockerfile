@@ -30,7 +30,7 @@ COPY worker/ worker/
 # The source tree is removed after the install: the installed package is the only `hairport`
 # on sys.path (`celery -A` puts the working directory on sys.path, and the layout here maps
 # solver/, service/, worker/ into the package only when installed).
-RUN pip install --no-cache-dir . \
+RUN pip install --no-cache-dir ".[alembic]" \
  && cd / && rm -rf /tmp/hairport-src
 
 # Shared storage of API and workers (uploads, artifacts, results, records). Created and

@@ -90,7 +90,8 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
     413: ("the body, an upload, a count in it or its estimated memory is above this deployment's limits",
           ("upload_too_large", "too_large", "over_memory_budget")),
     415: ("no accepted format: the file name's extension is not one this field reads, or the name has none and "
-          "the content is not recognised", ("unknown_format", "unsupported_media_type")),
+          "the content is not recognised, or the format needs a library this deployment lacks",
+          ("unknown_format", "unsupported_media_type", "format_unavailable")),
     422: ("the request is invalid: a field fails the schema (`invalid_request`), or a value, file or option fails "
           "its check", ("invalid_request", "bad_units", "bad_axis", "bad_option", "no_skeleton", "too_many_targets",
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",

@@ -14,6 +14,9 @@ SIGNATURES: tuple[tuple[bytes, str], ...] = (
     (b"glTF", ".glb"),  # binary glTF
     (b"PK\x03\x04", ".npz"),  # a zip archive: numpy's .npz
     (b"HAIR", ".hair"),  # Cem Yuksel's HAIR
+    (b"PXR-USDC", ".usdc"),  # USD crate
+    (b"#usda ", ".usda"),  # USD text (before OBJ: both start with '#')
+    (b"Ogawa", ".abc"),  # Alembic's Ogawa archive
 )
 #: a byte-order mark and white space a text file may start with
 TEXT_LEAD = b"\xef\xbb\xbf \t\r\n"

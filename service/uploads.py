@@ -60,11 +60,16 @@ async def store_upload(storage: LocalStorage, upload: UploadFile, settings: Sett
 OVERSIZE_CODES = ("too_large", solver.OVER_MEMORY_BUDGET)
 
 
+#: the code of a format whose optional library this deployment lacks
+UNAVAILABLE_FORMAT = "format_unavailable"
+
+
 def input_problem(error: solver.InputError, field: str) -> Problem:
-    """413 for inputs above the configured limits, 422 for every other bad input.
+    """413 for inputs above the configured limits, 415 for a format this deployment cannot read (Alembic
+    without its optional bindings), 422 for every other bad input.
 
     The detail names the request field, never a storage path."""
-    status = 413 if error.code in OVERSIZE_CODES else 422
+    status = 413 if error.code in OVERSIZE_CODES else 415 if error.code == UNAVAILABLE_FORMAT else 422
     return Problem(status, error.code or "bad_input", f"{field}: {error.problem}")
 
 

@@ -32,18 +32,20 @@ from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write
 from hairport.solver.model.frame import InputFrame
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import Hair, HairAttribute
 from hairport.solver.model.json_input import parse_json
 from hairport.solver.options import PreprocessOptions
 from hairport.solver.transfer.anchors import ANCHOR_BY_BONES, Anchors
 
 FORMAT_NAME = "hairport-adaptable-hairstyle"
 #: bump when the arrays or their meaning change. Version 2: compact indices (int16 anchor bones,
-#: int32 anchor faces and neighbour indices) and the frame offsets of the fallback particles only
-FORMAT_VERSION = 2
+#: int32 anchor faces and neighbour indices) and the frame offsets of the fallback particles only.
+#: Version 3: the hairstyle's attributes (meta ``hair_attributes``, arrays ``hair_attribute_<i>``)
+FORMAT_VERSION = 3
 #: versions this hairport reads: version 1 (int64 indices, a frame offset row per particle) is
-#: converted on load; others are refused
-READABLE_VERSIONS = (1, 2)
+#: converted on load; versions 1 and 2 have no attributes; others are refused
+READABLE_VERSIONS = (1, 2, 3)
+HAIR_ATTRIBUTE = "hair_attribute_{}"
 EXTENSION = ".hpa"
 
 
@@ -79,6 +81,8 @@ def _arrays(adaptable) -> dict[str, np.ndarray]:
         arrays["hair_thickness"] = hair.thickness
     if hair.color is not None:
         arrays["hair_color"] = hair.color
+    for index, attribute in enumerate(hair.attributes.values()):
+        arrays[HAIR_ATTRIBUTE.format(index)] = attribute.values
     return {name: np.ascontiguousarray(value) for name, value in arrays.items()}
 
 
@@ -117,6 +121,7 @@ def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
         "timings": adaptable.timings,
         "input_frame": adaptable.frame.to_dict(),
         "input_report": adaptable.input_report,
+        "hair_attributes": [[name, attribute.domain, attribute.role] for name, attribute in adaptable.hair.attributes.items()],
         "digest": _digest(arrays),
     }
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
@@ -168,8 +173,11 @@ def load_adaptable(path: str | os.PathLike):
         source = Character(
             arrays["source_vertices"], arrays["source_faces"], skeleton, weights, meta.get("source_name", "source")
         )
+        attributes = {name: HairAttribute(arrays[HAIR_ATTRIBUTE.format(index)], domain, role)
+                      for index, (name, domain, role) in enumerate(meta.get("hair_attributes", []))}
         hair = Hair(
-            arrays["hair_points"], arrays["hair_offsets"], arrays.get("hair_thickness"), arrays.get("hair_color")
+            arrays["hair_points"], arrays["hair_offsets"], arrays.get("hair_thickness"), arrays.get("hair_color"),
+            attributes,
         )
         frame_offset = arrays["anchor_frame_offset"]
         if meta["format_version"] == 1:  # a row per particle, zeros but for the fallback particles
@@ -190,7 +198,7 @@ def load_adaptable(path: str | os.PathLike):
         frame = InputFrame.from_dict(meta.get("input_frame"))
     except KeyError as error:
         raise InputError(f"adaptable hairstyle lacks {error}", str(path), "bad_artifact") from None
-    except ValueError as error:  # arrays of inconsistent shapes
+    except (ValueError, TypeError) as error:  # arrays of inconsistent shapes, a malformed attribute list
         raise InputError(f"adaptable hairstyle arrays disagree ({error})", str(path), "bad_artifact") from None
     n = hair.n_particles
     if any(len(a) != n for a in (anchors.bone, anchors.face, anchors.barycentric, anchors.eta, anchors.fallback)):

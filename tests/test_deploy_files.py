@@ -151,7 +151,7 @@ def test_dockerfile_copies_only_the_package_sources(dockerfile):
 
 def test_dockerfile_installs_the_package_without_pip_cache(dockerfile):
     runs = " && ".join(_args(dockerfile, "RUN"))
-    assert re.search(r"pip install --no-cache-dir \.(\s|$)", runs)
+    assert re.search(r"pip install --no-cache-dir (\.|\"\.\[alembic\]\")(\s|$)", runs)  # the package, with the Alembic extra
     assert "-e ." not in runs and "--editable" not in runs
 
 

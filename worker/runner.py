@@ -294,7 +294,7 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
         hair = solver.hair_in_frame(frame, result.hair)
         for fmt in sorted({"npz", job.output_format}):
             path = work / f"result.{fmt}"
-            solver.write_hair(path, hair, units=frame.units, format=fmt)
+            solver.write_hair(path, hair, units=frame.units, format=fmt, up_axis=frame.up)
             outputs[fmt] = stored(storage.save_file(path, f".{fmt}"), f".{fmt}")
         path = work / "report.json"
         path.write_text(json.dumps(report, indent=2, default=json_default) + "\n")

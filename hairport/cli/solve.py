@@ -145,7 +145,7 @@ def cmd_retarget(args: argparse.Namespace) -> int:
                         "guides": len(adaptable.multiscale.guides), "units": units}
     with OutputSet() as outputs:
         outputs.add(args.out, lambda path: solver.write_hair(path, solver.hair_in_frame(frame, result.hair),
-                                                             units=units, format=out_format))
+                                                             units=units, format=out_format, up_axis=frame.up))
         if args.report:
             outputs.add_json(args.report, report)
         if args.preview:

@@ -43,7 +43,7 @@ async def get_job(job: OwnedJob) -> JobOut:
 
 @router.get("/{job_id}/result", summary="The retargeted hair file", response_class=FileResponse,
             responses={200: {"description": RESULT_DESCRIPTION, "content": result_content()},
-                       **problem_responses(401, 404, 409, 410, 422)})
+                       **problem_responses(401, 404, 409, 410, 415, 422)})
 def get_result(repository: RepositoryDep, job: OwnedJob, format: HairFormat | None = None):
     return jobs.result_response(repository, job, format)
 

@@ -12,6 +12,7 @@ from hairport.worker.queue import TaskQueue
 
 from ..errors import Problem
 from ..schemas import RESULT_MEDIA_TYPES
+from ..uploads import input_problem
 
 #: what a lossless copy of every result is kept as (other formats are converted from it)
 LOSSLESS_FORMAT = "npz"
@@ -67,7 +68,12 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
     try:
         # the lossless copy is in the groom's units (it records them): convert in the same units
         units = solver.recorded_hair_units(source.path) or "m"
-        solver.write_hair(path, solver.read_hair(source.path, units=units, limits=UNLIMITED), units=units, format=fmt)
+        up_axis = solver.recorded_hair_up_axis(source.path) or "+y"
+        solver.write_hair(path, solver.read_hair(source.path, units=units, limits=UNLIMITED), units=units, format=fmt,
+                          up_axis=up_axis)
+    except solver.InputError as error:  # a format whose optional library this deployment lacks
+        work.__exit__(None, None, None)
+        raise input_problem(error, "format") from None
     except BaseException:
         work.__exit__(None, None, None)
         raise

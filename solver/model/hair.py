@@ -4,11 +4,15 @@ Convention: a hairstyle of S strands and N particles stores all particle positio
 array ``points (N, 3) float64`` (meters) and the strand boundaries in ``offsets (S+1,) int64``
 (compressed sparse rows): strand ``s`` is ``points[offsets[s]:offsets[s+1]]``, root first.
 Every strand has at least two particles. Optional per-particle attributes (``thickness``,
-``color``) travel with the points and are carried through retargeting unchanged.
+``color``) and any number of named per-strand or per-particle arrays (``attributes``: UVs, ids,
+group ids, transparency, a file's custom primvars) travel with the points and are carried
+through retargeting unchanged: a retarget changes positions only.
 """
 
 from __future__ import annotations
 
+import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,6 +22,83 @@ from hairport.solver.model.errors import InputError
 MIN_PARTICLES_PER_STRAND = 2
 #: code of the :class:`InputError` for a hairstyle with nothing to retarget
 EMPTY_HAIR = "empty_hair"
+
+#: an attribute belongs to every particle (``vertex``: one row per particle) or to every strand
+VERTEX = "vertex"
+STRAND = "strand"
+DOMAINS = (VERTEX, STRAND)
+#: what an attribute's values mean, in words every format maps to its own type names (USD's
+#: ``color3f``/``texCoord2f``/``normal3f``..., Alembic's interpretations); "" for plain numbers
+ROLES = ("", "color", "texcoord", "normal", "point", "vector")
+#: an attribute name: a letter or underscore, then letters, digits, underscores; ``:`` separates
+#: namespaces (as in USD's ``primvars:ns:name``)
+ATTRIBUTE_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(:[A-Za-z_][A-Za-z0-9_]*)*")
+MAX_ATTRIBUTE_NAME = 128
+#: components one row of an attribute may have (a 4x4 matrix at most)
+MAX_ATTRIBUTE_COMPONENTS = 16
+#: attributes one hairstyle may carry (a file declaring more is refused: each costs a pass)
+MAX_ATTRIBUTES = 256
+#: numpy kinds an attribute may hold: booleans, signed and unsigned integers, floats
+ATTRIBUTE_KINDS = "biuf"
+
+
+@dataclass(frozen=True, eq=False)
+class HairAttribute:
+    """One named array carried beside the points.
+
+    Attributes
+    ----------
+    values : (N,) or (N, k) array for a ``vertex`` attribute, (S,) or (S, k) for a ``strand`` one
+        Any boolean, integer or float dtype, kept as it is (a format that cannot hold the dtype
+        converts it where that is exact, else drops the attribute and says so).
+    domain : str
+        ``"vertex"`` or ``"strand"``.
+    role : str
+        One of :data:`ROLES`.
+    """
+
+    values: np.ndarray
+    domain: str
+    role: str = ""
+
+    def __post_init__(self) -> None:
+        values = np.ascontiguousarray(self.values)
+        if values.dtype.byteorder == ">":
+            values = values.astype(values.dtype.newbyteorder("="))
+        object.__setattr__(self, "values", values)
+        if self.domain not in DOMAINS:
+            raise ValueError(f"attribute domain {self.domain!r}, expected one of {', '.join(DOMAINS)}")
+        if self.role not in ROLES:
+            raise ValueError(f"attribute role {self.role!r}, expected one of {', '.join(map(repr, ROLES))}")
+
+    @property
+    def components(self) -> int:
+        """Values per row (1 for a scalar attribute)."""
+        return 1 if self.values.ndim == 1 else int(self.values.shape[1])
+
+    def take(self, rows: np.ndarray) -> "HairAttribute":
+        """The attribute of the given rows (particles or strands, as its domain)."""
+        return HairAttribute(self.values[rows], self.domain, self.role)
+
+
+def attribute_problem(name: str, attribute: HairAttribute, n_particles: int, n_strands: int) -> str | None:
+    """Why ``attribute`` cannot be a hairstyle's attribute ``name`` (None: it can), in words."""
+    if not isinstance(name, str) or len(name) > MAX_ATTRIBUTE_NAME or not ATTRIBUTE_NAME.fullmatch(name):
+        return (f"attribute name {str(name)[:MAX_ATTRIBUTE_NAME]!r} is not a name (letters, digits, underscores, "
+                f"':' between namespaces, at most {MAX_ATTRIBUTE_NAME} characters)")
+    values = attribute.values
+    if values.dtype.kind not in ATTRIBUTE_KINDS:
+        return f"attribute {name!r} holds {values.dtype} values; booleans, integers or floats only"
+    rows = n_particles if attribute.domain == VERTEX else n_strands
+    if values.ndim not in (1, 2) or len(values) != rows:
+        return (f"{attribute.domain} attribute {name!r} has shape {values.shape}, expected ({rows:,},) or "
+                f"({rows:,}, k): one row per {'particle' if attribute.domain == VERTEX else 'strand'}")
+    if not 1 <= attribute.components <= MAX_ATTRIBUTE_COMPONENTS:
+        return f"attribute {name!r} has {attribute.components} values per row, at most {MAX_ATTRIBUTE_COMPONENTS}"
+    if values.dtype.kind == "f" and not np.isfinite(values).all():
+        row = int(np.argmin(np.isfinite(values).reshape(len(values), -1).all(axis=1)))
+        return f"attribute {name!r} has a non-finite value (NaN or inf) in row {row:,}"
+    return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,12 +115,15 @@ class Hair:
         Per-particle strand thickness in meters (from ``.hair`` files).
     color : (N, 3) float64 or None
         Per-particle RGB in [0, 1].
+    attributes : mapping of str to HairAttribute
+        Every other named per-strand or per-particle array, in the order read (a copy the hairstyle owns).
     """
 
     points: np.ndarray
     offsets: np.ndarray
     thickness: np.ndarray | None = field(default=None)
     color: np.ndarray | None = field(default=None)
+    attributes: Mapping[str, HairAttribute] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "points", np.ascontiguousarray(self.points, dtype=np.float64))
@@ -56,6 +140,16 @@ class Hair:
             if color.shape != (n, 3):
                 raise InputError(f"color has shape {color.shape}, expected ({n}, 3)")
             object.__setattr__(self, "color", color)
+        attributes = dict(self.attributes)
+        if len(attributes) > MAX_ATTRIBUTES:
+            raise InputError(f"{len(attributes):,} attributes, at most {MAX_ATTRIBUTES}", code="bad_attribute")
+        for name, attribute in attributes.items():
+            if not isinstance(attribute, HairAttribute):
+                raise TypeError(f"attribute {name!r} is a {type(attribute).__name__}, expected a HairAttribute")
+            problem = attribute_problem(name, attribute, n, self.n_strands)
+            if problem is not None:
+                raise InputError(problem, code="bad_attribute")
+        object.__setattr__(self, "attributes", attributes)
 
     @classmethod
     def from_strands(cls, strands: list[np.ndarray]) -> "Hair":
@@ -110,7 +204,7 @@ class Hair:
 
     def with_points(self, points: np.ndarray) -> "Hair":
         """Same layout and attributes, new positions ``(N, 3)``."""
-        return Hair(points, self.offsets, self.thickness, self.color)
+        return Hair(points, self.offsets, self.thickness, self.color, self.attributes)
 
     def strand(self, s: int) -> np.ndarray:
         return self.points[self.offsets[s] : self.offsets[s + 1]]
@@ -126,7 +220,17 @@ class Hair:
             offsets,
             None if self.thickness is None else self.thickness[index],
             None if self.color is None else self.color[index],
+            {name: attribute.take(index if attribute.domain == VERTEX else strand_ids)
+             for name, attribute in self.attributes.items()},
         )
+
+    def attributes_of(self, domain: str) -> dict[str, HairAttribute]:
+        """The attributes of one domain (``"vertex"`` or ``"strand"``), in order."""
+        return {name: attribute for name, attribute in self.attributes.items() if attribute.domain == domain}
+
+    def without_attributes(self) -> "Hair":
+        """The same strands, thickness and color, no other attributes."""
+        return Hair(self.points, self.offsets, self.thickness, self.color)
 
 
 def particle_indices(offsets: np.ndarray, strand_ids: np.ndarray) -> np.ndarray:

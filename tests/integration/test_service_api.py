@@ -238,7 +238,7 @@ def test_bad_hair_uploads(service, files, uploaded):
     assert_problem(client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": "0" * 32},
                                files={"hair": ("g.data", data)}), 404, "not_found")
     assert_problem(client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": uploaded["source"]},
-                               files={"hair": ("g.abc", data)}), 415, "unknown_format")
+                               files={"hair": ("g.fbx", data)}), 415, "unknown_format")
 
 
 def test_hairstyle_is_preprocessed_once(service, files, uploaded):

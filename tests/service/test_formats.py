@@ -20,6 +20,9 @@ HAIR = tuple(f".{name}" for name in solver.HAIR_FORMATS)
     (b"mtllib body.mtl\n", MESH, ".obj"),
     (b"PK\x03\x04\x14\x00", HAIR, ".npz"),
     (b"HAIR\x02\x00\x00\x00", HAIR, ".hair"),
+    (b"PXR-USDC\x00\x00\x08\x00", HAIR, ".usdc"),
+    (b"#usda 1.0\n(\n", HAIR, ".usda"),
+    (b"Ogawa\xff\x00\x01x\n", HAIR, ".abc"),
     # not the field's formats, or nothing known
     (b"PK\x03\x04\x14\x00", MESH, None),
     (b"glTF\x02\x00\x00\x00", HAIR, None),

@@ -9,6 +9,7 @@ import pytest
 from hairport.solver import artifact, pipeline
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.hair import Hair, HairAttribute
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
 from tests.solver.hair_shapes import outward_strands, sphere_character
@@ -61,7 +62,7 @@ def rewrite_meta(src, dst, change):
 def test_other_format_version_is_refused(saved, tmp_path):
     other = tmp_path / "old.hpa"
     rewrite_meta(saved, other, lambda meta, arrays: meta.update(format_version=artifact.FORMAT_VERSION + 1))
-    with pytest.raises(InputError, match="format version 3.*reads versions 1, 2") as caught:
+    with pytest.raises(InputError, match="format version 4.*reads versions 1, 2, 3") as caught:
         artifact.load_adaptable(other)
     assert caught.value.code == "artifact_version"
 
@@ -95,13 +96,44 @@ def test_version_1_artifacts_are_read_and_retarget_bit_for_bit_like_version_2(ca
                           pipeline.retarget(adaptable, target, options).hair.points)
 
 
-def test_version_2_stores_compact_indices_and_only_the_fallback_frame_offsets(case, saved):
+def test_compact_indices_and_only_the_fallback_frame_offsets_are_stored(case, saved):
     adaptable = case[3]
     with np.load(saved) as archive:
         assert archive["anchor_bone"].dtype == np.int16 and archive["anchor_face"].dtype == np.int32
         assert archive["fine_neighbour_index"].dtype == archive["guide_neighbour_index"].dtype == np.int32
         assert archive["anchor_frame_offset"].shape == (int(adaptable.anchors.fallback.sum()), 3)
-        assert json.loads(archive["meta"].tobytes())["format_version"] == 2
+        assert json.loads(archive["meta"].tobytes())["format_version"] == artifact.FORMAT_VERSION == 3
+
+
+def test_attributes_are_kept_in_the_artifact_and_come_out_of_the_retarget_unchanged(case, tmp_path):
+    source, target, hair, _ = case
+    rng = np.random.default_rng(5)
+    attributes = {
+        "uv": HairAttribute(rng.random((hair.n_particles, 2)).astype(np.float32), "vertex", "texcoord"),
+        "groom_group_id": HairAttribute(rng.integers(0, 4, hair.n_strands).astype(np.int32), "strand"),
+    }
+    styled = Hair(hair.points, hair.offsets, hair.thickness, hair.color, attributes)
+    path = tmp_path / "styled.hpa"
+    artifact.save_adaptable(pipeline.preprocess(source, styled, pipeline.PreprocessOptions(guides=12)), path)
+    loaded = artifact.load_adaptable(path)
+    result = pipeline.retarget(loaded, target, pipeline.RetargetOptions(max_iterations=4, workers=1)).hair
+    assert list(result.attributes) == ["uv", "groom_group_id"]
+    for name, attribute in attributes.items():
+        assert result.attributes[name].domain == attribute.domain and result.attributes[name].role == attribute.role
+        assert result.attributes[name].values.dtype == attribute.values.dtype
+        np.testing.assert_array_equal(result.attributes[name].values, attribute.values)
+    assert np.abs(result.points - hair.points).max() > 1e-3  # the positions did change
+
+
+def test_a_version_2_artifact_without_attributes_still_loads(saved, tmp_path):
+    older = tmp_path / "v2.hpa"
+
+    def as_version_2(meta, arrays):
+        meta["format_version"] = 2
+        meta.pop("hair_attributes")
+
+    rewrite_meta(saved, older, as_version_2)
+    assert artifact.load_adaptable(older).hair.attributes == {}
 
 
 def test_altered_arrays_are_refused(saved, tmp_path):

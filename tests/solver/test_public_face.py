@@ -12,7 +12,7 @@ def test_every_exported_name_resolves():
     assert solver.__all__ == sorted(solver.__all__) and dir(solver) == solver.__all__
     for name in solver.__all__:
         assert getattr(solver, name) is not None, name
-    assert solver.HAIR_FORMATS == ("data", "hair", "ply", "npz", "obj", "usd", "usda", "usdc") and solver.UNITS == ("m", "dm", "cm", "mm")
+    assert solver.HAIR_FORMATS == ("data", "hair", "ply", "npz", "obj", "usd", "usda", "usdc", "abc") and solver.UNITS == ("m", "dm", "cm", "mm")
     with pytest.raises(AttributeError, match="no attribute 'pipeline_internals'"):
         solver.pipeline_internals  # noqa: B018
 

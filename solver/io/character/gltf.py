@@ -26,6 +26,10 @@ from hairport.solver.model.errors import InputError
 #: primitive mode of a triangle list (the only one read)
 TRIANGLES_MODE = 4
 
+#: glTF's length unit, by its specification
+GLTF_UNITS = "m"
+
+
 def read_gltf(
     path: str | os.PathLike,
     *,
@@ -115,7 +119,7 @@ def _read_gltf(path: Path, max_vertices: int, max_faces: int, mesh_name: str | N
                 faces = faces[:, [0, 2, 1]]
     else:
         skin = read_gltf_skin(reader, skin_index, primitives, counts, vertices, world, source)
-    return MeshFile(vertices, faces, skin, label)
+    return MeshFile(vertices, faces, skin, label, GLTF_UNITS)
 
 
 def _select_gltf_mesh(document: dict, mesh_name: str | None, reader: GltfReader, source: str):

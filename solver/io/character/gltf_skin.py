@@ -77,9 +77,9 @@ def read_gltf_skin(
     heads = bind[:, :3, 3]
     parents = _joint_parents(reader.parents(), joints)
     diagonal = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))) or 1.0
-    tails = _bone_tails(heads, parents, bind, diagonal)
+    tails = bone_tails(heads, parents, bind, diagonal)
     raw_names = [str(nodes[j].get("name") or f"joint_{b}") for b, j in enumerate(joints.tolist())]
-    skeleton = Skeleton(_unique_names(raw_names), parents, heads, tails)
+    skeleton = Skeleton(unique_names(raw_names), parents, heads, tails)
     weights = _skin_weights(reader, primitives, counts, len(vertices), n_bones, source)
     return Skin(skeleton, weights)
 
@@ -129,7 +129,7 @@ def _joint_parents(node_parents: np.ndarray, joints: np.ndarray) -> np.ndarray:
     return parents
 
 
-def _bone_tails(heads: np.ndarray, parents: np.ndarray, bind: np.ndarray, diagonal: float) -> np.ndarray:
+def bone_tails(heads: np.ndarray, parents: np.ndarray, bind: np.ndarray, diagonal: float) -> np.ndarray:
     """(B, 3) tails: the mean head of the children; leaves and isolated joints as in the module docstring.
 
     Parameters
@@ -160,7 +160,7 @@ def _bone_tails(heads: np.ndarray, parents: np.ndarray, bind: np.ndarray, diagon
     return tails
 
 
-def _unique_names(raw_names: list[str]) -> list[str]:
+def unique_names(raw_names: list[str]) -> list[str]:
     """Names that repeat get the suffix ``_<index>``; the others stay."""
     seen: dict[str, int] = {}
     for name in raw_names:

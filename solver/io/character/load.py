@@ -6,8 +6,8 @@ Each format module exports ``READERS = {extension: reader}``, a reader being
 trimesh's ``exchange/``); :data:`MESH_READERS` merges them and :data:`MESH_EXTENSIONS` is
 its keys. A character's skeleton comes, in order of precedence, from the ``skeleton_path``
 given to :func:`load_character`, the sidecar ``<mesh>.skeleton.json`` beside the mesh
-(:func:`~hairport.solver.io.character.skeleton_json.resolve_skeleton_path`), the glTF skin
-of the selected mesh, else nowhere.
+(:func:`~hairport.solver.io.character.skeleton_json.resolve_skeleton_path`), the glTF skin or
+UsdSkel binding of the selected mesh, else nowhere.
 """
 
 from __future__ import annotations
@@ -27,16 +27,15 @@ from hairport.solver.io.character.mesh_file import (
 from hairport.solver.io.character.obj import READERS as OBJ_READERS
 from hairport.solver.io.character.ply import READERS as PLY_READERS
 from hairport.solver.io.character.skeleton_json import read_skeleton_json, resolve_skeleton_path
+from hairport.solver.io.character.usd import READERS as USD_READERS
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.units import unit_scale
 
 #: the reader of every mesh format :func:`load_character` reads, by lower-case file extension
-MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS}
+MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS, **USD_READERS}
 #: the mesh formats :func:`load_character` reads
 MESH_EXTENSIONS = tuple(MESH_READERS)
-#: glTF's length unit, by its specification
-GLTF_UNITS = "m"
 
 
 def load_character(
@@ -84,13 +83,14 @@ def read_character(
     Parameters
     ----------
     mesh_path : path
-        ``.obj``, ``.ply``, ``.glb`` or ``.gltf``.
+        ``.obj``, ``.ply``, ``.glb``, ``.gltf``, ``.usd``, ``.usda`` or ``.usdc``.
     skeleton_path : path, optional
         Skeleton JSON sidecar. Default: ``<mesh without extension>.skeleton.json`` if it
         exists, else the glTF skin, else no skeleton.
     units : {"m", "dm", "cm", "mm"}, optional
         Units of the mesh file. Default: the sidecar's ``units`` when a sidecar is used,
-        else meters for glTF (by specification), else unknown. The sidecar's own
+        else the unit the file states (meters for glTF by specification, a USD stage's
+        ``metersPerUnit``), else unknown. The sidecar's own
         coordinates always use its ``units`` key.
     max_vertices, max_faces : int
         Limits checked before the arrays are built; ``max_faces`` counts triangles.
@@ -108,8 +108,8 @@ def read_character(
         In meters when ``units`` is known, else in the file's own coordinates; named after
         the file.
     units : str or None
-        The mesh's units: ``units`` when given, else the sidecar's ``units``, else ``m`` for
-        glTF (meters by specification), else None (nothing states them: the character is in
+        The mesh's units: ``units`` when given, else the sidecar's ``units``, else the unit the
+        file states (glTF, USD), else None (nothing states them: the character is in
         the file's coordinates, for :func:`hairport.solver.inputs.canonical_source` to infer,
         and skin weights a sidecar lacks are derived there, in meters).
 
@@ -145,7 +145,7 @@ def read_character(
         skeleton, weights, sidecar_units = read_skeleton_json(sidecar, len(vertices), max_bytes)
         mesh_units = units if units is not None else sidecar_units
     else:
-        mesh_units = units if units is not None else GLTF_UNITS if path.suffix.lower() in GLTF_READERS else None
+        mesh_units = units if units is not None else mesh.units
     scale = unit_scale(mesh_units or "m")
     vertices = vertices * scale
     if sidecar is None and skin is not None:

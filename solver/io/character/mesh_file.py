@@ -57,12 +57,16 @@ class MeshFile:
         Only formats that can hold a skin (glTF) fill it.
     name : str
         The name of the mesh in the file, where the format has one.
+    units : str or None
+        The length unit the file states (glTF: meters by specification; USD: the stage's
+        ``metersPerUnit``), None where the format states none.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     skin: Skin | None = None
     name: str = ""
+    units: str | None = None
 
 
 def check_file(path: Path, max_bytes: int) -> None:

@@ -12,6 +12,13 @@ each, where its layout is described:
 ``obj``   Wavefront OBJ polylines (:mod:`.obj`).
 ``usd``, ``usda``, ``usdc``  USD ``BasisCurves`` (:mod:`.usd`, through usd-core), with
           widths and displayColor; the stage's metersPerUnit is its recorded unit.
+``abc``   Alembic ``ICurves`` (:mod:`.alembic`, through the optional ``alembic3d``), in
+          Unreal Engine's groom convention.
+
+Attributes: every per-strand and per-point array a file holds beyond positions, thickness and
+colour (UVs, ids, group ids, transparency, custom primvars) is read into ``Hair.attributes`` and
+written back by the formats that hold it (``npz``, ``ply``, ``usd*``, ``abc``; ``hair`` holds
+transparency only); writing to a format that cannot hold something warns once, naming it.
 
 Each format module exports ``FORMAT``, a :class:`~.common.HairFormat` naming its reader,
 its writer and what the format keeps; :data:`FORMATS` below lists them, and everything else
@@ -53,6 +60,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
+from hairport.solver.io.hair.alembic import FORMAT as ALEMBIC
 from hairport.solver.io.hair.common import (
     ERROR_CODES,
     HairFormat,
@@ -65,12 +73,14 @@ from hairport.solver.io.hair.common import (
 )
 from hairport.solver.io.hair.data import FORMAT as DATA
 from hairport.solver.io.hair.npz import FORMAT as NPZ
+from hairport.solver.io.hair.npz import recorded_up_axis as npz_recorded_up_axis
 from hairport.solver.io.hair.obj import FORMAT as OBJ
 from hairport.solver.io.hair.ply import FORMAT as PLY
 from hairport.solver.io.hair.usd import FORMATS as USD_FORMATS
 from hairport.solver.io.hair.yuksel import FORMAT as YUKSEL_HAIR
 from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.files import atomic_write
+from hairport.solver.model.frame import parse_axis
 from hairport.solver.model.hair import Hair
 from hairport.solver.model.units import unit_scale
 
@@ -92,7 +102,7 @@ __all__ = [
 ]
 
 #: every format, by name, in the order the API and the docs list them
-FORMATS: dict[str, HairFormat] = {spec.name: spec for spec in (DATA, YUKSEL_HAIR, PLY, NPZ, OBJ, *USD_FORMATS)}
+FORMATS: dict[str, HairFormat] = {spec.name: spec for spec in (DATA, YUKSEL_HAIR, PLY, NPZ, OBJ, *USD_FORMATS, ALEMBIC)}
 SUPPORTED_FORMATS: tuple[str, ...] = tuple(FORMATS)
 EXTENSIONS: dict[str, str] = {spec.extension: name for name, spec in FORMATS.items()}
 # the formats with a text variant, as the writer names them when ascii=True is misused
@@ -108,6 +118,11 @@ def recorded_units(path: str | os.PathLike[str], format: str | None = None) -> s
     except InputError:
         return None
     return None if fmt.recorded_units is None else fmt.recorded_units(os.fspath(path))
+
+
+def recorded_up_axis(path: str | os.PathLike[str]) -> str | None:
+    """The up axis (``+y``, ``+z``...) a hairport ``.npz`` archive records, or None."""
+    return npz_recorded_up_axis(os.fspath(path)) if Path(path).suffix.lower() == NPZ.extension else None
 
 
 def format_for_path(path: str | os.PathLike[str], format: str | None = None) -> str:
@@ -242,6 +257,7 @@ def write_hair(
     units: str = "m",
     format: str | None = None,
     ascii: bool = False,
+    up_axis: str = "+y",
 ) -> None:
     """Write a hairstyle atomically (temporary file in the same directory, then rename).
 
@@ -256,6 +272,9 @@ def write_hair(
         One of ``SUPPORTED_FORMATS``; from the extension when omitted.
     ascii : bool
         PLY only: write ``format ascii 1.0`` instead of binary little-endian.
+    up_axis : str
+        The axis of the coordinates that points up, recorded by the formats that record one
+        (USD's ``upAxis``: ``+z`` is ``Z``, anything else ``Y``; the ``.npz`` archive).
 
     Raises
     ------
@@ -265,14 +284,14 @@ def write_hair(
         The file system refused; no partial file is left behind.
     """
     fmt = format_for_path(path, format)
-    writer = _writer(fmt, hair, units, ascii, os.fspath(path))
+    writer = _writer(fmt, hair, units, ascii, os.fspath(path), up_axis)
     atomic_write(path, writer)
 
 
-def hair_to_bytes(hair: Hair, format: str, *, units: str = "m", ascii: bool = False) -> bytes:
+def hair_to_bytes(hair: Hair, format: str, *, units: str = "m", ascii: bool = False, up_axis: str = "+y") -> bytes:
     """The bytes :func:`write_hair` would write (for downloads)."""
     fmt = format_for_path("<bytes>", format)
-    writer = _writer(fmt, hair, units, ascii, "<bytes>")
+    writer = _writer(fmt, hair, units, ascii, "<bytes>", up_axis)
     buffer = io.BytesIO()
     writer(buffer)
     return buffer.getvalue()
@@ -310,7 +329,7 @@ def _emit_warnings(report: ReadReport) -> None:
 
 
 def _writer(
-    fmt: str, hair: Hair, units: str, ascii: bool, target: str
+    fmt: str, hair: Hair, units: str, ascii: bool, target: str, up_axis: str = "+y"
 ) -> Callable[[BinaryIO], None]:
     """A function that writes ``hair`` to a binary file; checks everything it can first."""
     if not isinstance(hair, Hair):
@@ -324,12 +343,18 @@ def _writer(
         dropped.append("thickness")
     if hair.color is not None and not spec.keeps_color:
         dropped.append("color")
+    left_out = [name for name, attribute in hair.attributes.items() if not spec.keeps_attribute(name, attribute)]
+    if left_out:
+        dropped.append(f"attribute{'s' if len(left_out) > 1 else ''} {', '.join(map(repr, left_out))}")
     if dropped:
         # stacklevel 3: the warning points at the caller of write_hair / hair_to_bytes
         warnings.warn(
-            f"{target}: the {fmt!r} format has no {' or '.join(dropped)}; not written",
+            f"{target}: the {fmt!r} format cannot hold {' or '.join(dropped)}; not written",
             HairIOWarning,
             stacklevel=3,
         )
-    options = WriteOptions(units, scale, ascii)
+    if left_out:
+        kept = {name: attribute for name, attribute in hair.attributes.items() if name not in left_out}
+        hair = Hair(hair.points, hair.offsets, hair.thickness, hair.color, kept)
+    options = WriteOptions(units, scale, ascii, parse_axis(up_axis, "up axis"))
     return lambda f: spec.write(f, hair, options)

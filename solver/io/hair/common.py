@@ -19,7 +19,16 @@ import numpy as np
 
 from hairport.solver.budget import check_memory
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import MIN_PARTICLES_PER_STRAND, Hair, require_hair
+from hairport.solver.model.hair import (
+    ATTRIBUTE_NAME,
+    MAX_ATTRIBUTE_NAME,
+    MIN_PARTICLES_PER_STRAND,
+    VERTEX,
+    Hair,
+    HairAttribute,
+    attribute_problem,
+    require_hair,
+)
 from hairport.solver.model.units import unit_scale
 
 ERROR_CODES: dict[str, str] = {
@@ -39,6 +48,7 @@ ERROR_CODES: dict[str, str] = {
     "not_text": "a text format (obj) holds bytes that are not text: a binary or damaged file",
     "over_memory_budget": "the declared particle count needs more memory than ReadLimits.memory_budget_bytes",
     "bad_file": "a count or index past what the reader's arithmetic holds (past int64)",
+    "bad_attribute": "an attribute (primvar, property, array) of the wrong length, type or name for its domain",
 }
 
 #: most points one strand may have: real strands have 10^2-10^3; one strand of millions of
@@ -51,6 +61,7 @@ INT32_MAX = int(np.iinfo(np.int32).max)
 UINT32_MAX = int(np.iinfo(np.uint32).max)
 
 ASCII_FLOAT = "%.9g"  # enough significant digits to give back every float32 exactly
+ASCII_DOUBLE = "%.17g"  # ... and every float64
 ASCII_CHUNK_ROWS = 1 << 16  # rows formatted per string operation when writing text
 
 
@@ -133,6 +144,8 @@ class Strands:
     warnings : list of str
     strict : bool
         Short strands are an error instead of being skipped.
+    attributes : dict of str to HairAttribute
+        Every other per-point or per-strand array, short strands' rows included.
     """
 
     points: np.ndarray
@@ -141,6 +154,19 @@ class Strands:
     color: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
     strict: bool = False
+    attributes: dict[str, HairAttribute] = field(default_factory=dict)
+
+    def add_attribute(self, name: str, values: np.ndarray, domain: str, role: str = "", where: str = "") -> None:
+        """Keep a file's array as attribute ``name``; a name hairport cannot carry (not an identifier,
+        or one already taken) is named in a warning and the array dropped."""
+        prefix = f"{where}: " if where else ""
+        if len(name) > MAX_ATTRIBUTE_NAME or not ATTRIBUTE_NAME.fullmatch(name):
+            self.warnings.append(f"{prefix}attribute {name[:MAX_ATTRIBUTE_NAME]!r} dropped: not a name hairport "
+                                 "carries (letters, digits, underscores, ':' between namespaces)")
+        elif name in self.attributes:
+            self.warnings.append(f"{prefix}attribute {name!r} appears twice: the second one dropped")
+        else:
+            self.attributes[name] = HairAttribute(values, domain, role)
 
 
 @dataclass(frozen=True)
@@ -170,11 +196,13 @@ class ReadContext:
 
 @dataclass(frozen=True)
 class WriteOptions:
-    """How a writer writes: the file's length unit, meters per that unit, text or binary."""
+    """How a writer writes: the file's length unit, meters per that unit, text or binary, and the
+    input axis that points up (``"+y"``, ``"+z"``...; formats that record an up axis write it)."""
 
     units: str
     scale: float
     ascii: bool = False
+    up_axis: str = "+y"
 
 
 Reader = Callable[[bytes | memoryview, ReadContext], Strands]
@@ -196,6 +224,9 @@ class HairFormat:
     keeps_thickness, keeps_color : bool
         Whether the file holds per-point thickness / color (else the writer warns and
         drops them).
+    keeps_attribute : callable
+        ``keeps_attribute(name, attribute) -> bool``: whether the writer writes that attribute
+        (the others are named in one warning and dropped); by default none.
     has_ascii : bool
         Whether the writer has a text variant (``ascii=True``).
     recorded_units : callable or None
@@ -210,6 +241,7 @@ class HairFormat:
     keeps_color: bool
     has_ascii: bool = False
     recorded_units: Callable[[str], str | None] | None = None
+    keeps_attribute: Callable[[str, HairAttribute], bool] = lambda name, attribute: False
 
     @property
     def extension(self) -> str:
@@ -252,6 +284,12 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         check_finite(raw.thickness, counts, "thickness", ctx)
     if raw.color is not None:
         check_finite(raw.color, counts, "color", ctx)
+    n_file_points = int(counts.sum())
+    for name, attribute in raw.attributes.items():
+        problem = attribute_problem(name, attribute, n_file_points, len(counts))
+        if problem is not None:
+            raise ctx.error(problem, "non_finite" if "non-finite" in problem else "bad_attribute")
+    attributes = raw.attributes
     keep = counts >= MIN_PARTICLES_PER_STRAND
     n_skipped = int(len(counts) - np.count_nonzero(keep))
     notes = list(raw.warnings)
@@ -270,6 +308,8 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         points = points[particle_keep]
         thickness = None if thickness is None else thickness[particle_keep]
         color = None if color is None else color[particle_keep]
+        attributes = {name: attribute.take(particle_keep if attribute.domain == VERTEX else keep)
+                      for name, attribute in attributes.items()}
         notes.append(
             f"skipped {n_skipped:,} strand(s) with fewer than {MIN_PARTICLES_PER_STRAND} points "
             f"({skipped_particles:,} point(s)); USC-HairSalon files mark scalp positions "
@@ -285,7 +325,7 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         points = points * scale
     if thickness is not None:
         thickness = np.asarray(thickness, dtype=np.float64) * scale
-    hair = Hair(points.reshape(-1, 3), offsets, thickness, color)
+    hair = Hair(points.reshape(-1, 3), offsets, thickness, color, attributes)
     return ReadReport(
         hair=hair,
         format=fmt,

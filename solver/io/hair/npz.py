@@ -2,8 +2,12 @@
 
 Layout: a numpy ``.npz`` (zip) archive of ``format = "hairport-hair"``, ``version`` (int),
 ``units`` (str), ``points (N, 3)``, ``offsets (S+1,)``, optional ``thickness (N,)`` and
-``color (N, 3)``, all kept exactly (float64). Read with ``allow_pickle=False``; every
-array's shape and dtype is checked from its ``.npy`` header before its data are read.
+``color (N, 3)``, all kept exactly (float64). Version 2 adds the hairstyle's other attributes:
+``attributes``, a JSON list of ``{"name", "domain", "role"}``, and array ``attribute_<i>`` for
+the i-th, in its own dtype (``(N, ...)`` per point, ``(S, ...)`` per strand). Read with
+``allow_pickle=False``; every array's shape and dtype is checked from its ``.npy`` header
+before its data are read. Version 2 also records the up axis of its coordinates (``up_axis``),
+so that a conversion to a format with an up axis (USD) writes the right one.
 
 The archive records its units and refuses to be read with other units (code
 ``"units_mismatch"``). The reader is strict about short strands (its writer never makes
@@ -13,7 +17,9 @@ them): code ``"short_strand"``.
 from __future__ import annotations
 
 import io
+import json
 import lzma
+import re
 import zipfile
 import zlib
 from typing import BinaryIO
@@ -21,13 +27,14 @@ from typing import BinaryIO
 import numpy as np
 
 from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import ATTRIBUTE_KINDS, DOMAINS, MAX_ATTRIBUTES, ROLES, VERTEX, Hair
 from hairport.solver.model.units import METERS_PER_UNIT
 
 NPZ_FORMAT = "hairport-hair"
-NPZ_VERSION = 1
+NPZ_VERSION = 2
 NPZ_REQUIRED = ("format", "version", "points", "offsets")
-NPZ_OPTIONAL = ("units", "thickness", "color")
+NPZ_OPTIONAL = ("units", "thickness", "color", "attributes", "up_axis")
+NPZ_ATTRIBUTE = "attribute_{}"
 NPZ_MAX_HEADER_BYTES = 10_000
 ZIP_MAGIC = b"PK\x03\x04"
 # what zipfile and numpy raise on a damaged member (bad deflate stream, unknown compression
@@ -73,34 +80,61 @@ def read_npz(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
             raise ctx.error(
                 f"not a hairport hair archive: no array(s) {', '.join(missing)}", "bad_header"
             )
-        _check_unpacked_size(archive, [members[key] for key in (*NPZ_REQUIRED, *NPZ_OPTIONAL) if key in members],
-                             ctx)
-        headers = {
-            key: _member_header(archive, members[key], key, ctx)
-            for key in (*NPZ_REQUIRED, *NPZ_OPTIONAL)
-            if key in members
-        }
+        attribute_keys = [key for key in members if re.fullmatch(NPZ_ATTRIBUTE.format(r"\d+"), key)]
+        known = (*NPZ_REQUIRED, *NPZ_OPTIONAL, *attribute_keys)
+        _check_unpacked_size(archive, [members[key] for key in known if key in members], ctx)
+        headers = {key: _member_header(archive, members[key], key, ctx) for key in known if key in members}
         _check_marker(archive, members, headers, ctx)
         n_points, n_strands = _check_shapes(headers, ctx)
         ctx.check_limit(n_strands, "strands")
         ctx.check_limit(n_points, "particles")
-        arrays = {key: _member_array(archive, members[key], key, ctx) for key in headers}
+        described = _attribute_descriptions(archive, members, headers, n_points, n_strands, ctx)
+        arrays = {key: _member_array(archive, members[key], key, ctx) for key in headers if key != "attributes"}
     offsets = arrays["offsets"].astype(np.int64)
     if offsets[0] != 0 or offsets[-1] != n_points or (np.diff(offsets) < 0).any():
         raise ctx.error(
             f"offsets must start at 0, end at the point count {n_points:,} and never decrease",
             "bad_offsets",
         )
-    extra = sorted(set(members) - set(NPZ_REQUIRED) - set(NPZ_OPTIONAL))
+    used = {*NPZ_REQUIRED, *NPZ_OPTIONAL, *(NPZ_ATTRIBUTE.format(i) for i in range(len(described)))}
+    extra = sorted(set(members) - used)
     notes = [f"ignored unknown array(s) {', '.join(extra)}"] if extra else []
-    return Strands(
-        arrays["points"],
-        np.diff(offsets),
-        arrays.get("thickness"),
-        arrays.get("color"),
-        notes,
-        strict=True,
-    )
+    strands = Strands(arrays["points"], np.diff(offsets), arrays.get("thickness"), arrays.get("color"), notes,
+                      strict=True)
+    for index, (name, domain, role) in enumerate(described):
+        strands.add_attribute(name, arrays[NPZ_ATTRIBUTE.format(index)], domain, role)
+    return strands
+
+
+def _attribute_descriptions(archive: zipfile.ZipFile, members: dict[str, str], headers: dict[str, _Header],
+                            n_points: int, n_strands: int, ctx: ReadContext) -> list[tuple[str, str, str]]:
+    """``(name, domain, role)`` of every attribute the archive describes, each array's header checked
+    against its domain's row count before any data is read."""
+    if "attributes" not in headers:
+        return []
+    shape, dtype = headers["attributes"]
+    if shape != () or dtype.kind not in "US":
+        raise ctx.error("array 'attributes' must be a JSON text scalar", "bad_header")
+    try:
+        described = json.loads(_member_text(_member_array(archive, members["attributes"], "attributes", ctx)))
+        described = [(str(item["name"]), str(item["domain"]), str(item.get("role", ""))) for item in described]
+    except (ValueError, TypeError, KeyError):
+        raise ctx.error("array 'attributes' is not a JSON list of {name, domain, role}", "bad_header") from None
+    if any(domain not in DOMAINS or role not in ROLES for _, domain, role in described):
+        raise ctx.error(f"array 'attributes' is not a JSON list of {{name, domain, role}} with a domain of "
+                        f"{', '.join(DOMAINS)} and a role of {', '.join(map(repr, ROLES))}", "bad_header")
+    if len(described) > MAX_ATTRIBUTES:
+        raise ctx.error(f"{len(described):,} attributes, at most {MAX_ATTRIBUTES}", "bad_attribute")
+    for index, (name, domain, _) in enumerate(described):
+        key = NPZ_ATTRIBUTE.format(index)
+        if key not in headers:
+            raise ctx.error(f"attribute {name!r} is described but its array {key!r} is missing", "bad_header")
+        shape, dtype = headers[key]
+        rows = n_points if domain == VERTEX else n_strands
+        if dtype.kind not in ATTRIBUTE_KINDS or len(shape) not in (1, 2) or shape[0] != rows:
+            raise ctx.error(f"attribute {name!r} ({domain}) must be ({rows:,},) or ({rows:,}, k) numbers, got "
+                            f"{shape} {dtype}", "bad_attribute")
+    return described
 
 
 def _check_unpacked_size(archive: zipfile.ZipFile, names: list[str], ctx: ReadContext) -> None:
@@ -147,7 +181,7 @@ def _check_marker(
     archive: zipfile.ZipFile, members: dict[str, str], headers: dict[str, _Header], ctx: ReadContext
 ) -> None:
     """The ``format`` marker, a readable ``version`` and the recorded ``units``."""
-    for key, kinds in (("format", "US"), ("version", "iu"), ("units", "US")):
+    for key, kinds in (("format", "US"), ("version", "iu"), ("units", "US"), ("up_axis", "US")):
         if key in headers and (headers[key][0] != () or headers[key][1].kind not in kinds):
             raise ctx.error(f"array {key!r} must be a scalar of kind {kinds!r}", "bad_header")
     marker = _member_text(_member_array(archive, members["format"], "format", ctx))
@@ -222,15 +256,24 @@ def recorded_units(path) -> str | None:
     Returns None for a file that is not a readable archive or records none (the reader then
     says what is wrong, or reads it in the units asked for).
     """
+    units = _recorded_text(path, "units")
+    return units if units in METERS_PER_UNIT else None
+
+
+def recorded_up_axis(path) -> str | None:
+    """The up axis (``+y``, ``+z``...) a hairport archive records (version 2), or None."""
+    return _recorded_text(path, "up_axis")
+
+
+def _recorded_text(path, key: str) -> str | None:
     try:
-        with zipfile.ZipFile(path) as archive, archive.open("units.npy") as f:
+        with zipfile.ZipFile(path) as archive, archive.open(f"{key}.npy") as f:
             value = np.lib.format.read_array(f, allow_pickle=False, max_header_size=NPZ_MAX_HEADER_BYTES)
     except (*_ZIP_ERRORS, KeyError):
         return None
     if value.shape != () or value.dtype.kind not in "US":
         return None
-    units = _member_text(value)
-    return units if units in METERS_PER_UNIT else None
+    return _member_text(value)
 
 
 def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
@@ -242,12 +285,20 @@ def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
         "units": np.array(options.units),
         "points": hair.points / scale,
         "offsets": hair.offsets,
+        "up_axis": np.array(options.up_axis),
     }
     if hair.thickness is not None:
         arrays["thickness"] = hair.thickness / scale
     if hair.color is not None:
         arrays["color"] = hair.color
+    if hair.attributes:
+        arrays["attributes"] = np.array(json.dumps(
+            [{"name": name, "domain": attribute.domain, "role": attribute.role}
+             for name, attribute in hair.attributes.items()]))
+        for index, attribute in enumerate(hair.attributes.values()):
+            arrays[NPZ_ATTRIBUTE.format(index)] = attribute.values
     np.savez(f, **arrays)
 
 
-FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True, recorded_units=recorded_units)
+FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True, recorded_units=recorded_units,
+                    keeps_attribute=lambda name, attribute: True)

@@ -17,12 +17,14 @@ strands. The reader accepts, in this order of precedence:
 
 When (b) and (d) are both present the edges must agree with the strands. Per-vertex
 ``thickness`` (or ``width``) and ``red`` / ``green`` / ``blue`` (integers scaled by their
-type's maximum, floats taken as [0, 1]) are kept; ``alpha`` is dropped with a warning.
+type's maximum, floats taken as [0, 1]) are the hairstyle's thickness and color; every other
+scalar property of the vertices (``alpha``, UVs, ids ...) and of the strand element becomes an
+attribute, written back as it was read (:mod:`.ply_attributes`).
 
 The writer writes ``binary_little_endian`` (``ascii=True`` for ASCII)::
 
-    element vertex N      float x, y, z [, float thickness] [, uchar red, green, blue]
-    element strand S      ushort nsegs   (uint when a strand has more than 65,535 segments)
+    element vertex N      float x, y, z [, float thickness] [, uchar red, green, blue] [, attributes]
+    element strand S      ushort nsegs   (uint when a strand has more than 65,535 segments) [, attributes]
     element edge N-S      int vertex1, vertex2
 
 that is the layout of ``hairutil`` (strand structure in ``nsegs``) plus edges, so that
@@ -38,6 +40,7 @@ from typing import BinaryIO
 import numpy as np
 
 from hairport.solver.io.hair.common import (
+    ASCII_DOUBLE,
     ASCII_FLOAT,
     INT32_MAX,
     UINT16_MAX,
@@ -50,6 +53,7 @@ from hairport.solver.io.hair.common import (
     write_rows,
 )
 from hairport.solver.io.hair.ply_ascii import read_ascii_body
+from hairport.solver.io.hair.ply_attributes import attribute_columns, read_attributes, writable
 from hairport.solver.io.hair.ply_binary import read_binary_body
 from hairport.solver.io.hair.ply_header import (
     PLY_ENCODINGS,
@@ -59,7 +63,7 @@ from hairport.solver.io.hair.ply_header import (
     PlyValues,
     parse_header,
 )
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import STRAND, VERTEX, Hair
 
 PLY_INDEX_LISTS = ("vertex_indices", "vertex_index", "indices")
 PLY_SEGMENT_COUNTS = ("nsegs", "segments", "num_segments", "segment_count")
@@ -113,19 +117,14 @@ def strands_from_elements(values: PlyValues, ctx: ReadContext) -> Strands:
     n = len(points)
     thickness = vertex_thickness(vertex)
     color = vertex_color(vertex)
-    notes = (
-        ["the vertex property 'alpha' was dropped (Hair has no transparency)"]
-        if "alpha" in vertex
-        else []
-    )
+    used_by_vertex = {"x", "y", "z", *(PLY_COLORS if color is not None else ())}
+    used_by_vertex |= {next(k for k in PLY_THICKNESS if k in vertex)} if thickness is not None else set()
     strand_name = next((name for name in PLY_STRAND_ELEMENTS if name in values), None)
     strand = values.get(strand_name, {}) if strand_name else {}
     edges = values.get("edge")
-    index_list = next(
-        (strand[k] for k in (*PLY_INDEX_LISTS, *strand) if isinstance(strand.get(k), PlyList)),
-        None,
-    )
-    if index_list is not None:
+    index_name = next((k for k in (*PLY_INDEX_LISTS, *strand) if isinstance(strand.get(k), PlyList)), None)
+    if index_name is not None:
+        index_list = strand[index_name]
         index = index_list.values.astype(np.int64)
         if len(index) and (index.min() < 0 or index.max() >= n):
             bad = int(index[(index < 0) | (index >= n)][0])
@@ -135,13 +134,22 @@ def strands_from_elements(values: PlyValues, ctx: ReadContext) -> Strands:
         points = points[index]
         thickness = None if thickness is None else thickness[index]
         color = None if color is None else color[index]
-        return Strands(points, index_list.lengths, thickness, color, notes)
+        found = Strands(points, index_list.lengths, thickness, color)
+        read_attributes(vertex, used_by_vertex, VERTEX, index, found)
+        read_attributes(strand, {index_name}, STRAND, None, found)
+        return found
     counts = counts_from_strand_element(strand, strand_name, n, ctx)
     if counts is not None:
         if edges is not None:
             check_edges_agree(edges, counts, n, ctx)
-    elif (id_name := next((k for k in PLY_STRAND_IDS if k in vertex), None)) is not None:
+        count_name = next(k for k in (*PLY_SEGMENT_COUNTS, *PLY_POINT_COUNTS) if k in strand)
+        found = Strands(points, counts, thickness, color)
+        read_attributes(vertex, used_by_vertex, VERTEX, None, found)
+        read_attributes(strand, {count_name}, STRAND, None, found)
+        return found
+    if (id_name := next((k for k in PLY_STRAND_IDS if k in vertex), None)) is not None:
         counts = counts_from_ids(vertex[id_name], id_name, ctx)
+        used_by_vertex.add(id_name)
     elif edges is not None:
         counts = counts_from_edges(edges, n, ctx)
     else:
@@ -151,7 +159,9 @@ def strands_from_elements(values: PlyValues, ctx: ReadContext) -> Strands:
             f"'{PLY_STRAND_IDS[0]}', or an element 'edge'",
             "bad_header",
         )
-    return Strands(points, counts, thickness, color, notes)
+    found = Strands(points, counts, thickness, color)
+    read_attributes(vertex, used_by_vertex, VERTEX, None, found)
+    return found
 
 
 def vertex_thickness(vertex: dict) -> np.ndarray | None:
@@ -248,31 +258,32 @@ def write_ply(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
     """Write vertices, ``nsegs`` per strand and the edges (module notes), binary or ASCII."""
     check_fits(hair, INT32_MAX, INT32_MAX, "ply")
     columns = vertex_columns(hair, options.scale)
+    columns += attribute_columns(hair.attributes_of(VERTEX), {name for name, _, _ in columns})
     nsegs = hair.counts - 1
     nsegs_type = "ushort" if not len(nsegs) or nsegs.max() <= NSEGS_SHORT_MAX else "uint"
+    strand_columns = [("nsegs", nsegs_type, nsegs)]
+    strand_columns += attribute_columns(hair.attributes_of(STRAND), {"nsegs"})
     edges = edge_starts(hair)  # edge k joins vertices edges[k] and edges[k] + 1
+    edge_columns = [("vertex1", "int", edges), ("vertex2", "int", edges + 1)]
     encoding = "ascii" if options.ascii else "binary_little_endian"
     lines = ["ply", f"format {encoding} 1.0", "comment written by hairport"]
-    lines.append(f"element vertex {hair.n_particles}")
-    lines += [f"property {ply_type} {name}" for name, ply_type, _ in columns]
-    lines += [f"element strand {hair.n_strands}", f"property {nsegs_type} nsegs"]
-    lines += [f"element edge {len(edges)}", "property int vertex1", "property int vertex2"]
+    for element, count, element_columns in (("vertex", hair.n_particles, columns),
+                                            ("strand", hair.n_strands, strand_columns),
+                                            ("edge", len(edges), edge_columns)):
+        lines.append(f"element {element} {count}")
+        lines += [f"property {ply_type} {name}" for name, ply_type, _ in element_columns]
     lines.append("end_header")
     f.write(("\n".join(lines) + "\n").encode("ascii"))
-    if options.ascii:
-        write_rows(
-            f, [values for _, _, values in columns], [_ascii_format(t) for _, t, _ in columns]
-        )
-        write_rows(f, [nsegs], ["%d"])
-        write_rows(f, [edges, edges + 1], ["%d", "%d"])
-        return
-    record = np.dtype([(name, "<" + PLY_TYPES[ply_type]) for name, ply_type, _ in columns])
-    table = np.empty(hair.n_particles, dtype=record)
-    for name, _, values in columns:
-        table[name] = values
-    f.write(table.tobytes())
-    f.write(nsegs.astype("<u2" if nsegs_type == "ushort" else "<u4").tobytes())
-    f.write(np.stack([edges, edges + 1], axis=1).tobytes())
+    for element_columns in (columns, strand_columns, edge_columns):
+        if options.ascii:
+            write_rows(f, [values for _, _, values in element_columns],
+                       [_ascii_format(t) for _, t, _ in element_columns])
+            continue
+        record = np.dtype([(name, "<" + PLY_TYPES[ply_type]) for name, ply_type, _ in element_columns])
+        table = np.empty(len(element_columns[0][2]), dtype=record)
+        for name, _, values in element_columns:
+            table[name] = values
+        f.write(table.tobytes())
 
 
 def edge_starts(hair: Hair) -> np.ndarray:
@@ -295,9 +306,17 @@ def vertex_columns(hair: Hair, scale: float) -> list[tuple[str, str, np.ndarray]
 
 
 def _ascii_format(ply_type: str) -> str:
-    return ASCII_FLOAT if PLY_TYPES[ply_type][0] == "f" else "%d"
+    code = PLY_TYPES[ply_type]
+    return "%d" if code[0] != "f" else ASCII_DOUBLE if code == "f8" else ASCII_FLOAT
 
+
+#: property names the layout uses, which no attribute may take (the reader would read them as layout)
+RESERVED = {
+    VERTEX: ("x", "y", "z", *PLY_THICKNESS, *PLY_COLORS, *PLY_STRAND_IDS),
+    STRAND: (*PLY_INDEX_LISTS, *PLY_SEGMENT_COUNTS, *PLY_POINT_COUNTS),
+}
 
 FORMAT = HairFormat(
-    "ply", read_ply, write_ply, keeps_thickness=True, keeps_color=True, has_ascii=True
+    "ply", read_ply, write_ply, keeps_thickness=True, keeps_color=True, has_ascii=True,
+    keeps_attribute=lambda name, attribute: writable(name, attribute, RESERVED),
 )

@@ -7,7 +7,10 @@ transform (the stage's default time). ``linear`` curves are the strands themselv
 polyline, with a warning. ``widths`` become ``Hair.thickness`` (a width is a diameter,
 thickness too) and ``primvars:displayColor`` becomes ``Hair.color``, each at vertex or
 varying interpolation as they are, at uniform (one per curve) or constant (one for all)
-expanded to every point. Other primvars are named in a warning and not kept.
+expanded to every point. Every other numeric primvar becomes an attribute of the hairstyle
+(:mod:`.usd_primvars`), written back as a primvar; a primvar some prims lack, or string
+primvars, are named in a warning and not kept; authored normals, velocities and
+accelerations too (they describe the source's shape).
 
 Units and axes: the coordinates stay in the stage's units and axes. The stage's
 ``metersPerUnit`` is the file's recorded length unit (:func:`recorded_units`, one of
@@ -18,107 +21,45 @@ every format: the body and the hair must share one frame).
 
 Write: one ``/Groom`` ``Xform`` holding one ``linear`` ``BasisCurves`` prim ``/Groom/hair``:
 counts, float32 points, widths (vertex) and ``displayColor`` (vertex) when the hairstyle has
-them, ``metersPerUnit`` from the written units and ``upAxis`` Y. ``.usda`` is text,
+them, every attribute as a primvar, ``metersPerUnit`` from the written units and ``upAxis`` Z when
+the coordinates' up axis is +z, else Y (USD has no other). ``.usda`` is text,
 ``.usdc`` and ``.usd`` crate.
 
 Bad input: bytes that USD cannot open (truncated, not USD) are ``bad_header`` naming USD's
 own message; a stage without ``BasisCurves`` is ``empty_hair``; counts that disagree with the
 points, negative counts, or a prim whose width or color count fits no interpolation are
 ``bad_index``; counts are checked against :class:`~.common.ReadLimits` before the points are
-copied out of USD. USD parses in a child process (``python -m hairport.solver.io.hair.usd``)
-under a heap limit and a time limit (:data:`CHILD_BASE_BYTES`, :data:`CHILD_SECONDS`): a
-damaged crate file whose decoding would take gigabytes is one error, and this process never
-holds more than the arrays the child hands back.
+copied out of USD. USD parses in a child process under a heap limit and a time limit
+(:mod:`~hairport.solver.io.sandbox`): a damaged crate file whose decoding would take gigabytes is one error, and
+this process never holds more than the arrays the child hands back.
 """
 
 from __future__ import annotations
 
-import json
 import os
-import re
-import subprocess
-import sys
 import tempfile
 from typing import BinaryIO
 
 import numpy as np
 
 from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite
+from hairport.solver.io.hair.sandboxed import read_in_child
+from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
+from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
-from hairport.solver.model.units import METERS_PER_UNIT
 
 #: the prim a written groom lives in
 GROOM_PRIM = "/Groom"
 CURVES_PRIM = "/Groom/hair"
-#: a stage's metersPerUnit names a hairport unit when it is within this relative distance of it
-UNIT_TOLERANCE = 1e-6
-#: primvars this reader turns into ``Hair`` fields (the others are named in a warning)
-KEPT_PRIMVARS = ("displayColor",)
-#: USD parses in a child process under a heap limit and a time limit: a damaged crate file can
-#: make USD's decoder allocate without bound (a mutated 2 KB file took 5 GB and 6 s here). The
-#: limit is this much for Python and USD themselves ...
-CHILD_BASE_BYTES = 768 * 2**20
-#: ... plus this many times the file's size (a crate file's arrays expand a few times at most:
-#: floats are stored raw, only integer arrays are compressed), at least CHILD_MIN_DATA_BYTES
-CHILD_BYTES_PER_FILE_BYTE = 100
-CHILD_MIN_DATA_BYTES = 256 * 2**20
-#: seconds a child may parse before it is stopped (code ``too_large``)
-CHILD_SECONDS = 60
-#: the child's exit status when it reports an input error (its code and message on stdout, JSON)
-CHILD_INPUT_ERROR = 3
+#: primvars this reader turns into ``Hair`` fields or that override the prim's own widths and normals:
+#: no attribute takes their names
+RESERVED_PRIMVARS = ("displayColor", "widths", "normals")
+#: authored attributes of a curves prim that describe its shape (a retarget makes them stale)
+SHAPE_ATTRIBUTES = ("normals", "velocities", "accelerations")
 #: the units a child is asked to read in when only the stage's own units are wanted: it answers
 #: with a ``units_mismatch`` whose message is this followed by them
 RECORDED_UNITS = "units:"
-
-
-def _pxr():
-    """``(Usd, UsdGeom, Vt, Sdf, Tf)``; usd-core is a dependency, imported only where USD is read or written."""
-    from pxr import Sdf, Tf, Usd, UsdGeom, Vt
-
-    return Usd, UsdGeom, Vt, Sdf, Tf
-
-
-def unit_of(meters_per_unit: float) -> str | None:
-    """The name in :data:`METERS_PER_UNIT` of a stage's ``metersPerUnit``, or None."""
-    for name, scale in METERS_PER_UNIT.items():
-        if abs(meters_per_unit - scale) <= UNIT_TOLERANCE * scale:
-            return name
-    return None
-
-
-def _open_stage(path: str, ctx: ReadContext):
-    """The stage of the USD file at ``path``."""
-    Usd, _, _, _, Tf = _pxr()
-    try:
-        stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
-    except Tf.ErrorException as error:
-        raise ctx.error(f"not a readable USD stage: {_reason(error, ctx)}", "bad_header") from None
-    if stage is None:
-        raise ctx.error("not a readable USD stage", "bad_header")
-    return stage
-
-
-def _reason(error: Exception, ctx: ReadContext) -> str:
-    """USD's own reason (quoted after its source locations), our temporary file's name replaced by the source's."""
-    try:
-        text = str(error)
-    except UnicodeError:  # USD quotes the damaged bytes themselves
-        text = ""
-    reasons = re.findall(r" : '(.*?)'(?= Error in |$)", " ".join(text.split()))
-    reason = reasons[0] if reasons else "unknown"
-    reason = re.sub(r"/\S*hairport-usd-\S*?/groom\.usd[ac]?", os.path.basename(ctx.source), reason)
-    return reason[:200]
-
-
-def _stage_units(stage, ctx: ReadContext) -> str:
-    _, UsdGeom, _, _, _ = _pxr()
-    meters = float(UsdGeom.GetStageMetersPerUnit(stage))
-    unit = unit_of(meters)
-    if unit is None:
-        known = ", ".join(f"{name} ({scale:g})" for name, scale in METERS_PER_UNIT.items())
-        raise ctx.error(f"the stage's metersPerUnit {meters:g} is none of hairport's units: {known}", "bad_header")
-    return unit
 
 
 def _per_point(values: np.ndarray | None, interpolation: str, counts: np.ndarray, what: str, prim: str,
@@ -139,7 +80,7 @@ def _per_point(values: np.ndarray | None, interpolation: str, counts: np.ndarray
 
 def _read_curves(prim, ctx: ReadContext, totals: list[int]):
     """``(points (n, 3) float64 world, counts, thickness or None, color or None, warnings)`` of one BasisCurves prim."""
-    Usd, UsdGeom, _, _, _ = _pxr()
+    Usd, UsdGeom, _, _, _ = pxr_modules()
     curves = UsdGeom.BasisCurves(prim)
     name = str(prim.GetPath())
     warnings: list[str] = []
@@ -173,11 +114,21 @@ def _read_curves(prim, ctx: ReadContext, totals: list[int]):
         values = display.ComputeFlattened()
         color = _per_point(None if values is None else np.asarray(values, dtype=np.float64).reshape(-1, 3),
                            display.GetInterpolation(), counts, "displayColor values", name, ctx)
-    dropped = sorted(p.GetPrimvarName() for p in primvars.GetPrimvarsWithValues()
-                     if p.GetPrimvarName() not in KEPT_PRIMVARS)
-    if dropped:
-        warnings.append(f"{name}: primvars not kept: {', '.join(dropped)}")
-    return world, counts, thickness, color, warnings
+    attributes = {}
+    for primvar in primvars.GetPrimvarsWithValues():
+        primvar_name = str(primvar.GetPrimvarName())
+        if primvar_name in RESERVED_PRIMVARS:
+            continue
+        found = read_primvar(primvar, counts, name, ctx)
+        if isinstance(found, str):
+            warnings.append(f"{name}: primvar {primvar_name!r} not kept: {found}")
+        else:
+            attributes[primvar_name] = found
+    stale = [attribute for attribute in SHAPE_ATTRIBUTES if prim.GetAttribute(attribute).HasAuthoredValue()]
+    if stale:
+        warnings.append(f"{name}: {', '.join(stale)} not kept: they describe the source's shape, which a retarget "
+                        "replaces")
+    return world, counts, thickness, color, warnings, attributes
 
 
 def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> Strands:
@@ -187,7 +138,7 @@ def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> St
         source = os.path.join(folder, f"groom{suffix}")
         with open(source, "wb") as handle:
             handle.write(content)
-        strands = _read_in_child(source, len(content), ctx)
+        strands = read_in_child(__name__, source, len(content), ctx, "USD")
     check_finite(strands.points, strands.counts, "coordinate", ctx)
     if strands.thickness is not None:
         check_finite(strands.thickness, strands.counts, "width", ctx)
@@ -196,61 +147,19 @@ def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> St
     return strands
 
 
-def _read_in_child(source: str, size: int, ctx: ReadContext) -> Strands:
-    """:func:`_strands_of` the USD file ``source`` of ``size`` bytes, run by :func:`_child_main` under
-    its heap and time limits; the child's input errors raised here."""
-    heap = CHILD_BASE_BYTES + max(CHILD_MIN_DATA_BYTES, CHILD_BYTES_PER_FILE_BYTE * size)
-    with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
-        result = os.path.join(folder, "strands.npz")
-        command = [sys.executable, "-m", "hairport.solver.io.hair.usd", source, result, ctx.units,
-                   str(ctx.limits.max_strands), str(ctx.limits.max_particles), str(heap), os.path.basename(ctx.source)]
-        try:
-            child = subprocess.run(command, capture_output=True, timeout=CHILD_SECONDS, check=False)
-        except subprocess.TimeoutExpired:
-            raise ctx.error(f"USD took more than {CHILD_SECONDS} s to read the stage: refused", "too_large") from None
-        if child.returncode == CHILD_INPUT_ERROR:
-            problem = json.loads(child.stdout)
-            raise ctx.error(problem["message"], problem["code"])
-        if child.returncode != 0:
-            raise ctx.error(f"USD could not read the stage within {heap // 2**20} MB (a damaged or hostile file; "
-                            f"exit status {child.returncode})", "too_large")
-        with np.load(result, allow_pickle=False) as arrays:
-            found = {name: arrays[name] for name in arrays.files}
-    warnings = [str(text) for text in found.pop("warnings")]
-    return Strands(found["points"], found["counts"], found.get("thickness"), found.get("color"), warnings)
-
-
-def _child_main(argv: list[str]) -> int:
-    """``python -m hairport.solver.io.hair.usd SOURCE RESULT UNITS MAX_STRANDS MAX_PARTICLES HEAP NAME``."""
-    import resource
-
-    source, result, units, max_strands, max_particles, heap, name = argv
-    resource.setrlimit(resource.RLIMIT_DATA, (int(heap), int(heap)))
-    from hairport.solver.io.hair.common import ReadLimits
-
-    ctx = ReadContext(name, ReadLimits(max_strands=int(max_strands), max_particles=int(max_particles)), units)
-    _, _, _, _, Tf = _pxr()
+def parse_file(path: str, ctx: ReadContext) -> Strands:
+    """The stage's strands (module notes); run by :mod:`~hairport.solver.io.sandbox` in its child."""
+    _, _, _, _, Tf = pxr_modules()
+    stage = open_stage(path, ctx)
     try:
-        stage = _open_stage(source, ctx)
-        try:
-            strands = _strands_of(stage, ctx)
-        except Tf.ErrorException as error:  # a damaged value deep in the file, met on reading it
-            raise ctx.error(f"damaged USD data: {_reason(error, ctx)}", "bad_header") from None
-    except InputError as error:
-        sys.stdout.write(json.dumps({"code": error.code, "message": error.problem}))
-        return CHILD_INPUT_ERROR
-    arrays = {"points": strands.points, "counts": strands.counts, "warnings": np.array(strands.warnings, dtype=str)}
-    if strands.thickness is not None:
-        arrays["thickness"] = strands.thickness
-    if strands.color is not None:
-        arrays["color"] = strands.color
-    np.savez(result, **arrays)
-    return 0
+        return _strands_of(stage, ctx)
+    except Tf.ErrorException as error:  # a damaged value deep in the file, met on reading it
+        raise ctx.error(f"damaged USD data: {usd_reason(error, ctx)}", "bad_header") from None
 
 
 def _strands_of(stage, ctx: ReadContext) -> Strands:
-    _, UsdGeom, _, _, _ = _pxr()
-    units = _stage_units(stage, ctx)
+    _, UsdGeom, _, _, _ = pxr_modules()
+    units = stage_units(stage, ctx)
     if ctx.units == RECORDED_UNITS:
         raise ctx.error(f"{RECORDED_UNITS}{units}", "units_mismatch")
     if units != ctx.units:
@@ -273,7 +182,29 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
             return None
         return np.concatenate([part[index] for part in parts])
 
-    return Strands(points, counts, joined(2, "widths"), joined(3, "displayColor"), warnings)
+    strands = Strands(points, counts, joined(2, "widths"), joined(3, "displayColor"), warnings)
+    for attribute_name, values, domain, role in _joined_attributes(parts, warnings):
+        strands.add_attribute(attribute_name, values, domain, role)
+    return strands
+
+
+def _joined_attributes(parts: list, warnings: list[str]) -> list[tuple[str, np.ndarray, str, str]]:
+    """The primvars every prim has with one domain, dtype, width and role, concatenated prim after prim;
+    the others named in ``warnings``."""
+    names = list(dict.fromkeys(name for part in parts for name in part[5]))
+    joined = []
+    for name in names:
+        found = [part[5].get(name) for part in parts]
+        if any(item is None for item in found):
+            warnings.append(f"primvar {name!r} on some BasisCurves prims only: not kept")
+            continue
+        kinds = {(values.dtype.str, values.shape[1:], domain, role) for values, domain, role in found}
+        if len(kinds) > 1:
+            warnings.append(f"primvar {name!r} has different types or interpolations on different prims: not kept")
+            continue
+        _, _, domain, role = kinds.pop()
+        joined.append((name, np.concatenate([values for values, _, _ in found]), domain, role))
+    return joined
 
 
 def recorded_units(path: str | os.PathLike[str]) -> str | None:
@@ -284,7 +215,7 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
 
     source = os.fspath(path)
     try:
-        _read_in_child(source, os.path.getsize(source), ReadContext(source, ReadLimits(), RECORDED_UNITS))
+        read_in_child(__name__, source, os.path.getsize(source), ReadContext(source, ReadLimits(), RECORDED_UNITS), "USD")
     except OSError:
         return None
     except InputError as error:
@@ -295,10 +226,10 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
 
 def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str) -> None:
     """One linear ``BasisCurves`` prim with widths and displayColor when present (module notes)."""
-    Usd, UsdGeom, Vt, Sdf, _ = _pxr()
+    Usd, UsdGeom, Vt, Sdf, _ = pxr_modules()
     stage = Usd.Stage.CreateInMemory(f"groom{suffix}")
     UsdGeom.SetStageMetersPerUnit(stage, float(options.scale))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if options.up_axis == "+z" else UsdGeom.Tokens.y)
     root = UsdGeom.Xform.Define(stage, GROOM_PRIM)
     stage.SetDefaultPrim(root.GetPrim())
     curves = UsdGeom.BasisCurves.Define(stage, CURVES_PRIM)
@@ -314,6 +245,7 @@ def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str) -
     if hair.color is not None:
         display = curves.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
         display.Set(Vt.Vec3fArray.FromNumpy(hair.color.astype(np.float32)))
+    write_primvars(curves.GetPrim(), hair.attributes)
     with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
         path = os.path.join(folder, f"groom{suffix}")
         # .usd is written as crate (USD's default for it); .usda as text
@@ -331,12 +263,10 @@ def _format(name: str) -> HairFormat:
         keeps_thickness=True,
         keeps_color=True,
         recorded_units=recorded_units,
+        keeps_attribute=lambda attribute_name, attribute: attribute_name not in RESERVED_PRIMVARS,
     )
 
 
 #: the three USD extensions: the same reader and writer
 FORMATS = tuple(_format(name) for name in ("usd", "usda", "usdc"))
 
-
-if __name__ == "__main__":
-    sys.exit(_child_main(sys.argv[1:]))

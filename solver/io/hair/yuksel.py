@@ -8,8 +8,9 @@ thickness, transparency, color (``float32`` x3).
 All five flags are read. Thickness and color are kept in ``Hair.thickness`` /
 ``Hair.color`` only when their array flag is set: the header defaults are always present in
 a HAIR file (the reference library fills them in), so they say nothing about the hairstyle
-and are not expanded to per-point arrays. ``Hair`` has no transparency field: a
-transparency array is read, checked for finite values and dropped, with a warning. Strands
+and are not expanded to per-point arrays. A transparency array becomes the float32 per-point
+attribute ``transparency`` (:data:`TRANSPARENCY`), which the writer writes back; no other
+attribute has a place in the format. Strands
 of zero segments are kept in the :class:`~.common.Strands` and dropped by the shared read
 step.
 """
@@ -34,7 +35,7 @@ from hairport.solver.io.hair.common import (
     to_float32,
 )
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import VERTEX, Hair, HairAttribute
 
 HAIR_MAGIC = b"HAIR"
 HAIR_HEADER_BYTES = 128
@@ -72,6 +73,8 @@ assert HAIR_HEADER_DTYPE.itemsize == HAIR_HEADER_BYTES
 TYPICAL_HAIR_THICKNESS_M = 7e-5
 HAIR_DEFAULT_TRANSPARENCY = 0.0
 HAIR_DEFAULT_COLOR = (1.0, 1.0, 1.0)  # the reference library's default
+#: the attribute a transparency array is read into and written from
+TRANSPARENCY = "transparency"
 
 
 def read_yuksel(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
@@ -111,17 +114,22 @@ def read_yuksel(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
     counts = strand_counts(
         arrays.get("segments"), int(header["d_segments"]), n_strands, n_points, ctx
     )
-    notes = []
-    if "transparency" in arrays:
-        check_finite(arrays["transparency"], counts, "transparency", ctx)
-        notes.append("the transparency array was dropped (Hair has no transparency)")
-    return Strands(
+    strands = Strands(
         points=arrays["points"].reshape(-1, 3),
         counts=counts,
         thickness=arrays.get("thickness"),
         color=None if "color" not in arrays else arrays["color"].reshape(-1, 3),
-        warnings=notes,
     )
+    if TRANSPARENCY in arrays:
+        check_finite(arrays[TRANSPARENCY], counts, TRANSPARENCY, ctx)
+        strands.add_attribute(TRANSPARENCY, arrays[TRANSPARENCY], VERTEX)
+    return strands
+
+
+def keeps_attribute(name: str, attribute: HairAttribute) -> bool:
+    """Only a scalar per-point ``transparency`` has a place in a HAIR file."""
+    return name == TRANSPARENCY and attribute.domain == VERTEX and attribute.components == 1 and \
+        attribute.values.dtype.kind in "biuf"
 
 
 def array_layout(flags: int, n_strands: int, n_points: int) -> list[tuple[str, int, np.dtype]]:
@@ -131,7 +139,7 @@ def array_layout(flags: int, n_strands: int, n_points: int) -> list[tuple[str, i
         (HAIR_SEGMENTS_BIT, "segments", 2 * n_strands, np.dtype("<u2")),
         (HAIR_POINTS_BIT, "points", 12 * n_points, f32),
         (HAIR_THICKNESS_BIT, "thickness", 4 * n_points, f32),
-        (HAIR_TRANSPARENCY_BIT, "transparency", 4 * n_points, f32),
+        (HAIR_TRANSPARENCY_BIT, TRANSPARENCY, 4 * n_points, f32),
         (HAIR_COLORS_BIT, "color", 12 * n_points, f32),
     ]
     return [(name, nbytes, dtype) for bit, name, nbytes, dtype in candidates if flags & bit]
@@ -190,6 +198,8 @@ def write_yuksel(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
     flags = HAIR_SEGMENTS_BIT | HAIR_POINTS_BIT
     flags |= HAIR_THICKNESS_BIT if hair.thickness is not None else 0
     flags |= HAIR_COLORS_BIT if hair.color is not None else 0
+    transparency = hair.attributes.get(TRANSPARENCY)
+    flags |= HAIR_TRANSPARENCY_BIT if transparency is not None else 0
     header["magic"] = HAIR_MAGIC
     header["hair_count"] = hair.n_strands
     header["point_count"] = hair.n_particles
@@ -204,8 +214,11 @@ def write_yuksel(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
     f.write(to_float32(hair.points / scale, "coordinate").tobytes())
     if hair.thickness is not None:
         f.write(to_float32(hair.thickness / scale, "thickness").tobytes())
+    if transparency is not None:
+        f.write(to_float32(transparency.values, TRANSPARENCY).tobytes())
     if hair.color is not None:
         f.write(to_float32(hair.color, "color").tobytes())
 
 
-FORMAT = HairFormat("hair", read_yuksel, write_yuksel, keeps_thickness=True, keeps_color=True)
+FORMAT = HairFormat("hair", read_yuksel, write_yuksel, keeps_thickness=True, keeps_color=True,
+                    keeps_attribute=keeps_attribute)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hairport.solver.model.errors import InputError
-from hairport.solver.model.hair import Hair, particle_indices, require_hair, validate_layout
+from hairport.solver.model.hair import Hair, HairAttribute, particle_indices, require_hair, validate_layout
 
 
 @pytest.fixture
@@ -69,3 +69,46 @@ def test_require_hair_refuses_no_strand_and_zero_length_strands_only():
     with pytest.raises(InputError, match="zero length"):
         require_hair(np.array([[0.0, 0, 0], [0, 0, 0], [1, 0, 0], [1, 0, 0]]), np.array([0, 2, 4]))
     require_hair(np.array([[0.0, 0, 0], [0, 0, 0], [1, 0, 0], [1, 0, 1e-9]]), np.array([0, 2, 4]))
+
+
+def _two_strands() -> Hair:
+    return Hair(np.arange(15.0).reshape(5, 3), [0, 2, 5])
+
+
+def test_attributes_follow_subsets_and_new_points():
+    base = _two_strands()
+    attributes = {"uv": HairAttribute(np.arange(10.0).reshape(5, 2), "vertex", "texcoord"),
+                  "group": HairAttribute(np.array([4, 9], np.int16), "strand")}
+    hair = Hair(base.points, base.offsets, attributes=attributes)
+    part = hair.subset(np.array([1, 0]))
+    np.testing.assert_array_equal(part.attributes["uv"].values, [[4, 5], [6, 7], [8, 9], [0, 1], [2, 3]])
+    np.testing.assert_array_equal(part.attributes["group"].values, [9, 4])
+    assert part.attributes["group"].values.dtype == np.int16 and part.attributes["uv"].role == "texcoord"
+    moved = hair.with_points(hair.points + 1)
+    assert moved.attributes["uv"] is hair.attributes["uv"]
+    assert list(hair.attributes_of("strand")) == ["group"] and hair.without_attributes().attributes == {}
+
+
+@pytest.mark.parametrize("name, attribute, words", [
+    ("bad name", HairAttribute(np.zeros(5), "vertex"), "not a name"),
+    ("uv", HairAttribute(np.zeros(4), "vertex"), "expected (5,)"),
+    ("group", HairAttribute(np.zeros(5), "strand"), "expected (2,)"),
+    ("wide", HairAttribute(np.zeros((2, 17)), "strand"), "at most 16"),
+    ("cube", HairAttribute(np.zeros((2, 2, 2)), "strand"), "has shape (2, 2, 2)"),
+    ("nan", HairAttribute(np.array([0.0, np.nan]), "strand"), "non-finite value (NaN or inf) in row 1"),
+    ("text", HairAttribute(np.array(["a", "b"]), "strand"), "<U1 values"),
+])
+def test_attributes_that_do_not_fit_the_hairstyle_are_refused(name, attribute, words):
+    base = _two_strands()
+    with pytest.raises(InputError) as caught:
+        Hair(base.points, base.offsets, attributes={name: attribute})
+    assert caught.value.code == "bad_attribute" and words in str(caught.value)
+
+
+def test_an_attribute_names_its_domain_and_role_from_fixed_lists():
+    with pytest.raises(ValueError, match="domain 'edge'"):
+        HairAttribute(np.zeros(2), "edge")
+    with pytest.raises(ValueError, match="role 'colour'"):
+        HairAttribute(np.zeros(2), "strand", "colour")
+    big_endian = HairAttribute(np.arange(3, dtype=">i4"), "strand")
+    assert big_endian.values.dtype == np.dtype("=i4") and big_endian.values.tolist() == [0, 1, 2]

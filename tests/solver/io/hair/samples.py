@@ -26,6 +26,7 @@ WRITE_VARIANTS = [
     ("usd", False),
     ("usda", False),
     ("usdc", False),
+    ("abc", False),
 ]
 PLY_ENCODINGS = ["ascii", "binary_little_endian", "binary_big_endian"]
 

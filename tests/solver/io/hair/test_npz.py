@@ -43,7 +43,7 @@ def test_npz_is_strict_about_short_strands(tmp_path):
     [
         ({"format": None}, "bad_header", "no array(s) format"),
         ({"format": np.array("something-else")}, "bad_header", "not a hairport hair archive"),
-        ({"version": np.array(2)}, "bad_header", "version 2"),
+        ({"version": np.array(3)}, "bad_header", "version 3"),
         ({"points": np.zeros((4, 2))}, "bad_header", "points must be (N, 3)"),
         (
             {"points": np.zeros((4, 3), dtype=np.int32)},
@@ -56,6 +56,16 @@ def test_npz_is_strict_about_short_strands(tmp_path):
         ({"thickness": np.zeros(3)}, "bad_header", "thickness must be (4,)"),
         ({"color": np.zeros((4, 3), dtype=object)}, "bad_header", "Python objects"),
         ({"units": np.array("furlong")}, "bad_header", "unknown units"),
+        ({"attributes": np.array("[{")}, "bad_header", "not a JSON list"),
+        ({"attributes": np.array('[{"name": "uv", "domain": "vertex"}]')}, "bad_header", "'attribute_0' is missing"),
+        ({"attributes": np.array('[{"name": "uv", "domain": "vertex"}]'), "attribute_0": np.zeros(3)},
+         "bad_attribute", "'uv' (vertex) must be (4,)"),
+        ({"attributes": np.array('[{"name": "g", "domain": "strand"}]'), "attribute_0": np.array(["a", "b"])},
+         "bad_attribute", "'g' (strand) must be (2,)"),
+        ({"attributes": np.array('[{"name": "g", "domain": "strand", "role": "x"}]'), "attribute_0": np.zeros(2)},
+         "bad_header", "not a JSON list"),
+        ({"attributes": np.array('[{"name": "g", "domain": "strand"}]'), "attribute_0": np.array([0, np.inf])},
+         "non_finite", "attribute 'g' has a non-finite value"),
     ],
 )
 def test_npz_bad_archives(arrays, code, words):
@@ -99,8 +109,8 @@ def test_nan_in_npz():
 def test_written_archive_members_in_file_units():
     hair = helix_hair(3, thickness=True)
     with np.load(io.BytesIO(hair_to_bytes(hair, "npz", units="cm"))) as arrays:
-        assert sorted(arrays.files) == ["format", "offsets", "points", "thickness", "units", "version"]
-        assert (str(arrays["format"]), int(arrays["version"]), str(arrays["units"])) == ("hairport-hair", 1, "cm")
+        assert sorted(arrays.files) == ["format", "offsets", "points", "thickness", "units", "up_axis", "version"]
+        assert (str(arrays["format"]), int(arrays["version"]), str(arrays["units"])) == ("hairport-hair", 2, "cm")
         np.testing.assert_array_equal(arrays["points"], hair.points / 0.01)
         np.testing.assert_array_equal(arrays["thickness"], hair.thickness / 0.01)
         np.testing.assert_array_equal(arrays["offsets"], hair.offsets)

@@ -8,6 +8,7 @@ import pytest
 from hairport.solver.io.hair import (
     HairIOWarning,
     ReadLimits,
+    hair_to_bytes,
     read_hair,
     read_hair_bytes,
     read_hair_bytes_report,
@@ -15,13 +16,14 @@ from hairport.solver.io.hair import (
 )
 from hairport.solver.io.hair.common import ReadContext
 from hairport.solver.io.hair.ply import counts_from_edges, counts_from_ids, edge_starts, vertex_columns
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import Hair, HairAttribute
 from tests.solver.io.hair.samples import (
     ASCII_PLY,
     PLY_ENCODINGS,
     XYZ,
     expect_error,
     f32,
+    helix_hair,
     long_strand_hair,
     ply_bytes,
     strands_of,
@@ -230,17 +232,75 @@ def test_ply_other_elements_and_properties_are_skipped():
     np.testing.assert_array_equal(hair.offsets, offsets)
 
 
-def test_ply_alpha_is_dropped_with_a_warning():
-    points, _ = strands_of([2])
+@pytest.mark.parametrize("encoding", ["ascii", "binary_little_endian", "binary_big_endian"])
+def test_ply_other_properties_become_attributes(encoding):
+    points, _ = strands_of([2, 3])
+    data = ply_bytes(
+        encoding,
+        [
+            ("vertex", 5, xyz_props(points) + [("alpha", "uchar", [1, 2, 3, 4, 5]),
+                                               ("uv_0", "float", [0.5, 1, 2, 3, 4]),
+                                               ("uv_1", "float", [9, 8, 7, 6, 5])]),
+            ("strand", 2, [("nsegs", "ushort", [1, 2]), ("group_id", "int", [7, -3])]),
+        ],
+    )
+    report = read_hair_bytes_report(data, "ply")
+    assert report.warnings == ()
+    attributes = report.hair.attributes
+    assert list(attributes) == ["alpha", "uv", "group_id"]
+    assert attributes["alpha"].values.dtype == np.uint8 and attributes["alpha"].domain == "vertex"
+    np.testing.assert_array_equal(attributes["alpha"].values, [1, 2, 3, 4, 5])
+    np.testing.assert_array_equal(attributes["uv"].values, np.float32([[0.5, 9], [1, 8], [2, 7], [3, 6], [4, 5]]))
+    assert attributes["group_id"].domain == "strand" and attributes["group_id"].values.dtype == np.int32
+    np.testing.assert_array_equal(attributes["group_id"].values, [7, -3])
+
+
+def test_ply_attributes_follow_the_vertex_order_of_index_lists():
+    points, _ = strands_of([2, 2])
     data = ply_bytes(
         "ascii",
         [
-            ("vertex", 2, xyz_props(points) + [("alpha", "uchar", [1, 2])]),
-            ("strand", 1, [("nsegs", "ushort", [1])]),
+            ("vertex", 4, xyz_props(points) + [("id", "int", [10, 11, 12, 13])]),
+            ("strand", 2, [("vertex_indices", ("list", "uchar", "int"), [[2, 3], [0, 1]])]),
         ],
     )
-    with pytest.warns(HairIOWarning, match="alpha"):
-        read_hair_bytes(data, "ply")
+    hair = read_hair_bytes(data, "ply")
+    np.testing.assert_array_equal(hair.attributes["id"].values, [12, 13, 10, 11])
+    np.testing.assert_array_equal(hair.points, points[[2, 3, 0, 1]])
+
+
+@pytest.mark.parametrize("ascii", [False, True])
+def test_ply_writes_attributes_back_as_read(ascii):
+    hair = helix_hair(6)
+    n, s = hair.n_particles, hair.n_strands
+    rng = np.random.default_rng(3)
+    attributes = {
+        "uv": HairAttribute(rng.random((n, 2)).astype(np.float32), "vertex", "texcoord"),
+        "weight": HairAttribute(rng.random(n), "vertex"),
+        "clump": HairAttribute(rng.integers(0, 60000, n).astype(np.uint16), "vertex"),
+        "group_id": HairAttribute(rng.integers(-5, 5, s).astype(np.int64), "strand"),
+        "is_guide": HairAttribute(rng.random(s) < 0.5, "strand"),
+    }
+    hair = Hair(hair.points, hair.offsets, attributes=attributes)
+    back = read_hair_bytes(hair_to_bytes(hair, "ply", ascii=ascii), "ply")
+    assert list(back.attributes) == list(attributes)
+    for name, attribute in attributes.items():
+        np.testing.assert_array_equal(back.attributes[name].values, attribute.values)
+        assert back.attributes[name].domain == attribute.domain
+    # PLY has no 64-bit integers and no booleans: the nearest type that holds the values exactly
+    assert back.attributes["group_id"].values.dtype == np.int32 and back.attributes["is_guide"].values.dtype == np.uint8
+
+
+def test_ply_writer_drops_attributes_it_cannot_hold_and_says_which():
+    hair = helix_hair(2)
+    attributes = {
+        "big": HairAttribute(np.array([1, 2**40]), "strand"),  # past int32
+        "red": HairAttribute(np.zeros(hair.n_particles), "vertex"),  # the colour's property
+        "kept": HairAttribute(np.arange(2, dtype=np.int64), "strand"),
+    }
+    with pytest.warns(HairIOWarning, match="'big', 'red'"):
+        data = hair_to_bytes(Hair(hair.points, hair.offsets, attributes=attributes), "ply")
+    assert list(read_hair_bytes(data, "ply").attributes) == ["kept"]
 
 
 @pytest.mark.parametrize(

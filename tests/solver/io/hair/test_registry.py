@@ -74,7 +74,7 @@ def test_round_trip_points_and_offsets(tmp_path, groom, fmt, ascii):
 
 
 def test_data_and_hair_written_from_one_groom_read_equal(tmp_path, groom):
-    with pytest.warns(HairIOWarning, match="no thickness or color"):
+    with pytest.warns(HairIOWarning, match="cannot hold thickness or color"):
         write_hair(tmp_path / "g.data", groom)
     write_hair(tmp_path / "g.hair", groom)
     a, b = read_hair(tmp_path / "g.data"), read_hair(tmp_path / "g.hair")
@@ -222,13 +222,13 @@ def test_values_too_large_for_float32_are_refused_when_writing(tmp_path):
 
 
 def test_unknown_extension(tmp_path):
-    path = write_bytes(tmp_path, "groom.abc", b"whatever")
+    path = write_bytes(tmp_path, "groom.fbx", b"whatever")
     err = expect_error("unknown_format", read_hair, path)
-    assert "'.abc'" in str(err) and "groom.abc" in str(err)
+    assert "'.fbx'" in str(err) and "groom.fbx" in str(err)
     assert all(f".{fmt}" in str(err) for fmt in SUPPORTED_FORMATS)
     expect_error("unknown_format", read_hair, write_bytes(tmp_path, "noext", b""))
-    expect_error("unknown_format", write_hair, tmp_path / "out.abc", helix_hair(2))
-    expect_error("unknown_format", read_hair_bytes, b"", "abc")
+    expect_error("unknown_format", write_hair, tmp_path / "out.fbx", helix_hair(2))
+    expect_error("unknown_format", read_hair_bytes, b"", "fbx")
 
 
 def test_format_argument_overrides_extension(tmp_path):
@@ -293,7 +293,7 @@ def test_ascii_flag_only_for_ply(tmp_path):
 
 
 def test_writer_warns_about_dropped_attributes(tmp_path, groom):
-    with pytest.warns(HairIOWarning, match="'obj' format has no thickness"):
+    with pytest.warns(HairIOWarning, match="'obj' format cannot hold thickness"):
         write_hair(tmp_path / "g.obj", groom)
     with warnings.catch_warnings():
         warnings.simplefilter("error", HairIOWarning)
@@ -340,11 +340,11 @@ REGISTERED_VARIANTS = [(name, False) for name in FORMATS] + [
 
 
 def test_supported_formats_come_from_the_registry_in_the_documented_order():
-    assert SUPPORTED_FORMATS == ("data", "hair", "ply", "npz", "obj", "usd", "usda", "usdc")
+    assert SUPPORTED_FORMATS == ("data", "hair", "ply", "npz", "obj", "usd", "usda", "usdc", "abc")
     assert tuple(FORMATS) == SUPPORTED_FORMATS
     assert all(spec.name == name for name, spec in FORMATS.items())
     assert EXTENSIONS == {".data": "data", ".hair": "hair", ".ply": "ply", ".npz": "npz", ".obj": "obj", ".usd": "usd",
-                          ".usda": "usda", ".usdc": "usdc"}
+                          ".usda": "usda", ".usdc": "usdc", ".abc": "abc"}
     assert sorted(REGISTERED_VARIANTS) == sorted(WRITE_VARIANTS)  # the tests' list covers them all
 
 
@@ -359,6 +359,7 @@ def test_what_each_format_keeps():
         "usd": (True, True, False),
         "usda": (True, True, False),
         "usdc": (True, True, False),
+        "abc": (True, True, False),
     }
 
 
@@ -385,13 +386,13 @@ def test_format_for_path_knows_every_registered_extension_and_refuses_others():
         assert format_for_path(f"some/dir/groom{extension}") == name
         assert format_for_path(f"GROOM{extension.upper()}") == name
         assert format_for_path("groom.bin", extension.upper()) == name
-    err = expect_error("unknown_format", format_for_path, "groom.abc")
+    err = expect_error("unknown_format", format_for_path, "groom.fbx")
     assert str(err) == (
-        "groom.abc: unknown hair file type (extension '.abc'); "
-        "supported extensions: .data, .hair, .ply, .npz, .obj, .usd, .usda, .usdc"
+        "groom.fbx: unknown hair file type (extension '.fbx'); "
+        "supported extensions: .data, .hair, .ply, .npz, .obj, .usd, .usda, .usdc, .abc"
     )
-    err = expect_error("unknown_format", format_for_path, "groom.data", "abc")
-    assert str(err) == "groom.data: unknown hair format 'abc'; supported: data, hair, ply, npz, obj, usd, usda, usdc"
+    err = expect_error("unknown_format", format_for_path, "groom.data", "fbx")
+    assert str(err) == "groom.data: unknown hair format 'fbx'; supported: data, hair, ply, npz, obj, usd, usda, usdc, abc"
 
 
 #: two strands (of 2 and 4 points) with every point at one place

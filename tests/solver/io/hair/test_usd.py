@@ -72,6 +72,12 @@ def test_stage_units_transforms_and_interpolations_are_honoured(tmp_path):
         cubic.CreateWidthsAttr(Vt.FloatArray([0.03]))
         cubic.SetWidthsInterpolation("constant")
         cubic.CreateDisplayColorPrimvar("vertex").Set(Vt.Vec3fArray([Gf.Vec3f(1, 0, 0)] * 4))
+        UsdGeom.PrimvarsAPI(cubic.GetPrim()).CreatePrimvar("clump", Sdf.ValueTypeNames.FloatArray, "constant").Set(
+            Vt.FloatArray([7]))
+        UsdGeom.PrimvarsAPI(cubic.GetPrim()).CreatePrimvar("only_here", Sdf.ValueTypeNames.IntArray, "uniform").Set(
+            Vt.IntArray([1]))
+        UsdGeom.PrimvarsAPI(cubic.GetPrim()).CreatePrimvar("label", Sdf.ValueTypeNames.StringArray, "uniform").Set(
+            Vt.StringArray(["x"]))
 
     data = stage_bytes(tmp_path, build)
     report = read_hair_bytes_report(data, "usda", units="cm", source="groom.usda")
@@ -83,7 +89,10 @@ def test_stage_units_transforms_and_interpolations_are_honoured(tmp_path):
     np.testing.assert_allclose(hair.color[:5], np.tile([0.5, 0.25, 0.125], (5, 1)))
     np.testing.assert_allclose(hair.color[5:], np.tile([1.0, 0.0, 0.0], (4, 1)))
     assert any("cubic bspline" in text and "/character/b" in text for text in report.warnings)
-    assert any("primvars not kept: clump" in text for text in report.warnings)
+    assert list(hair.attributes) == ["clump"] and hair.attributes["clump"].domain == "strand"
+    np.testing.assert_array_equal(hair.attributes["clump"].values, np.float32([1, 2, 7]))  # uniform, then constant
+    assert any("'only_here' on some BasisCurves prims only" in text for text in report.warnings)
+    assert any("'label' not kept" in text and "not numbers" in text for text in report.warnings)
     expect_error("units_mismatch", read_hair_bytes_report, data, "usda", units="m", source="groom.usda")
 
 
@@ -98,6 +107,15 @@ def test_bad_usd_input_gets_one_clear_error_each(tmp_path):
                  stage_bytes(tmp_path, lambda s: UsdGeom.Mesh.Define(s, "/body")), "usda", units="cm")
     expect_error("bad_index", read_hair_bytes_report,
                  stage_bytes(tmp_path, lambda s: linear_curves(s, "/h", [4], [[0, 0, 0], [0, 1, 0]])), "usda", units="cm")
+
+    def primvar_of_wrong_length(stage):
+        curves = linear_curves(stage, "/h", [3], [[0, 0, 0], [0, 1, 0], [0, 2, 0]])
+        UsdGeom.PrimvarsAPI(curves.GetPrim()).CreatePrimvar("uv", Sdf.ValueTypeNames.TexCoord2fArray, "vertex").Set(
+            Vt.Vec2fArray([Gf.Vec2f(0, 0)] * 2))
+
+    error = expect_error("bad_attribute", read_hair_bytes_report, stage_bytes(tmp_path, primvar_of_wrong_length),
+                         "usda", units="cm")
+    assert "/h: primvar 'uv' has 2 values at vertex interpolation for 1 curves of 3 points" in str(error)
     expect_error("bad_index", read_hair_bytes_report, stage_bytes(
         tmp_path, lambda s: linear_curves(s, "/h", [3], [[0, 0, 0], [0, 1, 0], [0, 2, 0]], [1, 2], "vertex")),
         "usda", units="cm")

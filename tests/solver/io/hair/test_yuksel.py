@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from hairport.solver.io.hair import (
-    HairIOWarning,
     ReadLimits,
     hair_to_bytes,
     read_hair,
@@ -71,14 +70,16 @@ def test_hair_without_segments_array_uses_default_segments(tmp_path):
     assert hair.thickness is None and hair.color is None  # header defaults are not expanded
 
 
-def test_hair_transparency_is_read_checked_and_dropped(tmp_path):
+def test_hair_transparency_is_read_into_an_attribute_and_written_back(tmp_path):
     points = np.arange(12.0).reshape(4, 3)
     data = hair_file_bytes([2, 2], points, transparency=[0.1, 0.2, 0.3, 0.4], color=np.ones((4, 3)))
     report = read_hair_bytes_report(data, "hair")
-    assert report.hair.color.shape == (4, 3) and report.hair.thickness is None
-    assert any("transparency" in w for w in report.warnings)
-    with pytest.warns(HairIOWarning, match="transparency"):
-        read_hair_bytes(data, "hair")
+    assert report.hair.color.shape == (4, 3) and report.hair.thickness is None and report.warnings == ()
+    transparency = report.hair.attributes["transparency"]
+    assert transparency.domain == "vertex" and transparency.values.dtype == np.float32
+    np.testing.assert_array_equal(transparency.values, np.float32([0.1, 0.2, 0.3, 0.4]))
+    again = read_hair_bytes(hair_to_bytes(report.hair, "hair"), "hair")
+    np.testing.assert_array_equal(again.attributes["transparency"].values, transparency.values)
     bad = hair_file_bytes([2, 2], points, transparency=[0.1, np.nan, 0.3, 0.4])
     expect_error("non_finite", read_hair_bytes, bad, "hair")
 

@@ -1,0 +1,204 @@
+"""USD characters (``.usd``, ``.usda``, ``.usdc``): a ``UsdGeom.Mesh`` and its ``UsdSkel`` skin.
+
+The mesh: the one named by ``mesh_name`` (prim name or path), else, like glTF, the skinned mesh
+with the most vertices (any mesh when none is skinned); a tie is ``ambiguous_mesh``. Its faces
+are triangulated as fans in file order (face ``v0 v1 ... vn`` gives ``(v0, vi, vi+1)``), so a
+source and a target of one topology give the same triangles. Points are taken at the stage's
+default time: a skinned mesh's through its ``primvars:skel:geomBindTransform`` into the
+skeleton's space and the skeleton prim's world transform (its bind pose), an unskinned one's
+through the mesh's world transform.
+
+The skeleton: the ``UsdSkel.Skeleton`` bound to the mesh (``skel:skeleton``, inherited).
+Bone ``b`` is joint ``b``, named after the last element of its path (made unique like
+glTF's), its parent the joint whose path is its path's parent. Its head is the translation of
+its ``bindTransforms`` matrix (world space of the skeleton, taken to the stage's world), its
+tail as for a glTF skin (:func:`~.gltf_skin.bone_tails`). Weights come from
+``primvars:skel:jointIndices``/``jointWeights`` (``elementSize`` influences a vertex, or
+``constant`` for all), through the mesh's own ``skel:joints`` order when it has one.
+
+Units: the stage's ``metersPerUnit`` (one of hairport's units, else ``bad_header``). The up axis
+is the input frame's to find (``--up-axis`` or inference), as for every format. Parsing runs in
+a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from hairport.solver.body.skinning import normalise_weight_rows
+from hairport.solver.io.character.gltf_skin import bone_tails, unique_names
+from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts
+from hairport.solver.io.hair.common import ReadContext, ReadLimits
+from hairport.solver.io.sandbox import run_in_child
+from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
+from hairport.solver.model.character import Skeleton
+
+
+def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
+    """The mesh (and skin) of a USD stage (module notes), parsed in a limited child."""
+    source = str(path)
+    arguments = {"name": path.name, "max_vertices": max_vertices, "max_faces": max_faces, "mesh_name": mesh_name}
+    found = run_in_child(__name__, "mesh_arrays", source, os.path.getsize(source), arguments, source, "USD")
+    skin = None
+    if "bone_names" in found:
+        skeleton = Skeleton(tuple(str(name) for name in found["bone_names"]), found["bone_parents"],
+                            found["bone_heads"], found["bone_tails"])
+        n_vertices, n_bones = len(found["vertices"]), len(found["bone_names"])
+        weights = sp.csr_matrix((found["weight_values"], (found["weight_rows"], found["weight_columns"])),
+                                shape=(n_vertices, n_bones))
+        skin = Skin(skeleton, normalise_weight_rows(weights))
+    return MeshFile(found["vertices"], found["faces"], skin, str(found["label"]), str(found["units"]))
+
+
+def mesh_arrays(source: str, name: str, max_vertices: int, max_faces: int, mesh_name: str | None
+                ) -> dict[str, np.ndarray]:
+    """In the child: the stage's mesh and skin as arrays (read back by :func:`read_usd`)."""
+    Usd, UsdGeom, _, _, Tf = pxr_modules()
+    ctx = ReadContext(name, ReadLimits(), "m")
+    stage = open_stage(source, ctx)
+    try:
+        units = stage_units(stage, ctx)
+        prim = _select_mesh(stage, mesh_name, ctx)
+        return {"units": np.array(units), "label": np.array(str(prim.GetPath())),
+                **_mesh(prim, ctx, max_vertices, max_faces)}
+    except Tf.ErrorException as error:  # a damaged value met on reading it
+        raise ctx.error(f"damaged USD data: {usd_reason(error, ctx)}", "bad_header") from None
+
+
+def _skinned(prim) -> bool:
+    from pxr import UsdSkel
+
+    binding = UsdSkel.BindingAPI(prim)
+    return bool(binding.GetJointIndicesPrimvar()) and binding.GetInheritedSkeleton().GetPrim().IsValid()
+
+
+def _select_mesh(stage, mesh_name: str | None, ctx: ReadContext):
+    _, UsdGeom, _, _, _ = pxr_modules()
+    meshes = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)]
+    if not meshes:
+        raise ctx.error("the stage has no Mesh prim", "empty_mesh")
+    if mesh_name is not None:
+        chosen = [prim for prim in meshes if mesh_name in (prim.GetName(), str(prim.GetPath()))]
+        if not chosen:
+            names = ", ".join(repr(str(prim.GetPath())) for prim in meshes)
+            raise ctx.error(f"no mesh named {mesh_name!r}; the stage has {names}", "bad_mesh")
+        return chosen[0]
+    pool = [prim for prim in meshes if _skinned(prim)] or meshes
+    sizes = [len(UsdGeom.Mesh(prim).GetPointsAttr().Get() or []) for prim in pool]
+    best = [prim for prim, size in zip(pool, sizes, strict=True) if size == max(sizes)]
+    if len(best) > 1:
+        names = ", ".join(repr(str(prim.GetPath())) for prim in best)
+        raise ctx.error(f"ambiguous: meshes {names} have {max(sizes)} vertices each; choose one with mesh_name",
+                        "ambiguous_mesh")
+    return best[0]
+
+
+def fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """(T, 3) int64: every face of ``counts[f]`` corners (from ``indices``, faces concatenated) as a fan
+    ``(v0, vi, vi+1)``, faces in order; faces of fewer than three corners give none."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    fans = np.maximum(counts - 2, 0)
+    first = np.repeat(starts, fans)
+    step = np.arange(int(fans.sum()), dtype=np.int64) - np.repeat(np.cumsum(fans) - fans, fans)
+    return np.stack([indices[first], indices[first + step + 1], indices[first + step + 2]], axis=1)
+
+
+def _matrix(value) -> np.ndarray:
+    return np.array(value, dtype=np.float64).reshape(4, 4)
+
+
+def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int) -> dict[str, np.ndarray]:
+    """Vertices (bind pose, world), fan triangles and the skin of one Mesh prim."""
+    Usd, UsdGeom, _, _, _ = pxr_modules()
+    from pxr import UsdSkel
+
+    mesh = UsdGeom.Mesh(prim)
+    where = str(prim.GetPath())
+    counts = np.array(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    indices = np.array(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    points = np.array(mesh.GetPointsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
+    check_counts(len(points), int(np.maximum(counts - 2, 0).sum()), ctx.source, max_vertices, max_faces)
+    if (counts < 0).any() or counts.sum() != len(indices):
+        raise ctx.error(f"{where}: faceVertexCounts add up to {int(counts.sum()):,} corners, the mesh has "
+                        f"{len(indices):,} faceVertexIndices", "bad_faces")
+    if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
+        raise ctx.error(f"{where}: a face refers to a point outside its {len(points):,} points", "bad_faces")
+    faces = fan_triangles(counts, indices)
+    time = Usd.TimeCode.Default()
+    binding = UsdSkel.BindingAPI(prim)
+    skeleton = binding.GetInheritedSkeleton() if _skinned(prim) else None
+    if skeleton is None:
+        world = _matrix(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
+        return {"vertices": points @ world[:3, :3] + world[3, :3], "faces": faces}
+    geom_bind = binding.GetGeomBindTransformAttr().Get()
+    geom_bind = np.eye(4) if geom_bind is None else _matrix(geom_bind)
+    skeleton_world = _matrix(UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time))
+    to_world = geom_bind @ skeleton_world  # row vectors: mesh space -> skeleton space -> world
+    vertices = points @ to_world[:3, :3] + to_world[3, :3]
+    return {"vertices": vertices, "faces": faces, **_skin(binding, skeleton, skeleton_world, vertices, where, ctx)}
+
+
+def _skin(binding, skeleton, skeleton_world: np.ndarray, vertices: np.ndarray, where: str,
+          ctx: ReadContext) -> dict[str, np.ndarray]:
+    """Bones (world, file units) and weight triplets of a skinned mesh."""
+    joints = [str(joint) for joint in skeleton.GetJointsAttr().Get() or []]
+    if not joints:
+        raise ctx.error(f"{skeleton.GetPath()}: the skeleton has no joints", "bad_skeleton")
+    if len(joints) > MAX_BONES:
+        raise ctx.error(f"the skeleton has {len(joints):,} joints, more than {MAX_BONES:,}", "too_large")
+    if len(set(joints)) != len(joints):
+        raise ctx.error(f"{skeleton.GetPath()}: a joint path appears twice", "bad_skeleton")
+    bind = np.array(skeleton.GetBindTransformsAttr().Get() or [], dtype=np.float64).reshape(-1, 4, 4)
+    if len(bind) != len(joints):
+        raise ctx.error(f"{skeleton.GetPath()}: {len(bind)} bindTransforms for {len(joints)} joints", "bad_skeleton")
+    if not np.isfinite(bind).all():
+        raise ctx.error(f"{skeleton.GetPath()}: a bind transform is not finite", "non_finite")
+    bind_world = bind @ skeleton_world
+    heads = bind_world[:, 3, :3]
+    position = {path: b for b, path in enumerate(joints)}
+    parents = np.array([position.get(path.rsplit("/", 1)[0], -1) if "/" in path else -1 for path in joints],
+                       dtype=np.int64)
+    diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0))) if len(vertices) else 1.0
+    tails = bone_tails(heads, parents, bind_world.transpose(0, 2, 1), diagonal)  # column-vector convention there
+    names = unique_names([path.rsplit("/", 1)[-1] for path in joints])
+    rows, columns, values = _weights(binding, joints, len(vertices), where, ctx)
+    return {"bone_names": np.array(names), "bone_parents": parents, "bone_heads": heads, "bone_tails": tails,
+            "weight_rows": rows, "weight_columns": columns, "weight_values": values}
+
+
+def _weights(binding, joints: list[str], n_vertices: int, where: str, ctx: ReadContext):
+    """``(rows, columns, values)`` of the skin weights, columns in the skeleton's joint order."""
+    index_primvar, weight_primvar = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
+    indices = np.array(index_primvar.Get() or [], dtype=np.int64)
+    weights = np.array(weight_primvar.Get() or [], dtype=np.float64) if weight_primvar else np.zeros(0)
+    influences = max(1, int(index_primvar.GetElementSize()))
+    if len(indices) != len(weights):
+        raise ctx.error(f"{where}: {len(indices):,} joint indices but {len(weights):,} joint weights", "bad_weights")
+    if index_primvar.GetInterpolation() == "constant":
+        indices, weights = np.tile(indices, n_vertices), np.tile(weights, n_vertices)
+    if len(indices) != n_vertices * influences:
+        raise ctx.error(f"{where}: {len(indices):,} joint influences for {n_vertices:,} points of {influences} "
+                        "each", "bad_weights")
+    if not np.isfinite(weights).all() or (weights < 0).any():
+        raise ctx.error(f"{where}: a negative or non-finite joint weight", "bad_weights")
+    local = binding.GetJointsAttr().Get()
+    if local:  # the mesh's own joint order: map it onto the skeleton's
+        order = {path: b for b, path in enumerate(joints)}
+        missing = [str(path) for path in local if str(path) not in order]
+        if missing:
+            raise ctx.error(f"{where}: skel:joints names {missing[0]!r}, not a joint of the skeleton", "bad_weights")
+        mapping = np.array([order[str(path)] for path in local], dtype=np.int64)
+    else:
+        mapping = np.arange(len(joints), dtype=np.int64)
+    used = weights > 0
+    if used.any() and (indices[used].min() < 0 or indices[used].max() >= len(mapping)):
+        raise ctx.error(f"{where}: a joint index outside the {len(mapping)} joints", "bad_weights")
+    rows = np.repeat(np.arange(n_vertices, dtype=np.int64), influences)[used]
+    return rows, mapping[indices[used]], weights[used]
+
+
+READERS = {".usd": read_usd, ".usda": read_usd, ".usdc": read_usd}

@@ -1,0 +1,51 @@
+"""Hair readers run in the sandbox's child (:mod:`~hairport.solver.io.sandbox`): their strands as arrays
+there, and back as :class:`~.common.Strands` here."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+
+import numpy as np
+
+from hairport.solver.io.hair.common import ReadContext, ReadLimits, Strands
+from hairport.solver.io.sandbox import run_in_child
+
+#: the hair readers whose ``parse_file(path, ctx) -> Strands`` runs in a child
+HAIR_PARSERS = ("hairport.solver.io.hair.usd", "hairport.solver.io.hair.alembic")
+
+
+def read_in_child(parser: str, source: str, size: int, ctx: ReadContext, library: str) -> Strands:
+    """``parser.parse_file(source, ctx)`` (a :class:`Strands`) run in a child under the limits."""
+    arguments = {"name": os.path.basename(ctx.source), "units": ctx.units, "max_strands": ctx.limits.max_strands,
+                 "max_particles": ctx.limits.max_particles}
+    arguments["parser"] = parser
+    return strands_of(run_in_child(__name__, "strands_arrays", source, size, arguments, ctx.source, library))
+
+
+def strands_arrays(source: str, parser: str, name: str, units: str, max_strands: int, max_particles: int
+                   ) -> dict[str, np.ndarray]:
+    """In the child: ``parser.parse_file`` of ``source`` as arrays (:func:`strands_of` reverses it)."""
+    if parser not in HAIR_PARSERS:
+        raise ValueError(f"unknown hair parser {parser!r}")
+    ctx = ReadContext(name, ReadLimits(max_strands=max_strands, max_particles=max_particles), units)
+    strands = importlib.import_module(parser).parse_file(source, ctx)
+    arrays = {"points": strands.points, "counts": strands.counts, "warnings": np.array(strands.warnings, dtype=str),
+              "attributes": np.array(json.dumps([(name, attribute.domain, attribute.role)
+                                                 for name, attribute in strands.attributes.items()]))}
+    arrays.update({f"attribute_{index}": attribute.values for index, attribute in enumerate(strands.attributes.values())})
+    if strands.thickness is not None:
+        arrays["thickness"] = strands.thickness
+    if strands.color is not None:
+        arrays["color"] = strands.color
+    return arrays
+
+
+def strands_of(found: dict[str, np.ndarray]) -> Strands:
+    """The :class:`Strands` of :func:`strands_arrays`."""
+    strands = Strands(found["points"], found["counts"], found.get("thickness"), found.get("color"),
+                      [str(text) for text in found["warnings"]])
+    for index, (name, domain, role) in enumerate(json.loads(str(found["attributes"]))):
+        strands.add_attribute(name, found[f"attribute_{index}"], domain, role)
+    return strands
