@@ -120,6 +120,8 @@ class HairstyleRecord(Record):
     artifact_key: str
     strands: int
     particles: int
+    #: USD/Alembic: the one curves prim or object read (None: all of them)
+    prim: str | None = None
 
 
 class ArtifactRecord(Record):
@@ -212,10 +214,12 @@ class SweepClock(Record):
 
 
 def artifact_key(character: CharacterRecord, hair_sha256: str, units: str, options: PreprocessSettings,
-                 format_version: int) -> str:
-    """Content hash of everything preprocessing depends on (the character's axes when given)."""
+                 format_version: int, prim: str | None = None) -> str:
+    """Content hash of everything preprocessing depends on (the character's axes and the hair's prim when
+    given)."""
     axes = [character.up_axis, character.front_axis] if character.up_axis or character.front_axis else []
+    chosen = [f"prim:{prim}"] if prim is not None else []
     return digest(
         "artifact", character.mesh.sha256, character.skeleton.sha256 if character.skeleton else None,
-        character.units, hair_sha256, units, options.model_dump(), format_version, *axes,
+        character.units, hair_sha256, units, options.model_dump(), format_version, *axes, *chosen,
     )

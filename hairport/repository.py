@@ -169,7 +169,7 @@ class Repository:
     def variant_key(self, hairstyle: HairstyleRecord, options: PreprocessSettings, format_version: int) -> str:
         """The artifact key of a hairstyle preprocessed with other options (e.g. another guide count)."""
         character = self.get(CharacterRecord, hairstyle.source_character_id)
-        return artifact_key(character, hairstyle.hair.sha256, hairstyle.units, options, format_version)
+        return artifact_key(character, hairstyle.hair.sha256, hairstyle.units, options, format_version, hairstyle.prim)
 
     def preprocessing_status(self, hairstyle: HairstyleRecord, key: str | None = None) -> PreprocessingRecord:
         """The state of a hairstyle's preprocessing (its own, or of the variant ``key``), shared by every

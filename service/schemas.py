@@ -84,6 +84,7 @@ class HairstyleOut(BaseModel):
     sha256: str = Field(description="SHA-256 of the hair file.")
     format: HairFormat
     units: str = Field(description="the hair file's units: given, recorded by a .npz, or auto (inferred)")
+    prim: str | None = Field(None, description="the one curves prim or object read from a USD or Alembic file")
     options: dict
     preprocessing: PreprocessingOut
     created_at: float
@@ -93,7 +94,7 @@ class HairstyleOut(BaseModel):
         return cls(
             id=record.id, source_character_id=record.source_character_id, strands=record.strands,
             particles=record.particles, sha256=record.hair.sha256, format=record.format, units=record.units,
-            options=record.options.model_dump(), preprocessing=preprocessing, created_at=record.created_at,
+            prim=record.prim, options=record.options.model_dump(), preprocessing=preprocessing, created_at=record.created_at,
         )
 
 

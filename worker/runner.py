@@ -99,7 +99,7 @@ def read_source(repository: Repository, settings: Settings, hairstyle: Hairstyle
     path = blob_path(repository, hairstyle.hair)
     units = hairstyle.units if hairstyle.units not in (None, solver.AUTO) else (
         solver.recorded_hair_units(path, hairstyle.format))
-    hair = solver.read_hair(path, units=units or "m", format=hairstyle.format,
+    hair = solver.read_hair(path, units=units or "m", format=hairstyle.format, prim=hairstyle.prim,
                             limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
                                                      settings.max_file_bytes,
                                                      memory_budget_bytes=settings.memory_budget_bytes))

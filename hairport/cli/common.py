@@ -63,6 +63,8 @@ def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--source", required=required, help=f"source character mesh ({'/'.join(solver.MESH_EXTENSIONS)})")
     p.add_argument("--hair", required=required,
                    help=f"hair file of the source ({'/'.join('.' + name for name in solver.HAIR_FORMATS)})")
+    p.add_argument("--prim", default=None,
+                   help="USD/Alembic hair: read only the curves prim or object of this name or path (default: all)")
     p.add_argument("--source-skeleton", help="skeleton JSON of the source (default: <mesh>.skeleton.json, else glTF skin)")
     p.add_argument("--guides", type=option_type("guides"), default=None,
                    help=option_help("guides", "default 300, or every strand if fewer"))
@@ -142,7 +144,7 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
                                                  units=mesh_units(args, args.source, args.source_skeleton),
                                                  **mesh_limits(settings))
     units = hair_units(args)
-    hair = solver.read_hair(args.hair, units=units or "m", limits=limits)
+    hair = solver.read_hair(args.hair, units=units or "m", limits=limits, prim=args.prim)
     inputs = solver.canonical_source(source, hair, source_units=source_units, hair_units=units, **axes(args))
     progress("input", 0.0, inputs.summary())
     for note in inputs.warnings:
@@ -151,7 +153,7 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
 
 
 def check_source_arguments(args: argparse.Namespace) -> None:
-    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.guides is not None):
+    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.prim or args.guides is not None):
         raise InputError("give either --adaptable or --source with --hair, not both "
                          "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
     if not args.adaptable and not (args.source and args.hair):

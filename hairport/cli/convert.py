@@ -25,6 +25,7 @@ def add_convert(sub) -> None:
                    help="units of the input (default: those it records, else m)")
     p.add_argument("--out-units", default=None, choices=solver.UNITS, help="units of the output (default: the input's)")
     p.add_argument("--ascii", action="store_true", help="text variant where the format has one (PLY)")
+    p.add_argument("--prim", default=None, help="USD/Alembic input: only the curves prim or object of this name or path")
     p.add_argument("--quiet", action="store_true", help="no summary line")
     p.set_defaults(run=cmd_convert)
 
@@ -32,11 +33,12 @@ def add_convert(sub) -> None:
 def cmd_convert(args: argparse.Namespace) -> int:
     out_format = solver.format_for_path(args.output)  # refuse an unknown output before reading
     units = args.units if args.units != solver.AUTO else (solver.recorded_hair_units(args.input) or "m")
-    report = solver.read_hair_report(args.input, units=units)
+    report = solver.read_hair_report(args.input, units=units, prim=args.prim)
     for text in report.warnings:
         print_warning(f"{args.input}: {text}")
     out_units = args.out_units or units
-    solver.write_hair(args.output, report.hair, units=out_units, format=out_format, ascii=args.ascii)
+    solver.write_hair(args.output, report.hair, units=out_units, format=out_format, ascii=args.ascii,
+                      up_axis=solver.recorded_hair_up_axis(args.input) or "+y")
     if not args.quiet:
         print(f"{args.output}: {report.hair.n_strands:,} strands, {report.hair.n_particles:,} points "
               f"({report.format}, {units} -> {out_format}, {out_units})")

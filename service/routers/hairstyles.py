@@ -24,6 +24,8 @@ def ranged_form(name: str, note: str = ""):
     return Form(ge=spec.minimum, le=spec.maximum,
                 description=f"{spec.description}; {spec.text()}" + (f" ({note})" if note else ""))
 _DEFAULTS = solver.PreprocessOptions()
+#: longest prim path a form accepts (USD paths are short; a longer value is refused at the door)
+MAX_PRIM_CHARACTERS = 1024
 
 
 @router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle",
@@ -43,10 +45,12 @@ async def create_hairstyle(
     anchoring: Annotated[Anchoring, Form(
         description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                     "when the source character has a skeleton, else the surface)")] = _DEFAULTS.anchoring,
+    prim: Annotated[str | None, Form(
+        description="USD or Alembic hair: read only the curves prim or object of this name or path (default: all); "
+                    "other formats refuse it", min_length=1, max_length=MAX_PRIM_CHARACTERS)] = None,
 ) -> HairstyleOut:
     record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, as_upload(hair),
-                                               units, k,
-                                               guides, anchoring)
+                                               units, k, guides, anchoring, prim)
     return hairstyles.hairstyle_out(repository, record)
 
 

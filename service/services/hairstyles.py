@@ -49,7 +49,7 @@ def preprocessing_settings(k: int, guides: int | None, anchoring: str) -> Prepro
 
 async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: Settings, owner: str,
                            source_character_id: str, hair: UploadFile, units: str, k: int,
-                           guides: int | None, anchoring: str) -> HairstyleRecord:
+                           guides: int | None, anchoring: str, prim: str | None = None) -> HairstyleRecord:
     """Store and validate an uploaded hair file for the owner's character, and start its
     preprocessing unless an identical hairstyle was preprocessed already."""
     check_units(units)
@@ -60,14 +60,14 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
                                           "(skeleton JSON or glTF skin); anchor by the surface (anchoring surface or auto)")
     suffix = extension_of(hair, tuple(f".{name}" for name in solver.HAIR_FORMATS), "hair")
     blob = await store_upload(repository.storage, hair, settings, suffix, "hair")
-    key = artifact_key(character, blob.sha256, units, options, solver.ARTIFACT_FORMAT_VERSION)
+    key = artifact_key(character, blob.sha256, units, options, solver.ARTIFACT_FORMAT_VERSION, prim)
     hairstyle_id = owned_id(character.owner, key)
     record = repository.get(HairstyleRecord, hairstyle_id)
     if record is None:
         stated = units if units != solver.AUTO else solver.recorded_hair_units(blob.path)
         try:
             loaded = await validated(
-                solver.read_hair, "hair", blob.path, units=stated or "m",
+                solver.read_hair, "hair", blob.path, units=stated or "m", prim=prim,
                 limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes,
                                          memory_budget_bytes=settings.memory_budget_bytes),
             )
@@ -80,6 +80,7 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
             hair=BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size), format=suffix[1:],
             units=stated or solver.AUTO,
             options=options, artifact_key=key, strands=int(loaded.n_strands), particles=int(loaded.n_particles),
+            prim=prim,
         )
         repository.put(record, hairstyle_id)
     start_preprocessing(repository, queue, settings, record)

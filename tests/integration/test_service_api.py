@@ -469,3 +469,62 @@ def test_metrics_count_jobs_by_state(service, uploaded):
     assert succeeded and float(succeeded[0].split()[-1]) >= 3
     assert 'hairport_queue_depth{queue="retarget"}' in text
     assert 'hairport_stage_seconds_sum{stage="solve"}' in text
+
+
+def test_usd_characters_and_an_alembic_groom_end_to_end(service, tmp_path):
+    """USD characters (skinned, cm, Z-up, under an Xform) and an Unreal-convention Alembic groom in the
+    stage's frame: uploaded, preprocessed and retargeted by the real worker; the result comes back as Alembic
+    with its attributes, and converted to USD in the stage's units and up axis."""
+    from pxr import Usd, UsdGeom
+
+    from hairport.solver.io.hair import read_hair_bytes
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.groom import generate_groom
+    from tests.solver.io.character.usd_samples import Y_UP_TO_Z_UP, write_scene
+    from tests.solver.io.hair.abc_samples import UNIFORM, write_groom
+
+    client = service["client"]
+    source = toy.toy_character(name="source")
+    target = toy.toy_character(head_scale=(1.1, 0.95, 1.05), neck_length=0.15, shoulder_width=0.42, name="target")
+    write_scene(tmp_path / "source.usda", source)
+    write_scene(tmp_path / "target.usdc", target)
+    hair = generate_groom(source, "short", 40, 10, seed=2)
+    groups = (np.arange(40) % 3).astype(np.int32)
+    write_groom(tmp_path / "groom.abc", hair.points @ Y_UP_TO_Z_UP / 0.01, hair.counts,
+                params=[("groom_group_id", "OInt32GeomParam", "IntArray", groups, UNIFORM)])
+    ids = {}
+    for name, file in (("source", "source.usda"), ("target", "target.usdc")):
+        response = client.post("/v1/characters", headers=AUTH, files={"mesh": (file, (tmp_path / file).read_bytes())})
+        assert response.status_code == 201, response.text
+        assert response.json()["units"] == "cm"
+        ids[name] = response.json()["id"]
+    groom = (tmp_path / "groom.abc").read_bytes()
+    assert_problem(client.post("/v1/hairstyles", headers=AUTH, files={"hair": ("groom.abc", groom)},
+                               data={"source_character_id": ids["source"], "units": "cm", "prim": "fringe"}),
+                   422, "unknown_prim")
+    response = client.post("/v1/hairstyles", headers=AUTH, files={"hair": ("groom.abc", groom)},
+                           data={"source_character_id": ids["source"], "units": "cm", "guides": "10",
+                                 "prim": "curves"})
+    assert response.status_code == 201, response.text
+    assert response.json()["prim"] == "curves" and response.json()["format"] == "abc"
+    response = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": response.json()["id"], "target_character_ids": [ids["target"]],
+        "options": {"max_iterations": 10}, "output_format": "abc"})
+    assert response.status_code == 202, response.text
+    job = response.json()["jobs"][0]["id"]
+    done = wait_for(client, f"/v1/jobs/{job}", lambda b: b["state"] in ("succeeded", "failed", "cancelled"))
+    assert done["state"] == "succeeded", done
+    assert done["metrics"]["penetrating_particles"] == 0
+    result = client.get(f"/v1/jobs/{job}/result", headers=AUTH)
+    assert result.status_code == 200 and result.content[:5] == b"Ogawa"
+    back = read_hair_bytes(result.content, "abc")
+    np.testing.assert_array_equal(back.attributes["groom_group_id"].values, groups)
+    assert np.abs(back.points - hair.points @ Y_UP_TO_Z_UP / 0.01).max() > 0.1  # moved, in cm
+    usda = client.get(f"/v1/jobs/{job}/result", headers=AUTH, params={"format": "usda"})
+    assert usda.status_code == 200 and usda.headers["content-type"].startswith("model/vnd.usda")
+    (tmp_path / "result.usda").write_bytes(usda.content)
+    stage = Usd.Stage.Open(str(tmp_path / "result.usda"))
+    assert UsdGeom.GetStageUpAxis(stage) == "Z" and UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    converted = read_hair_bytes(usda.content, "usda", units="cm")
+    np.testing.assert_allclose(converted.points, back.points * 0.01, atol=1e-8)
+    np.testing.assert_array_equal(converted.attributes["groom_group_id"].values, groups)

@@ -73,7 +73,6 @@ from hairport.solver.io.hair.common import (
 )
 from hairport.solver.io.hair.data import FORMAT as DATA
 from hairport.solver.io.hair.npz import FORMAT as NPZ
-from hairport.solver.io.hair.npz import recorded_up_axis as npz_recorded_up_axis
 from hairport.solver.io.hair.obj import FORMAT as OBJ
 from hairport.solver.io.hair.ply import FORMAT as PLY
 from hairport.solver.io.hair.usd import FORMATS as USD_FORMATS
@@ -120,9 +119,14 @@ def recorded_units(path: str | os.PathLike[str], format: str | None = None) -> s
     return None if fmt.recorded_units is None else fmt.recorded_units(os.fspath(path))
 
 
-def recorded_up_axis(path: str | os.PathLike[str]) -> str | None:
-    """The up axis (``+y``, ``+z``...) a hairport ``.npz`` archive records, or None."""
-    return npz_recorded_up_axis(os.fspath(path)) if Path(path).suffix.lower() == NPZ.extension else None
+def recorded_up_axis(path: str | os.PathLike[str], format: str | None = None) -> str | None:
+    """The up axis (``+y``, ``+z``...) a hair file records (an ``.npz`` archive's, a USD stage's
+    ``upAxis``), or None: the format records none, or the file cannot be read."""
+    try:
+        fmt = FORMATS[format_for_path(path, format)]
+    except InputError:
+        return None
+    return None if fmt.recorded_up_axis is None else fmt.recorded_up_axis(os.fspath(path))
 
 
 def format_for_path(path: str | os.PathLike[str], format: str | None = None) -> str:
@@ -160,6 +164,7 @@ def read_hair(
     units: str = "m",
     limits: ReadLimits = ReadLimits(),
     format: str | None = None,
+    prim: str | None = None,
 ) -> Hair:
     """Read a hairstyle file, in meters.
 
@@ -174,6 +179,9 @@ def read_hair(
     limits : ReadLimits
     format : str, optional
         One of ``SUPPORTED_FORMATS``; from the extension when omitted.
+    prim : str, optional
+        USD and Alembic: read only the curves prim or object of this name or path (code
+        ``unknown_prim`` when there is none); other formats refuse it (``bad_option``).
 
     Returns
     -------
@@ -184,7 +192,7 @@ def read_hair(
     InputError
         Naming the file, with a code from ``ERROR_CODES``.
     """
-    report = read_hair_report(path, units=units, limits=limits, format=format)
+    report = read_hair_report(path, units=units, limits=limits, format=format, prim=prim)
     _emit_warnings(report)
     return report.hair
 
@@ -195,13 +203,15 @@ def read_hair_report(
     units: str = "m",
     limits: ReadLimits = ReadLimits(),
     format: str | None = None,
+    prim: str | None = None,
 ) -> ReadReport:
     """Like :func:`read_hair`, but return the hairstyle with what the reader did."""
     source = os.fspath(path)
     fmt = format_for_path(source, format)
     unit_scale(units)
+    _check_prim(fmt, prim, source)
     content = _read_file(source, limits)
-    return _parse(content, fmt, ReadContext(source, limits, units))
+    return _parse(content, fmt, ReadContext(source, limits, units, prim))
 
 
 def read_hair_bytes(
@@ -211,6 +221,7 @@ def read_hair_bytes(
     units: str = "m",
     limits: ReadLimits = ReadLimits(),
     source: str = "<bytes>",
+    prim: str | None = None,
 ) -> Hair:
     """Read a hairstyle from the bytes of a file (an upload), in meters.
 
@@ -224,7 +235,7 @@ def read_hair_bytes(
     source : str
         Name used in messages (e.g. the uploaded file name).
     """
-    report = read_hair_bytes_report(data, format, units=units, limits=limits, source=source)
+    report = read_hair_bytes_report(data, format, units=units, limits=limits, source=source, prim=prim)
     _emit_warnings(report)
     return report.hair
 
@@ -236,10 +247,12 @@ def read_hair_bytes_report(
     units: str = "m",
     limits: ReadLimits = ReadLimits(),
     source: str = "<bytes>",
+    prim: str | None = None,
 ) -> ReadReport:
     """Like :func:`read_hair_bytes`, but return the hairstyle with what the reader did."""
     fmt = format_for_path(source, format)
     unit_scale(units)
+    _check_prim(fmt, prim, source)
     view = memoryview(data).cast("B")
     if limits.max_bytes is not None and len(view) > limits.max_bytes:
         raise InputError(
@@ -247,7 +260,7 @@ def read_hair_bytes_report(
             source,
             "too_large",
         )
-    return _parse(view, fmt, ReadContext(source, limits, units))
+    return _parse(view, fmt, ReadContext(source, limits, units, prim))
 
 
 def write_hair(
@@ -295,6 +308,13 @@ def hair_to_bytes(hair: Hair, format: str, *, units: str = "m", ascii: bool = Fa
     buffer = io.BytesIO()
     writer(buffer)
     return buffer.getvalue()
+
+
+def _check_prim(fmt: str, prim: str | None, source: str) -> None:
+    if prim is not None and not FORMATS[fmt].has_prims:
+        with_prims = ", ".join(name for name, spec in FORMATS.items() if spec.has_prims)
+        raise InputError(f"a prim selects one curves prim or object of a {with_prims} file; a {fmt!r} file has none",
+                         source, "bad_option")
 
 
 def _read_file(source: str, limits: ReadLimits) -> bytes:

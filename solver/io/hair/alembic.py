@@ -1,6 +1,7 @@
 """Alembic grooms (``.abc``): ``ICurves`` objects, through the ``alembic3d`` bindings (an optional extra).
 
-Read: every ``ICurves`` object of the archive, in depth-first order, strands concatenated,
+Read: every ``ICurves`` object of the archive (or the one ``prim`` names, by name or full path),
+in depth-first order, strands concatenated,
 positions of the first time sample taken to world space by the ``IXform`` objects above it.
 ``linear`` curves are the strands; for cubic or variable-order ones the control points are
 read as the strand's polyline, with a warning. Unreal Engine's groom convention (Epic's
@@ -35,7 +36,7 @@ import numpy as np
 
 from hairport import __version__
 from hairport.solver.io.hair.alembic_params import imath_array, numpy_copy, read_param, writable_dtype, write_param
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite, chosen_prims
 from hairport.solver.io.hair.sandboxed import read_in_child
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import HairAttribute
@@ -109,6 +110,7 @@ def parse_file(path: str, ctx: ReadContext) -> Strands:
         _collect_curves(archive.getTop(), found, AbcGeom)
         if not found:
             raise ctx.error("the archive has no ICurves object: no hair", "empty_hair")
+        found = chosen_prims(found, [[obj.getName(), obj.getFullName()] for obj in found], "ICurves object", ctx)
         totals = [0, 0]
         parts = [_read_curves(curves, ctx, totals) for curves in found]
     except InputError:
@@ -300,4 +302,4 @@ def keeps_attribute(name: str, attribute: HairAttribute) -> bool:
 
 
 FORMAT = HairFormat("abc", read_archive, write_archive, keeps_thickness=True, keeps_color=True,
-                    keeps_attribute=keeps_attribute)
+                    keeps_attribute=keeps_attribute, has_prims=True)

@@ -49,6 +49,9 @@ ERROR_CODES: dict[str, str] = {
     "over_memory_budget": "the declared particle count needs more memory than ReadLimits.memory_budget_bytes",
     "bad_file": "a count or index past what the reader's arithmetic holds (past int64)",
     "bad_attribute": "an attribute (primvar, property, array) of the wrong length, type or name for its domain",
+    "bad_option": "a read option that does not apply to the format (a prim for a format without prims)",
+    "unknown_prim": "no curves prim (USD) or object (Alembic) of the name or path asked for",
+    "format_unavailable": "the format needs an optional library this installation lacks (Alembic: hairport[alembic])",
 }
 
 #: most points one strand may have: real strands have 10^2-10^3; one strand of millions of
@@ -171,11 +174,13 @@ class Strands:
 
 @dataclass(frozen=True)
 class ReadContext:
-    """Where the bytes come from (for messages), the limits to enforce and the file's units."""
+    """Where the bytes come from (for messages), the limits to enforce, the file's units, and the
+    one prim or object to read (USD, Alembic; None: every curves prim or object)."""
 
     source: str
     limits: ReadLimits
     units: str
+    prim: str | None = None
 
     def error(self, problem: str, code: str) -> InputError:
         """An :class:`InputError` naming the source, with one of ``ERROR_CODES``."""
@@ -227,6 +232,11 @@ class HairFormat:
     keeps_attribute : callable
         ``keeps_attribute(name, attribute) -> bool``: whether the writer writes that attribute
         (the others are named in one warning and dropped); by default none.
+    has_prims : bool
+        Whether a file holds named curves prims or objects one of which may be read alone.
+    recorded_up_axis : callable or None
+        ``recorded_up_axis(path) -> str | None``: the up axis (``+y``...) a file records, like
+        ``recorded_units``.
     has_ascii : bool
         Whether the writer has a text variant (``ascii=True``).
     recorded_units : callable or None
@@ -242,6 +252,8 @@ class HairFormat:
     has_ascii: bool = False
     recorded_units: Callable[[str], str | None] | None = None
     keeps_attribute: Callable[[str, HairAttribute], bool] = lambda name, attribute: False
+    has_prims: bool = False
+    recorded_up_axis: Callable[[str], str | None] | None = None
 
     @property
     def extension(self) -> str:
@@ -336,6 +348,24 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         kept_strands=np.flatnonzero(keep).astype(np.int64),
         warnings=tuple(notes),
     )
+
+
+def chosen_prims(found: list, names: list[str], kind: str, ctx: ReadContext) -> list:
+    """The items of ``found`` (prims or objects, named by ``names``: each a list of the name and the path
+    it may be asked by) that ``ctx.prim`` asks for: all when it is None.
+
+    Raises
+    ------
+    InputError
+        ``unknown_prim``, listing what the file has.
+    """
+    if ctx.prim is None:
+        return found
+    chosen = [item for item, aliases in zip(found, names, strict=True) if ctx.prim in aliases]
+    if not chosen:
+        have = ", ".join(repr(aliases[-1]) for aliases in names[:20]) or "none"
+        raise ctx.error(f"no {kind} named {ctx.prim!r}; the file has {have}", "unknown_prim")
+    return chosen
 
 
 def check_finite(values: np.ndarray, counts: np.ndarray, what: str, ctx: ReadContext) -> None:

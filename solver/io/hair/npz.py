@@ -301,4 +301,4 @@ def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
 
 
 FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True, recorded_units=recorded_units,
-                    keeps_attribute=lambda name, attribute: True)
+                    keeps_attribute=lambda name, attribute: True, recorded_up_axis=recorded_up_axis)

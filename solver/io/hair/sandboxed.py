@@ -19,17 +19,17 @@ HAIR_PARSERS = ("hairport.solver.io.hair.usd", "hairport.solver.io.hair.alembic"
 def read_in_child(parser: str, source: str, size: int, ctx: ReadContext, library: str) -> Strands:
     """``parser.parse_file(source, ctx)`` (a :class:`Strands`) run in a child under the limits."""
     arguments = {"name": os.path.basename(ctx.source), "units": ctx.units, "max_strands": ctx.limits.max_strands,
-                 "max_particles": ctx.limits.max_particles}
+                 "max_particles": ctx.limits.max_particles, "prim": ctx.prim}
     arguments["parser"] = parser
     return strands_of(run_in_child(__name__, "strands_arrays", source, size, arguments, ctx.source, library))
 
 
-def strands_arrays(source: str, parser: str, name: str, units: str, max_strands: int, max_particles: int
-                   ) -> dict[str, np.ndarray]:
+def strands_arrays(source: str, parser: str, name: str, units: str, max_strands: int, max_particles: int,
+                   prim: str | None = None) -> dict[str, np.ndarray]:
     """In the child: ``parser.parse_file`` of ``source`` as arrays (:func:`strands_of` reverses it)."""
     if parser not in HAIR_PARSERS:
         raise ValueError(f"unknown hair parser {parser!r}")
-    ctx = ReadContext(name, ReadLimits(max_strands=max_strands, max_particles=max_particles), units)
+    ctx = ReadContext(name, ReadLimits(max_strands=max_strands, max_particles=max_particles), units, prim)
     strands = importlib.import_module(parser).parse_file(source, ctx)
     arrays = {"points": strands.points, "counts": strands.counts, "warnings": np.array(strands.warnings, dtype=str),
               "attributes": np.array(json.dumps([(name, attribute.domain, attribute.role)

@@ -1,6 +1,7 @@
 """USD grooms (``.usda`` text, ``.usdc`` crate, ``.usd`` either): ``UsdGeom.BasisCurves`` prims, through ``usd-core``.
 
-Read: every ``BasisCurves`` prim of the stage, in prim order, strands concatenated. A curve
+Read: every ``BasisCurves`` prim of the stage (or the one ``prim`` names, by name or path), in
+prim order, strands concatenated. A curve
 is ``curveVertexCounts`` points of ``points`` taken to world space by the prim's local-to-world
 transform (the stage's default time). ``linear`` curves are the strands themselves; for
 ``cubic`` ones (bezier, bspline, catmullRom) the control points are read as the strand's
@@ -42,7 +43,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite, chosen_prims
 from hairport.solver.io.hair.sandboxed import read_in_child
 from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
 from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
@@ -161,12 +162,14 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
     _, UsdGeom, _, _, _ = pxr_modules()
     units = stage_units(stage, ctx)
     if ctx.units == RECORDED_UNITS:
-        raise ctx.error(f"{RECORDED_UNITS}{units}", "units_mismatch")
+        up = "+z" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else "+y"
+        raise ctx.error(f"{RECORDED_UNITS}{units} {up}", "units_mismatch")
     if units != ctx.units:
         raise ctx.error(f"the stage is in {units} (metersPerUnit), read as {ctx.units}", "units_mismatch")
     prims = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.BasisCurves)]
     if not prims:
         raise ctx.error("the stage has no BasisCurves prim: no hair", "empty_hair")
+    prims = chosen_prims(prims, [[prim.GetName(), str(prim.GetPath())] for prim in prims], "BasisCurves prim", ctx)
     totals = [0, 0]
     parts = [_read_curves(prim, ctx, totals) for prim in prims]
     counts = np.concatenate([part[1] for part in parts])
@@ -211,6 +214,18 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
     """The units a USD stage records (its ``metersPerUnit``) by name; None if it cannot be read or
     records none of hairport's (the reader then says what is wrong). Read in a child, like the
     stage itself."""
+    recorded = _recorded(path)
+    return None if recorded is None else recorded[0]
+
+
+def recorded_up_axis(path: str | os.PathLike[str]) -> str | None:
+    """``+z`` for a stage whose ``upAxis`` is Z, ``+y`` for Y; None if it cannot be read."""
+    recorded = _recorded(path)
+    return None if recorded is None else recorded[1]
+
+
+def _recorded(path: str | os.PathLike[str]) -> tuple[str, str] | None:
+    """(units, up axis) of a stage, asked of a child (the stage's own answer to a read in no units)."""
     from hairport.solver.io.hair.common import ReadLimits
 
     source = os.fspath(path)
@@ -219,8 +234,9 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
     except OSError:
         return None
     except InputError as error:
-        return error.problem[len(RECORDED_UNITS):] if error.code == "units_mismatch" and \
-            error.problem.startswith(RECORDED_UNITS) else None
+        if error.code == "units_mismatch" and error.problem.startswith(RECORDED_UNITS):
+            units, up = error.problem[len(RECORDED_UNITS):].split()
+            return units, up
     return None
 
 
@@ -263,7 +279,9 @@ def _format(name: str) -> HairFormat:
         keeps_thickness=True,
         keeps_color=True,
         recorded_units=recorded_units,
+        recorded_up_axis=recorded_up_axis,
         keeps_attribute=lambda attribute_name, attribute: attribute_name not in RESERVED_PRIMVARS,
+        has_prims=True,
     )
 
 

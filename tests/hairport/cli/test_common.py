@@ -38,12 +38,13 @@ def test_units_apply_to_meshes_without_a_sidecar(tmp_path):
 @pytest.mark.parametrize("given, words", [
     (dict(adaptable="a.hpa", source="s.obj"), "not both"),
     (dict(adaptable="a.hpa", guides=10), "not both"),
+    (dict(adaptable="a.hpa", prim="/groom/hair"), "not both"),
     (dict(source="s.obj"), "give --adaptable, or --source with --hair"),
     (dict(), "give --adaptable, or --source with --hair"),
 ])
 def test_source_arguments(given, words):
     args = argparse.Namespace(**{"adaptable": None, "source": None, "hair": None, "source_skeleton": None,
-                                 "guides": None, **given})
+                                 "guides": None, "prim": None, **given})
     with pytest.raises(InputError, match=words) as refused:
         check_source_arguments(args)
     assert refused.value.code == "bad_option"

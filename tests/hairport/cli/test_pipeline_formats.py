@@ -106,3 +106,20 @@ def test_an_unreal_alembic_groom_retargets_with_only_positions_changed(capsys, s
     assert properties["groom_version_major"] == ("kInt16POD", 1)
     assert properties["groom_version_minor"] == ("kInt16POD", 4)
     assert properties["groom_tool"][1].startswith("hairport ")
+
+
+def test_convert_keeps_the_stage_frame_and_reads_one_prim(capsys, scene, tmp_path):
+    d = scene["dir"]
+    archive, stage_out = tmp_path / "groom.npz", tmp_path / "groom.usdc"
+    code, _, err = run(capsys, ["convert", str(d / "source.usda"), str(archive), "--prim", "groom", "--quiet"])
+    assert code == 0, err
+    code, _, err = run(capsys, ["convert", str(archive), str(stage_out), "--quiet"])
+    assert code == 0, err
+    stage = Usd.Stage.Open(str(stage_out))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01) and UsdGeom.GetStageUpAxis(stage) == "Z"
+    before = read_hair_report(d / "source.usda", units="cm").hair
+    after = read_hair_report(stage_out, units="cm").hair
+    np.testing.assert_allclose(after.points, before.points, rtol=0, atol=1e-7)  # world positions, float32 cm
+    np.testing.assert_array_equal(after.attributes["strand_id"].values, before.attributes["strand_id"].values)
+    code, _, err = run(capsys, ["convert", str(d / "source.usda"), str(archive), "--prim", "fringe", "--quiet"])
+    assert code == 2 and "no BasisCurves prim named 'fringe'" in err

@@ -114,3 +114,11 @@ def test_without_the_bindings_abc_is_one_error_naming_the_extra(monkeypatch):
     assert "pip install 'hairport[alembic]'" in str(error)
     with pytest.raises(Exception, match=r"hairport\[alembic\]"):
         hair_to_bytes(helix_hair(n_strands=2), "abc")
+
+
+def test_one_curves_object_is_read_by_name_or_path(tmp_path):
+    path = tmp_path / "g.abc"
+    write_groom(path, POINTS, [3, 2])
+    assert read_hair_report(path, prim="curves").hair.n_strands == 2
+    assert read_hair_report(path, prim="/groom_xform/curves").hair.n_strands == 2
+    assert "'/groom_xform/curves'" in str(expect_error("unknown_prim", read_hair_report, path, prim="hair"))

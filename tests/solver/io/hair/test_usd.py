@@ -162,3 +162,18 @@ def test_written_stages_pass_usd_validation(tmp_path, fmt):
     linear_curves(bare, "/h", [2], [[0, 0, 0], [0, 1, 0]])
     assert any("metersPerUnit" in error.GetMessage() or "upAxis" in error.GetMessage()
                for error in context.Validate(bare))
+
+
+def test_one_prim_is_read_by_name_or_path_and_an_unknown_one_is_named(tmp_path):
+    def two_prims(stage):
+        linear_curves(stage, "/groom/bangs", [2], [[0, 0, 0], [0, 1, 0]])
+        linear_curves(stage, "/groom/back", [3], [[1, 0, 0], [1, 1, 0], [1, 2, 0]])
+
+    data = stage_bytes(tmp_path, two_prims)
+    assert read_hair_bytes_report(data, "usda", units="cm").hair.n_strands == 2
+    for prim in ("back", "/groom/back"):
+        hair = read_hair_bytes_report(data, "usda", units="cm", prim=prim).hair
+        assert hair.counts.tolist() == [3]
+    error = expect_error("unknown_prim", read_hair_bytes_report, data, "usda", units="cm", prim="fringe")
+    assert "'/groom/bangs', '/groom/back'" in str(error)
+    expect_error("bad_option", read_hair_bytes_report, b"", "ply", prim="back")
