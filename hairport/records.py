@@ -90,6 +90,8 @@ class PreprocessSettings(BaseModel):
     k: int
     guides: int
     anchoring: str = "auto"
+    #: a per-strand attribute whose flagged strands are the guides (then ``guides`` is their count)
+    guides_from: str | None = None
 
 
 class CharacterRecord(Record):
@@ -181,6 +183,8 @@ class JobRecord(Record, RunInfo):
     preprocess_options: PreprocessSettings
     artifact_key: str
     output_format: str
+    #: write the guides the solve used as the per-strand attribute groom_guide
+    flag_guides: bool = False
     created_at: float
     updated_at: float
     started_at: float | None = None

@@ -95,7 +95,8 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
     422: ("the request is invalid: a field fails the schema (`invalid_request`), or a value, file or option fails "
           "its check", ("invalid_request", "bad_units", "bad_axis", "bad_option", "no_skeleton", "too_many_targets",
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
-                        "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite")),
+                        "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
+                        "unknown_prim", "no_guide_flags")),
     503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds",
           ("queue_unavailable",)),
 }

@@ -158,6 +158,9 @@ class RetargetIn(BaseModel):
     options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
     hairline: HairlineIn | None = None
     output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
+    flag_guides: bool = Field(False, description=f"write the guides the solve used as the per-strand attribute "
+                                                 f"{solver.GUIDE_FLAG} (1 guide, 0 other: Unreal's convention) in "
+                                                 "formats with attributes")
 
 
 class JobOut(BaseModel):

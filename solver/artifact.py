@@ -114,6 +114,7 @@ def save_adaptable(adaptable, path: str | os.PathLike) -> Path:
             "sigma": adaptable.options.sigma,
             "guides": adaptable.options.guides,
             "guide_seed": adaptable.options.guide_seed,
+            "guides_from": adaptable.options.guides_from,
             "anchoring": adaptable.options.anchoring,
         },
         "bone_names": list(adaptable.bone_names),

@@ -95,6 +95,8 @@ class PreprocessOptions:
     ``anchoring`` (:data:`~hairport.solver.transfer.anchors.ANCHORINGS`) anchors particles
     by the bones (Eq. 2), by the body surface, or ``auto``: by the bones when the source has a
     skeleton with skin weights, else by the surface. An adaptable hairstyle records the one used.
+    ``guides_from`` names a per-strand attribute whose non-zero strands are the guides (e.g.
+    Unreal's ``groom_guide``) instead of the k-means selection of ``guides`` strands.
     """
 
     k: int = 5
@@ -102,6 +104,7 @@ class PreprocessOptions:
     guides: int = DEFAULT_GUIDES
     guide_seed: int = 0
     anchoring: str = ANCHOR_AUTO
+    guides_from: str | None = None
 
     def validate(self) -> None:
         if self.anchoring not in ANCHORINGS:

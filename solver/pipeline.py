@@ -22,6 +22,7 @@ import numpy as np
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
+from hairport.solver.adaptation.guide_flags import flagged_guides
 from hairport.solver.adaptation.guides import select_guides
 from hairport.solver.adaptation.multiscale import MultiscaleReport, multiscale_model, solve_multiscale
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
@@ -41,7 +42,7 @@ from hairport.solver.model.character import Character
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
-from hairport.solver.options import SOLVER_METHODS, PreprocessOptions, RetargetOptions
+from hairport.solver.options import OPTION_RANGES, SOLVER_METHODS, PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
 
@@ -111,7 +112,11 @@ def preprocess(
         anchors = compute_anchors(source, hair.points, hair.is_root, query, options.sigma, options.anchoring)
     with timed(timings, "guides"):
         progress("guides", 0.5, "selecting guides")
-        guides = select_guides(hair, options.guides, seed=options.guide_seed)
+        if options.guides_from is None:
+            guides = select_guides(hair, options.guides, seed=options.guide_seed)
+        else:
+            guides = flagged_guides(hair, options.guides_from, OPTION_RANGES["guides"].maximum)
+            options = replace(options, guides=len(guides))
     with timed(timings, "neighbours"):
         progress("neighbours", 0.7, "finding the inter-strand neighbours")
         multiscale = multiscale_model(hair, guides, options.k)

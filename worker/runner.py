@@ -291,7 +291,8 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
                                           "target_character_id": job.target_character_id}}
     storage = repository.storage
     with storage.work_dir() as work:
-        hair = solver.hair_in_frame(frame, result.hair)
+        written = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if job.flag_guides else result.hair
+        hair = solver.hair_in_frame(frame, written)
         for fmt in sorted({"npz", job.output_format}):
             path = work / f"result.{fmt}"
             solver.write_hair(path, hair, units=frame.units, format=fmt, up_axis=frame.up)

@@ -68,6 +68,9 @@ def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--source-skeleton", help="skeleton JSON of the source (default: <mesh>.skeleton.json, else glTF skin)")
     p.add_argument("--guides", type=option_type("guides"), default=None,
                    help=option_help("guides", "default 300, or every strand if fewer"))
+    p.add_argument("--guides-from", metavar="ATTRIBUTE", default=None,
+                   help=f"take as guides the strands this per-strand attribute flags (e.g. {solver.GUIDE_FLAG} of an "
+                        "Unreal groom) instead of selecting --guides of them"),
     p.add_argument("--k", type=option_type("k"), default=solver.PreprocessOptions.k,
                    help=option_help("k"))
     p.add_argument("--anchoring", default=solver.PreprocessOptions.anchoring, choices=solver.ANCHORINGS,
@@ -90,8 +93,10 @@ def add_units(p: argparse.ArgumentParser) -> None:
 
 
 def preprocess_options(args: argparse.Namespace) -> solver.PreprocessOptions:
+    if args.guides_from is not None and args.guides is not None:
+        raise InputError("give --guides or --guides-from, not both", code="bad_option")
     options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides,
-                                       anchoring=args.anchoring)
+                                       anchoring=args.anchoring, guides_from=args.guides_from)
     options.validate()
     return options
 
@@ -153,7 +158,8 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
 
 
 def check_source_arguments(args: argparse.Namespace) -> None:
-    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.prim or args.guides is not None):
+    if args.adaptable and (args.source or args.hair or args.source_skeleton or args.prim or args.guides is not None
+                          or args.guides_from):
         raise InputError("give either --adaptable or --source with --hair, not both "
                          "(guides and neighbours are fixed when the artifact is made)", code="bad_option")
     if not args.adaptable and not (args.source and args.hair):

@@ -47,6 +47,9 @@ def add_retarget(sub) -> None:
                         f"(default: {_DEFAULTS.method})")
     p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
     p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
+    p.add_argument("--flag-guides", action="store_true",
+                   help=f"write the guides the solve used as the per-strand attribute {solver.GUIDE_FLAG} "
+                        "(1 guide, 0 other; Unreal's convention)")
     add_units(p)
     p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
@@ -143,8 +146,9 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
     report["inputs"] = {**inputs, "target": args.target, "strands": hair.n_strands, "particles": hair.n_particles,
                         "guides": len(adaptable.multiscale.guides), "units": units}
+    written = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if args.flag_guides else result.hair
     with OutputSet() as outputs:
-        outputs.add(args.out, lambda path: solver.write_hair(path, solver.hair_in_frame(frame, result.hair),
+        outputs.add(args.out, lambda path: solver.write_hair(path, solver.hair_in_frame(frame, written),
                                                              units=units, format=out_format, up_axis=frame.up))
         if args.report:
             outputs.add_json(args.report, report)

@@ -26,6 +26,8 @@ def ranged_form(name: str, note: str = ""):
 _DEFAULTS = solver.PreprocessOptions()
 #: longest prim path a form accepts (USD paths are short; a longer value is refused at the door)
 MAX_PRIM_CHARACTERS = 1024
+#: longest attribute name (the hairstyle model's limit)
+MAX_ATTRIBUTE_NAME = 128
 
 
 @router.post("", status_code=201, response_model=HairstyleOut, summary="Upload a hairstyle",
@@ -48,9 +50,13 @@ async def create_hairstyle(
     prim: Annotated[str | None, Form(
         description="USD or Alembic hair: read only the curves prim or object of this name or path (default: all); "
                     "other formats refuse it", min_length=1, max_length=MAX_PRIM_CHARACTERS)] = None,
+    guides_from: Annotated[str | None, Form(
+        description=f"take as guides the strands this per-strand attribute flags (e.g. {solver.GUIDE_FLAG} of an "
+                    "Unreal groom) instead of selecting `guides` of them", min_length=1,
+        max_length=MAX_ATTRIBUTE_NAME)] = None,
 ) -> HairstyleOut:
     record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, as_upload(hair),
-                                               units, k, guides, anchoring, prim)
+                                               units, k, guides, anchoring, prim, guides_from)
     return hairstyles.hairstyle_out(repository, record)
 
 

@@ -36,25 +36,30 @@ def queue_unavailable(error: QueueUnavailable) -> Problem:
                    headers={"Retry-After": str(RETRY_AFTER_SECONDS)})
 
 
-def preprocessing_settings(k: int, guides: int | None, anchoring: str) -> PreprocessSettings:
+def preprocessing_settings(k: int, guides: int | None, anchoring: str,
+                           guides_from: str | None = None) -> PreprocessSettings:
     """Validated preprocessing options (``guides=None``: the solver's default)."""
+    if guides is not None and guides_from is not None:
+        raise Problem(422, "bad_option", "options: give guides or guides_from, not both")
     options = solver.PreprocessOptions(k=k, guides=solver.DEFAULT_GUIDES if guides is None else guides,
-                                       anchoring=anchoring)
+                                       anchoring=anchoring, guides_from=guides_from)
     try:
         options.validate()
     except solver.InputError as error:
         raise input_problem(error, "options") from None
-    return PreprocessSettings(k=options.k, guides=options.guides, anchoring=options.anchoring)
+    return PreprocessSettings(k=options.k, guides=options.guides, anchoring=options.anchoring,
+                              guides_from=options.guides_from)
 
 
 async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: Settings, owner: str,
                            source_character_id: str, hair: UploadFile, units: str, k: int,
-                           guides: int | None, anchoring: str, prim: str | None = None) -> HairstyleRecord:
+                           guides: int | None, anchoring: str, prim: str | None = None,
+                           guides_from: str | None = None) -> HairstyleRecord:
     """Store and validate an uploaded hair file for the owner's character, and start its
     preprocessing unless an identical hairstyle was preprocessed already."""
     check_units(units)
     character: CharacterRecord = owned(repository, CharacterRecord, owner, source_character_id, "character")
-    options = preprocessing_settings(k, guides, anchoring)
+    options = preprocessing_settings(k, guides, anchoring, guides_from)
     if options.anchoring == solver.ANCHOR_BY_BONES and not character.bones:
         raise Problem(422, "no_skeleton", "anchoring by bones needs a source character with a skeleton "
                                           "(skeleton JSON or glTF skin); anchor by the surface (anchoring surface or auto)")
@@ -72,6 +77,9 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
                                          memory_budget_bytes=settings.memory_budget_bytes),
             )
             await validated(check_fit, "hair", repository, settings, character, loaded, stated)
+            if guides_from is not None:
+                await validated(solver.flagged_guides, "guides_from", loaded, guides_from,
+                                solver.OPTION_RANGES["guides"].maximum)
         except Problem:
             repository.storage.discard_new(blob)  # a refused upload keeps no file
             raise

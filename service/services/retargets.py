@@ -49,9 +49,10 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
     targets = [owned(repository, CharacterRecord, owner, target_id, "character")
                for target_id in request.target_character_ids]
     options = request.options.model_dump()
+    guides = options.pop("guides")  # a guide count asks for k-means guides, even of a hairstyle with flagged ones
     variant = PreprocessSettings(k=options.pop("k") or hairstyle.options.k,
-                                 guides=options.pop("guides") or hairstyle.options.guides,
-                                 anchoring=hairstyle.options.anchoring)
+                                 guides=guides or hairstyle.options.guides, anchoring=hairstyle.options.anchoring,
+                                 guides_from=None if guides else hairstyle.options.guides_from)
     check_options(options, variant, body["hairline"])
     try:
         solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=variant.k)
@@ -64,7 +65,8 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
         job = JobRecord(
             id=new_job_id(), owner=owner, hairstyle_id=hairstyle.id, target_character_id=target.id, options=options,
             hairline=body["hairline"], preprocess_options=variant, artifact_key=key,
-            output_format=request.output_format, created_at=now(), updated_at=now(), task_id=new_task_id(),
+            output_format=request.output_format, flag_guides=request.flag_guides, created_at=now(), updated_at=now(),
+            task_id=new_task_id(),
             enqueued_at=now(),
         )
         repository.create_job(job)

@@ -490,8 +490,10 @@ def test_usd_characters_and_an_alembic_groom_end_to_end(service, tmp_path):
     write_scene(tmp_path / "target.usdc", target)
     hair = generate_groom(source, "short", 40, 10, seed=2)
     groups = (np.arange(40) % 3).astype(np.int32)
+    flags = (np.arange(40) % 5 == 0).astype(np.int16)
     write_groom(tmp_path / "groom.abc", hair.points @ Y_UP_TO_Z_UP / 0.01, hair.counts,
-                params=[("groom_group_id", "OInt32GeomParam", "IntArray", groups, UNIFORM)])
+                params=[("groom_group_id", "OInt32GeomParam", "IntArray", groups, UNIFORM),
+                        ("groom_guide", "OInt16GeomParam", "ShortArray", flags, UNIFORM)])
     ids = {}
     for name, file in (("source", "source.usda"), ("target", "target.usdc")):
         response = client.post("/v1/characters", headers=AUTH, files={"mesh": (file, (tmp_path / file).read_bytes())})
@@ -502,14 +504,18 @@ def test_usd_characters_and_an_alembic_groom_end_to_end(service, tmp_path):
     assert_problem(client.post("/v1/hairstyles", headers=AUTH, files={"hair": ("groom.abc", groom)},
                                data={"source_character_id": ids["source"], "units": "cm", "prim": "fringe"}),
                    422, "unknown_prim")
+    assert_problem(client.post("/v1/hairstyles", headers=AUTH, files={"hair": ("groom.abc", groom)},
+                               data={"source_character_id": ids["source"], "units": "cm", "guides_from": "sim"}),
+                   422, "no_guide_flags")
     response = client.post("/v1/hairstyles", headers=AUTH, files={"hair": ("groom.abc", groom)},
-                           data={"source_character_id": ids["source"], "units": "cm", "guides": "10",
+                           data={"source_character_id": ids["source"], "units": "cm", "guides_from": "groom_guide",
                                  "prim": "curves"})
     assert response.status_code == 201, response.text
     assert response.json()["prim"] == "curves" and response.json()["format"] == "abc"
+    assert response.json()["options"]["guides_from"] == "groom_guide"
     response = client.post("/v1/retargets", headers=AUTH, json={
         "hairstyle_id": response.json()["id"], "target_character_ids": [ids["target"]],
-        "options": {"max_iterations": 10}, "output_format": "abc"})
+        "options": {"max_iterations": 10}, "output_format": "abc", "flag_guides": True})
     assert response.status_code == 202, response.text
     job = response.json()["jobs"][0]["id"]
     done = wait_for(client, f"/v1/jobs/{job}", lambda b: b["state"] in ("succeeded", "failed", "cancelled"))
@@ -519,6 +525,7 @@ def test_usd_characters_and_an_alembic_groom_end_to_end(service, tmp_path):
     assert result.status_code == 200 and result.content[:5] == b"Ogawa"
     back = read_hair_bytes(result.content, "abc")
     np.testing.assert_array_equal(back.attributes["groom_group_id"].values, groups)
+    np.testing.assert_array_equal(back.attributes["groom_guide"].values, flags)  # the solve's guides: the flagged
     assert np.abs(back.points - hair.points @ Y_UP_TO_Z_UP / 0.01).max() > 0.1  # moved, in cm
     usda = client.get(f"/v1/jobs/{job}/result", headers=AUTH, params={"format": "usda"})
     assert usda.status_code == 200 and usda.headers["content-type"].startswith("model/vnd.usda")

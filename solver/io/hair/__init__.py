@@ -181,7 +181,7 @@ def read_hair(
         One of ``SUPPORTED_FORMATS``; from the extension when omitted.
     prim : str, optional
         USD and Alembic: read only the curves prim or object of this name or path (code
-        ``unknown_prim`` when there is none); other formats refuse it (``bad_option``).
+        ``unknown_prim`` when there is none, and for formats without prims).
 
     Returns
     -------
@@ -313,8 +313,8 @@ def hair_to_bytes(hair: Hair, format: str, *, units: str = "m", ascii: bool = Fa
 def _check_prim(fmt: str, prim: str | None, source: str) -> None:
     if prim is not None and not FORMATS[fmt].has_prims:
         with_prims = ", ".join(name for name, spec in FORMATS.items() if spec.has_prims)
-        raise InputError(f"a prim selects one curves prim or object of a {with_prims} file; a {fmt!r} file has none",
-                         source, "bad_option")
+        raise InputError(f"no curves prim named {prim!r}: a prim selects one of a {with_prims} file; a {fmt!r} file "
+                         "has none", source, "unknown_prim")
 
 
 def _read_file(source: str, limits: ReadLimits) -> bytes:

@@ -60,9 +60,17 @@ def _modules():
     return Abc, AbcGeom, imath
 
 
+#: colour channels a colour array exposes as float arrays (numpy reads those through their buffer; the
+#: colour array itself only element by element, about 5 us a point)
+COLOR_CHANNELS = ("r", "g", "b", "a")
+
+
 def numpy_copy(array) -> np.ndarray:
     """A numpy copy of a binding array, made while this function holds the array: a view of a
-    temporary would outlive the memory it shows."""
+    temporary would outlive the memory it shows. Colour arrays are read channel by channel."""
+    if hasattr(array, "r") and hasattr(array, "g"):
+        channels = [getattr(array, name) for name in COLOR_CHANNELS if hasattr(array, name)]
+        return np.stack([np.array(channel, copy=True) for channel in channels], axis=1)
     return np.array(array, copy=True)
 
 

@@ -49,8 +49,7 @@ ERROR_CODES: dict[str, str] = {
     "over_memory_budget": "the declared particle count needs more memory than ReadLimits.memory_budget_bytes",
     "bad_file": "a count or index past what the reader's arithmetic holds (past int64)",
     "bad_attribute": "an attribute (primvar, property, array) of the wrong length, type or name for its domain",
-    "bad_option": "a read option that does not apply to the format (a prim for a format without prims)",
-    "unknown_prim": "no curves prim (USD) or object (Alembic) of the name or path asked for",
+    "unknown_prim": "no curves prim (USD) or object (Alembic) of the name or path asked for (none in other formats)",
     "format_unavailable": "the format needs an optional library this installation lacks (Alembic: hairport[alembic])",
 }
 

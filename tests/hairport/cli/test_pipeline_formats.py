@@ -123,3 +123,22 @@ def test_convert_keeps_the_stage_frame_and_reads_one_prim(capsys, scene, tmp_pat
     np.testing.assert_array_equal(after.attributes["strand_id"].values, before.attributes["strand_id"].values)
     code, _, err = run(capsys, ["convert", str(d / "source.usda"), str(archive), "--prim", "fringe", "--quiet"])
     assert code == 2 and "no BasisCurves prim named 'fringe'" in err
+
+
+def test_guides_flagged_in_the_groom_are_the_solver_guides_and_are_written_back(capsys, scene, tmp_path):
+    d, hair = scene["dir"], scene["hair"]
+    flags = (np.arange(hair.n_strands) % 4 == 0).astype(np.int16)
+    groom = tmp_path / "groom.abc"
+    write_groom(groom, hair.points @ Y_UP_TO_Z_UP / 0.01, hair.counts,
+                params=[("groom_guide", "OInt16GeomParam", "ShortArray", flags, UNIFORM)])
+    out, report = tmp_path / "result.abc", tmp_path / "report.json"
+    base = ["retarget", "--source", str(d / "source.usda"), "--hair", str(groom), "--hair-units", "cm",
+            "--target", str(d / "target.usdc"), "--out", str(out), "--quiet", "--max-iterations", "3"]
+    code, _, err = run(capsys, [*base, "--guides-from", "groom_guide", "--flag-guides", "--report", str(report)])
+    assert code == 0, err
+    import json
+
+    assert json.loads(report.read_text())["inputs"]["guides"] == int(flags.sum()) == 20
+    np.testing.assert_array_equal(read_hair_report(out, units="cm").hair.attributes["groom_guide"].values, flags)
+    code, _, err = run(capsys, [*base, "--guides-from", "sim_guide"])
+    assert code == 2 and "no per-strand attribute 'sim_guide'" in err and "'groom_guide'" in err

@@ -30,7 +30,7 @@ def test_one_record_and_one_preprocessing_per_content(client, files):
     assert first.status_code == second.status_code == 201 and first.json()["id"] == second.json()["id"]
     body = first.json()
     assert (body["strands"], body["particles"], body["format"]) == (20, 120, "data")
-    assert body["options"] == {"k": 5, "guides": 5, "anchoring": "auto"} and body["preprocessing"] == {"state": "queued", "error": None}
+    assert body["options"] == {"k": 5, "guides": 5, "anchoring": "auto", "guides_from": None} and body["preprocessing"] == {"state": "queued", "error": None}
     assert waiting(client, PREPROCESS_QUEUE) == 1
     assert client.get(f"/v1/hairstyles/{body['id']}", headers=AUTH).json() == body
     other = client.post("/v1/hairstyles", headers=AUTH, data={**form, "guides": "6"},

@@ -7,6 +7,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, Vt
 
 from hairport.solver.io.hair import ReadLimits, read_hair_bytes_report, read_hair_report, recorded_units, write_hair
+from hairport.solver.model.hair import Hair, HairAttribute
 from tests.solver.io.hair.samples import expect_error, helix_hair
 
 USD_FORMATS = ("usda", "usdc", "usd")
@@ -156,7 +157,11 @@ def test_written_stages_pass_usd_validation(tmp_path, fmt):
     registry = UsdValidation.ValidationRegistry()
     context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
     path = tmp_path / f"groom.{fmt}"
-    write_hair(path, helix_hair(5, thickness=True, color=True), units="cm")
+    hair = helix_hair(5, thickness=True, color=True)
+    attributes = {"uv": HairAttribute(np.zeros((hair.n_particles, 2), np.float32), "vertex", "texcoord"),
+                  "groom_guide": HairAttribute(np.ones(5, np.int16), "strand"),
+                  "wide": HairAttribute(np.zeros((5, 9)), "strand")}
+    write_hair(path, Hair(hair.points, hair.offsets, hair.thickness, hair.color, attributes), units="cm", up_axis="z")
     assert [error.GetMessage() for error in context.Validate(Usd.Stage.Open(str(path)))] == []
     bare = Usd.Stage.CreateInMemory()
     linear_curves(bare, "/h", [2], [[0, 0, 0], [0, 1, 0]])
@@ -176,4 +181,4 @@ def test_one_prim_is_read_by_name_or_path_and_an_unknown_one_is_named(tmp_path):
         assert hair.counts.tolist() == [3]
     error = expect_error("unknown_prim", read_hair_bytes_report, data, "usda", units="cm", prim="fringe")
     assert "'/groom/bangs', '/groom/back'" in str(error)
-    expect_error("bad_option", read_hair_bytes_report, b"", "ply", prim="back")
+    expect_error("unknown_prim", read_hair_bytes_report, b"", "ply", prim="back")
