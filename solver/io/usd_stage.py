@@ -49,7 +49,7 @@ def usd_reason(error: Exception, ctx) -> str:
         text = ""
     reasons = re.findall(r" : '(.*?)'(?= Error in |$)", " ".join(text.split()))
     reason = reasons[0] if reasons else "unknown"
-    reason = re.sub(r"/\S*hairport-usd-\S*?/groom\.usd[ac]?", os.path.basename(ctx.source), reason)
+    reason = re.sub(r"/\S*hairport-read-\S*?/groom\.\w+", os.path.basename(ctx.source), reason)
     return reason[:200]
 
 

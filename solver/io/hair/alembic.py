@@ -36,8 +36,16 @@ import numpy as np
 
 from hairport import __version__
 from hairport.solver.io.hair.alembic_params import imath_array, numpy_copy, read_param, writable_dtype, write_param
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite, chosen_prims
-from hairport.solver.io.hair.sandboxed import read_in_child
+from hairport.solver.io.hair.common import (
+    CurvesPart,
+    HairFormat,
+    ReadContext,
+    Strands,
+    WriteOptions,
+    chosen_prims,
+    join_parts,
+)
+from hairport.solver.io.hair.sandboxed import read_bytes_in_child
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import HairAttribute
 
@@ -85,17 +93,7 @@ def read_archive(content: bytes | memoryview, ctx: ReadContext) -> Strands:
     """Every ``ICurves`` of an Alembic archive as :class:`~.common.Strands` (module notes), parsed in a
     limited child."""
     require_alembic(ctx.source)
-    with tempfile.TemporaryDirectory(prefix="hairport-abc-") as folder:
-        source = os.path.join(folder, "groom.abc")
-        with open(source, "wb") as handle:
-            handle.write(content)
-        strands = read_in_child(__name__, source, len(content), ctx, "Alembic")
-    check_finite(strands.points, strands.counts, "coordinate", ctx)
-    if strands.thickness is not None:
-        check_finite(strands.thickness, strands.counts, "width", ctx)
-    if strands.color is not None:
-        check_finite(strands.color, strands.counts, "color", ctx)
-    return strands
+    return read_bytes_in_child(__name__, content, ".abc", ctx, "Alembic")
 
 
 def parse_file(path: str, ctx: ReadContext) -> Strands:
@@ -117,7 +115,7 @@ def parse_file(path: str, ctx: ReadContext) -> Strands:
         raise
     except Exception as error:  # damage met while reading values
         raise ctx.error(f"damaged Alembic data: {_first_line(error)}", "bad_header") from None
-    return _joined(parts)
+    return join_parts(parts, "curves objects", ("widths", GROOM_COLOR, "parameter"))
 
 
 def _first_line(error: Exception) -> str:
@@ -149,7 +147,7 @@ def _world_matrix(obj) -> np.ndarray:
     return matrix
 
 
-def _read_curves(obj, ctx: ReadContext, totals: list[int]) -> dict:
+def _read_curves(obj, ctx: ReadContext, totals: list[int]) -> CurvesPart:
     """Points (world, file units), counts, thickness, colour, attributes and warnings of one ``ICurves``."""
     Abc, AbcGeom, _ = _modules()
     where = obj.getFullName()
@@ -198,9 +196,9 @@ def _read_curves(obj, ctx: ReadContext, totals: list[int]) -> dict:
         warnings.append(f"{where}: normals not kept: they describe the source's shape, which a retarget replaces")
     thickness = _take(params, GROOM_WIDTH, ".widths", counts, where, warnings)
     color = params.pop(GROOM_COLOR, None)
-    return {"points": points, "counts": counts, "thickness": thickness,
-            "color": None if color is None else _per_point(color, counts).astype(np.float64).reshape(-1, 3),
-            "params": params, "warnings": warnings, "where": where}
+    return CurvesPart(points, counts, thickness,
+                      None if color is None else _per_point(color, counts).astype(np.float64).reshape(-1, 3),
+                      params, warnings)
 
 
 def _take(params: dict, preferred: str, fallback: str, counts: np.ndarray, where: str,
@@ -221,34 +219,6 @@ def _per_point(found: tuple, counts: np.ndarray) -> np.ndarray:
     """A parameter's rows, one per point (a per-curve one repeated along its curve)."""
     values, domain, _ = found
     return values if domain == "vertex" else np.repeat(values, counts, axis=0)
-
-
-def _joined(parts: list[dict]) -> Strands:
-    warnings = [text for part in parts for text in part["warnings"]]
-
-    def field_of(name: str, what: str):
-        present = [part[name] is not None for part in parts]
-        if not any(present):
-            return None
-        if not all(present):
-            warnings.append(f"{what} on some curves objects only: dropped")
-            return None
-        return np.concatenate([part[name] for part in parts])
-
-    strands = Strands(np.concatenate([part["points"] for part in parts]),
-                      np.concatenate([part["counts"] for part in parts]),
-                      field_of("thickness", "widths"), field_of("color", GROOM_COLOR), warnings)
-    for name in dict.fromkeys(name for part in parts for name in part["params"]):
-        found = [part["params"].get(name) for part in parts]
-        if any(item is None for item in found):
-            warnings.append(f"parameter {name!r} on some curves objects only: not kept")
-            continue
-        if len({(values.dtype.str, values.shape[1:], domain, role) for values, domain, role in found}) > 1:
-            warnings.append(f"parameter {name!r} has different types or scopes on different curves objects: not kept")
-            continue
-        _, domain, role = found[0]
-        strands.add_attribute(name, np.concatenate([values for values, _, _ in found]), domain, role)
-    return strands
 
 
 def write_archive(out: BinaryIO, hair, options: WriteOptions) -> None:

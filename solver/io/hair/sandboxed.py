@@ -6,10 +6,11 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import tempfile
 
 import numpy as np
 
-from hairport.solver.io.hair.common import ReadContext, ReadLimits, Strands
+from hairport.solver.io.hair.common import ReadContext, ReadLimits, Strands, check_finite
 from hairport.solver.io.sandbox import run_in_child
 
 #: the hair readers whose ``parse_file(path, ctx) -> Strands`` runs in a child
@@ -22,6 +23,23 @@ def read_in_child(parser: str, source: str, size: int, ctx: ReadContext, library
                  "max_particles": ctx.limits.max_particles, "prim": ctx.prim}
     arguments["parser"] = parser
     return strands_of(run_in_child(__name__, "strands_arrays", source, size, arguments, ctx.source, library))
+
+
+def read_bytes_in_child(parser: str, content: bytes | memoryview, suffix: str, ctx: ReadContext,
+                        library: str) -> Strands:
+    """:func:`read_in_child` of a file's bytes (written to a scratch file of extension ``suffix``), its
+    values then checked to be finite."""
+    with tempfile.TemporaryDirectory(prefix="hairport-read-") as folder:
+        source = os.path.join(folder, f"groom{suffix}")
+        with open(source, "wb") as handle:
+            handle.write(content)
+        strands = read_in_child(parser, source, len(content), ctx, library)
+    check_finite(strands.points, strands.counts, "coordinate", ctx)
+    if strands.thickness is not None:
+        check_finite(strands.thickness, strands.counts, "width", ctx)
+    if strands.color is not None:
+        check_finite(strands.color, strands.counts, "color", ctx)
+    return strands
 
 
 def strands_arrays(source: str, parser: str, name: str, units: str, max_strands: int, max_particles: int,

@@ -43,8 +43,16 @@ from typing import BinaryIO
 
 import numpy as np
 
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, check_finite, chosen_prims
-from hairport.solver.io.hair.sandboxed import read_in_child
+from hairport.solver.io.hair.common import (
+    CurvesPart,
+    HairFormat,
+    ReadContext,
+    Strands,
+    WriteOptions,
+    chosen_prims,
+    join_parts,
+)
+from hairport.solver.io.hair.sandboxed import read_bytes_in_child, read_in_child
 from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
 from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
 from hairport.solver.model.errors import InputError
@@ -129,23 +137,13 @@ def _read_curves(prim, ctx: ReadContext, totals: list[int]):
     if stale:
         warnings.append(f"{name}: {', '.join(stale)} not kept: they describe the source's shape, which a retarget "
                         "replaces")
-    return world, counts, thickness, color, warnings, attributes
+    return CurvesPart(world, counts, thickness, color, attributes, warnings)
 
 
 def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> Strands:
     """Every ``BasisCurves`` prim of a USD stage as :class:`~.common.Strands` (module notes), parsed
     by USD in a child process with bounded memory and time."""
-    with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
-        source = os.path.join(folder, f"groom{suffix}")
-        with open(source, "wb") as handle:
-            handle.write(content)
-        strands = read_in_child(__name__, source, len(content), ctx, "USD")
-    check_finite(strands.points, strands.counts, "coordinate", ctx)
-    if strands.thickness is not None:
-        check_finite(strands.thickness, strands.counts, "width", ctx)
-    if strands.color is not None:
-        check_finite(strands.color, strands.counts, "color", ctx)
-    return strands
+    return read_bytes_in_child(__name__, content, suffix, ctx, "USD")
 
 
 def parse_file(path: str, ctx: ReadContext) -> Strands:
@@ -172,42 +170,7 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
     prims = chosen_prims(prims, [[prim.GetName(), str(prim.GetPath())] for prim in prims], "BasisCurves prim", ctx)
     totals = [0, 0]
     parts = [_read_curves(prim, ctx, totals) for prim in prims]
-    counts = np.concatenate([part[1] for part in parts])
-    points = np.concatenate([part[0] for part in parts])
-    warnings = [text for part in parts for text in part[4]]
-
-    def joined(index: int, what: str):
-        present = [part[index] is not None for part in parts]
-        if not any(present):
-            return None
-        if not all(present):
-            warnings.append(f"{what} on some prims only: dropped")
-            return None
-        return np.concatenate([part[index] for part in parts])
-
-    strands = Strands(points, counts, joined(2, "widths"), joined(3, "displayColor"), warnings)
-    for attribute_name, values, domain, role in _joined_attributes(parts, warnings):
-        strands.add_attribute(attribute_name, values, domain, role)
-    return strands
-
-
-def _joined_attributes(parts: list, warnings: list[str]) -> list[tuple[str, np.ndarray, str, str]]:
-    """The primvars every prim has with one domain, dtype, width and role, concatenated prim after prim;
-    the others named in ``warnings``."""
-    names = list(dict.fromkeys(name for part in parts for name in part[5]))
-    joined = []
-    for name in names:
-        found = [part[5].get(name) for part in parts]
-        if any(item is None for item in found):
-            warnings.append(f"primvar {name!r} on some BasisCurves prims only: not kept")
-            continue
-        kinds = {(values.dtype.str, values.shape[1:], domain, role) for values, domain, role in found}
-        if len(kinds) > 1:
-            warnings.append(f"primvar {name!r} has different types or interpolations on different prims: not kept")
-            continue
-        _, _, domain, role = kinds.pop()
-        joined.append((name, np.concatenate([values for values, _, _ in found]), domain, role))
-    return joined
+    return join_parts(parts, "BasisCurves prims", ("widths", "displayColor", "primvar"))
 
 
 def recorded_units(path: str | os.PathLike[str]) -> str | None:
