@@ -36,15 +36,8 @@ import numpy as np
 
 from hairport import __version__
 from hairport.solver.io.hair.alembic_params import imath_array, numpy_copy, read_param, writable_dtype, write_param
-from hairport.solver.io.hair.common import (
-    CurvesPart,
-    HairFormat,
-    ReadContext,
-    Strands,
-    WriteOptions,
-    chosen_prims,
-    join_parts,
-)
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import HairAttribute

@@ -43,15 +43,8 @@ from typing import BinaryIO
 
 import numpy as np
 
-from hairport.solver.io.hair.common import (
-    CurvesPart,
-    HairFormat,
-    ReadContext,
-    Strands,
-    WriteOptions,
-    chosen_prims,
-    join_parts,
-)
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child, read_in_child
 from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
 from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
