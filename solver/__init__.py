@@ -85,7 +85,6 @@ _EXPORTS = {
     "read_hair": ("hairport.solver.io.hair", "read_hair"),
     "read_hair_report": ("hairport.solver.io.hair", "read_hair_report"),
     "recorded_hair_units": ("hairport.solver.io.hair", "recorded_units"),
-    "recorded_hair_up_axis": ("hairport.solver.io.hair", "recorded_up_axis"),
     "rescaled": ("hairport.solver.model.progress", "rescaled"),
     "resolve_skeleton_path": ("hairport.solver.io.character", "resolve_skeleton_path"),
     "retarget": ("hairport.solver.pipeline", "retarget"),

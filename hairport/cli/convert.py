@@ -38,7 +38,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
         print_warning(f"{args.input}: {text}")
     out_units = args.out_units or units
     solver.write_hair(args.output, report.hair, units=out_units, format=out_format, ascii=args.ascii,
-                      up_axis=solver.recorded_hair_up_axis(args.input) or "+y")
+                      up_axis=report.up_axis or "+y")
     if not args.quiet:
         print(f"{args.output}: {report.hair.n_strands:,} strands, {report.hair.n_particles:,} points "
               f"({report.format}, {units} -> {out_format}, {out_units})")

@@ -68,9 +68,8 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
     try:
         # the lossless copy is in the groom's units (it records them): convert in the same units
         units = solver.recorded_hair_units(source.path) or "m"
-        up_axis = solver.recorded_hair_up_axis(source.path) or "+y"
-        solver.write_hair(path, solver.read_hair(source.path, units=units, limits=UNLIMITED), units=units, format=fmt,
-                          up_axis=up_axis)
+        lossless_copy = solver.read_hair_report(source.path, units=units, limits=UNLIMITED)
+        solver.write_hair(path, lossless_copy.hair, units=units, format=fmt, up_axis=lossless_copy.up_axis or "+y")
     except solver.InputError as error:  # a format whose optional library this deployment lacks
         work.__exit__(None, None, None)
         raise input_problem(error, "format") from None

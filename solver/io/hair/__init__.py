@@ -119,16 +119,6 @@ def recorded_units(path: str | os.PathLike[str], format: str | None = None) -> s
     return None if fmt.recorded_units is None else fmt.recorded_units(os.fspath(path))
 
 
-def recorded_up_axis(path: str | os.PathLike[str], format: str | None = None) -> str | None:
-    """The up axis (``+y``, ``+z``...) a hair file records (an ``.npz`` archive's, a USD stage's
-    ``upAxis``), or None: the format records none, or the file cannot be read."""
-    try:
-        fmt = FORMATS[format_for_path(path, format)]
-    except InputError:
-        return None
-    return None if fmt.recorded_up_axis is None else fmt.recorded_up_axis(os.fspath(path))
-
-
 def format_for_path(path: str | os.PathLike[str], format: str | None = None) -> str:
     """The format of a hair file: ``format`` if given, else from the extension.
 

@@ -28,15 +28,13 @@ a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`), like USD'
 from __future__ import annotations
 
 import importlib.util
-import os
-import tempfile
 from typing import BinaryIO
 
 import numpy as np
 
 from hairport import __version__
 from hairport.solver.io.hair.alembic_params import imath_array, numpy_copy, read_param, writable_dtype, write_param
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, write_through_file
 from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child
 from hairport.solver.model.errors import InputError
@@ -217,11 +215,8 @@ def _per_point(found: tuple, counts: np.ndarray) -> np.ndarray:
 def write_archive(out: BinaryIO, hair, options: WriteOptions) -> None:
     """One linear ``ICurves`` in Unreal's groom convention (module notes)."""
     require_alembic()
-    with tempfile.TemporaryDirectory(prefix="hairport-abc-") as folder:
-        path = os.path.join(folder, "groom.abc")
-        _write_file(path, hair, options)  # the archive is finished when its objects are released
-        with open(path, "rb") as handle:
-            out.write(handle.read())
+    # the archive is finished when _write_file returns and its objects are released
+    write_through_file(out, ".abc", lambda path: _write_file(path, hair, options))
 
 
 def _write_file(path: str, hair, options: WriteOptions) -> None:

@@ -10,6 +10,8 @@ converted to meters).
 
 from __future__ import annotations
 
+import os
+import tempfile
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -116,6 +118,9 @@ class ReadReport:
         File index of every strand of ``hair``, in order.
     warnings : tuple of str
         Everything the reader dropped or could not keep, in words.
+    up_axis : str or None
+        The up axis (``+y``, ``+z``) the file records (an ``.npz`` archive, a USD stage's
+        ``upAxis``), else None.
     """
 
     hair: Hair
@@ -126,6 +131,7 @@ class ReadReport:
     skipped_particles: int
     kept_strands: np.ndarray
     warnings: tuple[str, ...] = ()
+    up_axis: str | None = None
 
 
 class HairIOWarning(UserWarning):
@@ -148,6 +154,8 @@ class Strands:
         Short strands are an error instead of being skipped.
     attributes : dict of str to HairAttribute
         Every other per-point or per-strand array, short strands' rows included.
+    up_axis : str or None
+        The up axis the file records, if it records one.
     """
 
     points: np.ndarray
@@ -157,6 +165,7 @@ class Strands:
     warnings: list[str] = field(default_factory=list)
     strict: bool = False
     attributes: dict[str, HairAttribute] = field(default_factory=dict)
+    up_axis: str | None = None
 
     def add_attribute(self, name: str, values: np.ndarray, domain: str, role: str = "", where: str = "") -> None:
         """Keep a file's array as attribute ``name``; a name hairport cannot carry (not an identifier,
@@ -233,9 +242,6 @@ class HairFormat:
         (the others are named in one warning and dropped); by default none.
     has_prims : bool
         Whether a file holds named curves prims or objects one of which may be read alone.
-    recorded_up_axis : callable or None
-        ``recorded_up_axis(path) -> str | None``: the up axis (``+y``...) a file records, like
-        ``recorded_units``.
     has_ascii : bool
         Whether the writer has a text variant (``ascii=True``).
     recorded_units : callable or None
@@ -252,7 +258,6 @@ class HairFormat:
     recorded_units: Callable[[str], str | None] | None = None
     keeps_attribute: Callable[[str, HairAttribute], bool] = lambda name, attribute: False
     has_prims: bool = False
-    recorded_up_axis: Callable[[str], str | None] | None = None
 
     @property
     def extension(self) -> str:
@@ -346,6 +351,7 @@ def finish_read(raw: Strands, fmt: str, ctx: ReadContext) -> ReadReport:
         skipped_particles=skipped_particles,
         kept_strands=np.flatnonzero(keep).astype(np.int64),
         warnings=tuple(notes),
+        up_axis=raw.up_axis,
     )
 
 
@@ -415,6 +421,16 @@ def parse_numbers(text: bytes, dtype: type, what: str, ctx: ReadContext) -> np.n
             return np.fromstring(text, dtype=dtype, sep=" ")
     except (ValueError, DeprecationWarning):
         raise ctx.error(f"{what} hold(s) something that is not a number", "bad_value") from None
+
+
+def write_through_file(out: BinaryIO, suffix: str, write_file: Callable[[str], None]) -> None:
+    """Copy into ``out`` what ``write_file(path)`` writes to a scratch file of extension ``suffix``: for
+    libraries (USD, Alembic) that write to paths only."""
+    with tempfile.TemporaryDirectory(prefix="hairport-write-") as folder:
+        path = os.path.join(folder, f"groom{suffix}")
+        write_file(path)
+        with open(path, "rb") as handle:
+            out.write(handle.read())
 
 
 def check_fits(hair: Hair, max_strands: int, max_particles: int, fmt: str) -> None:

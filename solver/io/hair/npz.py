@@ -27,6 +27,7 @@ from typing import BinaryIO
 import numpy as np
 
 from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.model.frame import AXIS_VECTORS
 from hairport.solver.model.hair import ATTRIBUTE_KINDS, DOMAINS, MAX_ATTRIBUTES, ROLES, VERTEX, Hair
 from hairport.solver.model.units import METERS_PER_UNIT
 
@@ -103,6 +104,11 @@ def read_npz(buf: bytes | memoryview, ctx: ReadContext) -> Strands:
                       strict=True)
     for index, (name, domain, role) in enumerate(described):
         strands.add_attribute(name, arrays[NPZ_ATTRIBUTE.format(index)], domain, role)
+    if "up_axis" in arrays:
+        up_axis = _member_text(arrays["up_axis"])
+        if up_axis not in AXIS_VECTORS:
+            raise ctx.error(f"the archive records an unknown up axis {up_axis!r}", "bad_header")
+        strands.up_axis = up_axis
     return strands
 
 
@@ -260,11 +266,6 @@ def recorded_units(path) -> str | None:
     return units if units in METERS_PER_UNIT else None
 
 
-def recorded_up_axis(path) -> str | None:
-    """The up axis (``+y``, ``+z``...) a hairport archive records (version 2), or None."""
-    return _recorded_text(path, "up_axis")
-
-
 def _recorded_text(path, key: str) -> str | None:
     try:
         with zipfile.ZipFile(path) as archive, archive.open(f"{key}.npy") as f:
@@ -301,4 +302,4 @@ def write_npz(f: BinaryIO, hair: Hair, options: WriteOptions) -> None:
 
 
 FORMAT = HairFormat("npz", read_npz, write_npz, keeps_thickness=True, keeps_color=True, recorded_units=recorded_units,
-                    keeps_attribute=lambda name, attribute: True, recorded_up_axis=recorded_up_axis)
+                    keeps_attribute=lambda name, attribute: True)

@@ -57,6 +57,8 @@ def strands_arrays(source: str, parser: str, name: str, units: str, max_strands:
         arrays["thickness"] = strands.thickness
     if strands.color is not None:
         arrays["color"] = strands.color
+    if strands.up_axis is not None:
+        arrays["up_axis"] = np.array(strands.up_axis)
     return arrays
 
 
@@ -66,4 +68,6 @@ def strands_of(found: dict[str, np.ndarray]) -> Strands:
                       [str(text) for text in found["warnings"]])
     for index, (name, domain, role) in enumerate(json.loads(str(found["attributes"]))):
         strands.add_attribute(name, found[f"attribute_{index}"], domain, role)
+    if "up_axis" in found:
+        strands.up_axis = str(found["up_axis"])
     return strands

@@ -38,12 +38,11 @@ this process never holds more than the arrays the child hands back.
 from __future__ import annotations
 
 import os
-import tempfile
 from typing import BinaryIO
 
 import numpy as np
 
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions
+from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, write_through_file
 from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child, read_in_child
 from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
@@ -153,8 +152,7 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
     _, UsdGeom, _, _, _ = pxr_modules()
     units = stage_units(stage, ctx)
     if ctx.units == RECORDED_UNITS:
-        up = "+z" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else "+y"
-        raise ctx.error(f"{RECORDED_UNITS}{units} {up}", "units_mismatch")
+        raise ctx.error(f"{RECORDED_UNITS}{units}", "units_mismatch")
     if units != ctx.units:
         raise ctx.error(f"the stage is in {units} (metersPerUnit), read as {ctx.units}", "units_mismatch")
     prims = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.BasisCurves)]
@@ -163,25 +161,15 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
     prims = chosen_prims(prims, [[prim.GetName(), str(prim.GetPath())] for prim in prims], "BasisCurves prim", ctx)
     totals = [0, 0]
     parts = [_read_curves(prim, ctx, totals) for prim in prims]
-    return join_parts(parts, "BasisCurves prims", ("widths", "displayColor", "primvar"))
+    strands = join_parts(parts, "BasisCurves prims", ("widths", "displayColor", "primvar"))
+    strands.up_axis = "+z" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else "+y"
+    return strands
 
 
 def recorded_units(path: str | os.PathLike[str]) -> str | None:
     """The units a USD stage records (its ``metersPerUnit``) by name; None if it cannot be read or
     records none of hairport's (the reader then says what is wrong). Read in a child, like the
     stage itself."""
-    recorded = _recorded(path)
-    return None if recorded is None else recorded[0]
-
-
-def recorded_up_axis(path: str | os.PathLike[str]) -> str | None:
-    """``+z`` for a stage whose ``upAxis`` is Z, ``+y`` for Y; None if it cannot be read."""
-    recorded = _recorded(path)
-    return None if recorded is None else recorded[1]
-
-
-def _recorded(path: str | os.PathLike[str]) -> tuple[str, str] | None:
-    """(units, up axis) of a stage, asked of a child (the stage's own answer to a read in no units)."""
     from hairport.solver.io.hair.common import ReadLimits
 
     source = os.fspath(path)
@@ -190,9 +178,8 @@ def _recorded(path: str | os.PathLike[str]) -> tuple[str, str] | None:
     except OSError:
         return None
     except InputError as error:
-        if error.code == "units_mismatch" and error.problem.startswith(RECORDED_UNITS):
-            units, up = error.problem[len(RECORDED_UNITS):].split()
-            return units, up
+        return error.problem[len(RECORDED_UNITS):] if error.code == "units_mismatch" and \
+            error.problem.startswith(RECORDED_UNITS) else None
     return None
 
 
@@ -218,12 +205,9 @@ def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str) -
         display = curves.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
         display.Set(Vt.Vec3fArray.FromNumpy(hair.color.astype(np.float32)))
     write_primvars(curves.GetPrim(), hair.attributes)
-    with tempfile.TemporaryDirectory(prefix="hairport-usd-") as folder:
-        path = os.path.join(folder, f"groom{suffix}")
-        # .usd is written as crate (USD's default for it); .usda as text
-        stage.GetRootLayer().Export(path, args={"format": "usda"} if suffix == ".usda" else {"format": "usdc"})
-        with open(path, "rb") as handle:
-            out.write(handle.read())
+    # .usd is written as crate (USD's default for it); .usda as text
+    layer_format = {"format": "usda"} if suffix == ".usda" else {"format": "usdc"}
+    write_through_file(out, suffix, lambda path: stage.GetRootLayer().Export(path, args=layer_format))
 
 
 def _format(name: str) -> HairFormat:
@@ -235,7 +219,6 @@ def _format(name: str) -> HairFormat:
         keeps_thickness=True,
         keeps_color=True,
         recorded_units=recorded_units,
-        recorded_up_axis=recorded_up_axis,
         keeps_attribute=lambda attribute_name, attribute: attribute_name not in RESERVED_PRIMVARS,
         has_prims=True,
     )

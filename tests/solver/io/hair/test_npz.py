@@ -56,6 +56,7 @@ def test_npz_is_strict_about_short_strands(tmp_path):
         ({"thickness": np.zeros(3)}, "bad_header", "thickness must be (4,)"),
         ({"color": np.zeros((4, 3), dtype=object)}, "bad_header", "Python objects"),
         ({"units": np.array("furlong")}, "bad_header", "unknown units"),
+        ({"up_axis": np.array("+w")}, "bad_header", "unknown up axis '+w'"),
         ({"attributes": np.array("[{")}, "bad_header", "not a JSON list"),
         ({"attributes": np.array('[{"name": "uv", "domain": "vertex"}]')}, "bad_header", "'attribute_0' is missing"),
         ({"attributes": np.array('[{"name": "uv", "domain": "vertex"}]'), "attribute_0": np.zeros(3)},

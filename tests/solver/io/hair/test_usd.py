@@ -41,7 +41,7 @@ def test_round_trip_keeps_points_widths_and_colours_to_float32(tmp_path, fmt):
     path = tmp_path / f"groom.{fmt}"
     write_hair(path, hair, units="cm")
     report = read_hair_report(path, units="cm")
-    assert report.format == fmt and report.warnings == ()
+    assert report.format == fmt and report.warnings == () and report.up_axis == "+y"
     np.testing.assert_array_equal(report.hair.offsets, hair.offsets)
     np.testing.assert_allclose(report.hair.points, hair.points, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(report.hair.thickness, hair.thickness, rtol=1e-6)
@@ -83,6 +83,7 @@ def test_stage_units_transforms_and_interpolations_are_honoured(tmp_path):
     data = stage_bytes(tmp_path, build)
     report = read_hair_bytes_report(data, "usda", units="cm", source="groom.usda")
     hair = report.hair
+    assert report.up_axis == "+z"
     np.testing.assert_array_equal(hair.counts, [3, 2, 4])
     expected = np.concatenate([first * 2 + [10, 20, 30], second]) * 0.01
     np.testing.assert_allclose(hair.points, expected, rtol=0, atol=1e-9)
