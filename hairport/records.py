@@ -43,6 +43,10 @@ MESSAGE_LOST = "message_lost"
 PreprocessingState = Literal["queued", "running", "ready", "failed"]
 READY = "ready"
 
+ChunkState = Literal["queued", "running", "done", "failed"]
+CHUNK_STATES: tuple[str, ...] = get_args(ChunkState)
+CHUNK_QUEUED, CHUNK_RUNNING, CHUNK_DONE, CHUNK_FAILED = CHUNK_STATES
+
 
 def now() -> float:
     return time.time()
@@ -167,6 +171,35 @@ class PreprocessingRecord(Record, RunInfo):
     options: dict | None = None
 
 
+class FineChunk(BaseModel):
+    """One chunk of a job's multi-scale fine level: a run of whole normal strands, solved by whichever
+    worker claims it first (a ``fine`` task, or the job's own run while it waits)."""
+
+    index: int
+    first_strand: int = Field(description="first normal strand (index among the strands that are not guides)")
+    stop_strand: int = Field(description="one past its last normal strand")
+    particles: int
+    state: ChunkState = CHUNK_QUEUED
+    task_id: str | None = Field(None, description="the message that may claim it")
+    claim: str | None = Field(None, description="token of the run that holds it")
+    attempts: int = 0
+    worker: str | None = None
+    worker_host: str | None = None
+    worker_pid: int | None = None
+    heartbeat_at: float | None = None
+    progress: float = 0.0
+    seconds: float | None = None
+    error: ErrorInfo | None = None
+
+
+class FineRun(BaseModel):
+    """A job's fine level spread over workers: its chunks, for the job run ``run_token``."""
+
+    run_token: str
+    folder: str = Field(description="the run's scratch folder under the storage's work/ (inputs and results)")
+    chunks: list[FineChunk]
+
+
 class JobRecord(Record, RunInfo):
     KIND: ClassVar[str] = "jobs"
     id: str
@@ -194,6 +227,8 @@ class JobRecord(Record, RunInfo):
     metrics: dict | None = None
     timings: dict | None = None
     outputs: dict[str, BlobRef] | None = None
+    #: the fine level's chunks when it ran over several workers (None: in the job's own process)
+    fine: FineRun | None = None
 
 
 class IdempotencyRecord(Record):

@@ -44,7 +44,13 @@ class Settings(BaseSettings):
     task_time_limit: int = Field(3600, description="Hard time limit of one job (s); the worker child is killed.")
     task_soft_time_limit: int = Field(3300, description="Soft time limit of one job (s): the job fails cleanly.")
     visibility_timeout: int = Field(3900, description="Seconds before a job whose worker died is delivered again.")
-    solver_workers: int = Field(1, description="Processes a worker job uses for the multi-scale fine level.")
+    solver_workers: int = Field(1, ge=1, description=(
+        "Processes a job's own run uses for the multi-scale fine level chunks it solves itself."))
+    fine_chunk_particles: int = Field(250_000, ge=1, description=(
+        "Particles per chunk of a job's multi-scale fine level sent to the fine queue; a fine level no larger "
+        "than this is solved in the job's own run, without chunk tasks."))
+    max_fine_chunks: int = Field(32, ge=1, description=(
+        "Most chunks one job's fine level is split into (larger chunks beyond that)."))
     max_targets_per_request: int = Field(64, description="Largest target_character_ids list of one retarget request.")
     max_attempts: int = Field(3, ge=1, description=(
         "Runs a job (or a preprocessing) may start: one whose worker died this many times fails with worker_lost."))

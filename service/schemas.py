@@ -14,6 +14,7 @@ from hairport import solver
 from hairport.records import (
     SUCCEEDED,
     CharacterRecord,
+    ChunkState,
     ErrorInfo,
     HairstyleRecord,
     JobRecord,
@@ -163,6 +164,21 @@ class RetargetIn(BaseModel):
                                                  "formats with attributes")
 
 
+class ChunkOut(BaseModel):
+    """One chunk of a job's multi-scale fine level, solved by whichever worker took it."""
+
+    index: int
+    first_strand: int = Field(description="first strand of the chunk, counted among the strands that are not guides")
+    stop_strand: int = Field(description="one past its last strand")
+    particles: int
+    state: ChunkState
+    worker: str | None = Field(None, description="the worker running (or that ran) the chunk")
+    attempts: int = Field(0, description="runs so far: a chunk whose worker died runs again")
+    progress: float = 0.0
+    seconds: float | None = None
+    error: ErrorInfo | None = None
+
+
 class JobOut(BaseModel):
     id: str
     state: JobState
@@ -185,6 +201,8 @@ class JobOut(BaseModel):
     timings: dict | None = None
     metrics: dict | None = None
     error: ErrorInfo | None = None
+    chunks: list[ChunkOut] | None = Field(None, description=(
+        "the chunks of the multi-scale fine level when it ran over several workers (none: in the job's own run)"))
     links: dict[str, str] = Field(default_factory=dict)
 
     @classmethod
@@ -193,12 +211,15 @@ class JobOut(BaseModel):
         links = {"self": base}
         if record.state == SUCCEEDED:
             links.update(result=f"{base}/result", preview=f"{base}/preview.png", report=f"{base}/report")
-        return cls(**{name: getattr(record, name) for name in _JOB_OUT_FIELDS}, links=links)
+        chunks = None if record.fine is None else [
+            ChunkOut(**chunk.model_dump(include=_CHUNK_OUT_FIELDS)) for chunk in record.fine.chunks]
+        return cls(**{name: getattr(record, name) for name in _JOB_OUT_FIELDS}, chunks=chunks, links=links)
 
 
 #: the fields a JobOut copies from its record (read once: pydantic's class-level ``model_fields`` is slow, and a
 #: listing builds 50 JobOuts per request)
-_JOB_OUT_FIELDS = tuple(name for name in JobOut.model_fields if name != "links")
+_JOB_OUT_FIELDS = tuple(name for name in JobOut.model_fields if name not in ("links", "chunks"))
+_CHUNK_OUT_FIELDS = set(ChunkOut.model_fields)
 
 
 class JobsCreated(BaseModel):

@@ -20,11 +20,21 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
+from hairport.solver.adaptation.active_set import solve_strands
+from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights
+from hairport.solver.adaptation.fine_chunks import FineInputs, chunk_problem
 from hairport.solver.adaptation.guide_flags import flagged_guides
 from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.multiscale import MultiscaleReport, multiscale_model, solve_multiscale
+from hairport.solver.adaptation.multiscale import (
+    CONTACT_BAND,
+    FineRunner,
+    MultiscaleReport,
+    multiscale_model,
+    solve_here,
+    solve_multiscale,
+)
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
@@ -39,6 +49,7 @@ from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics
 from hairport.solver.model.character import Character
+from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
@@ -153,6 +164,7 @@ def retarget(
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
     target_input: dict | None = None,
+    fine_runner: FineRunner = solve_here,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -169,6 +181,9 @@ def retarget(
     target_input : dict, optional
         What :func:`~hairport.solver.inputs.canonical_target` found; with the hairstyle's own
         it makes the metrics' ``input`` section.
+    fine_runner : FineRunner
+        Solves the multi-scale fine level (in this process by default; :func:`solve_fine_chunk`
+        solves a run of its strands in another).
     """
     options.validate()
     progress = progress or no_progress
@@ -196,7 +211,7 @@ def retarget(
         claims_outside = True
         with timed(timings, "solve"):
             points, solve_report = adapt_shape(adaptable, body, initial, options, weights, timings, gamma,
-                                               start, progress, should_stop)
+                                               start, progress, should_stop, fine_runner)
     else:
         solve_report = None
         with timed(timings, "baseline"):
@@ -242,6 +257,7 @@ def adapt_shape(
     start: np.ndarray | None = None,
     progress: ProgressFn = no_progress,
     should_stop: Callable[[], bool] | None = None,
+    fine_runner: FineRunner = solve_here,
 ) -> tuple[np.ndarray, SolveReport | MultiscaleReport]:
     """Eq. 1 under Eq. 12-13, by the multi-scale solve (Sec. 5) or over all strands coupled.
 
@@ -262,10 +278,7 @@ def adapt_shape(
     report : SolveReport or MultiscaleReport
     """
     hair = adaptable.hair
-    solve_options = SolveOptions(
-        eps_c=options.eps_c, max_iterations=options.max_iterations, step_tolerance=options.step_tolerance,
-        energy_tolerance=options.energy_tolerance,
-    )
+    solve_options = shape_solve_options(options)
     solver_progress = rescaled(progress, 0.1, 0.95, "solve")
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")
@@ -275,17 +288,69 @@ def adapt_shape(
         )
     progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
     with timed(timings, "distance_grid"):
-        reach = (initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN)
-        grid = DistanceGrid.build(target_query, region=reach)
+        grid = DistanceGrid.build(target_query, region=grid_region(initial))
     points, report = solve_multiscale(
         hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
         weights, solve_options, gamma=gamma, start=start, workers=options.workers or 1,
         chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
-        progress=solver_progress, should_stop=should_stop,
+        progress=solver_progress, should_stop=should_stop, fine_runner=fine_runner,
     )
     timings["coarse_solve"] = report.coarse_seconds
     timings["fine_solve"] = report.fine_seconds
     return points, report
+
+
+def shape_solve_options(options: RetargetOptions) -> SolveOptions:
+    """The shape solve's options of a retarget's."""
+    return SolveOptions(eps_c=options.eps_c, max_iterations=options.max_iterations,
+                        step_tolerance=options.step_tolerance, energy_tolerance=options.energy_tolerance)
+
+
+def grid_region(initial: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The box of the multi-scale solve's distance grid: the initial transfer's, grown by
+    :data:`GRID_REGION_MARGIN` (``initial : (N, 3) float64``)."""
+    return initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN
+
+
+def solve_fine_chunk(
+    adaptable: AdaptableHairstyle,
+    target: Character,
+    options: RetargetOptions,
+    inputs: FineInputs,
+    first: int,
+    stop: int,
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray, SolveReport]:
+    """Solve the normal strands ``first .. stop - 1`` of a multi-scale retarget's fine level in this
+    process, as :func:`retarget` with the same ``adaptable``, ``target`` and ``options`` would have
+    (bit for bit): the chunk a :data:`FineRunner` handed to another process.
+
+    Parameters
+    ----------
+    inputs : FineInputs
+        The retarget's :attr:`FineLevel.inputs <.multiscale.FineLevel.inputs>` (its adapted guides).
+    first, stop : int
+        Indices into the normal strands (the hairstyle's strands that are not guides, in order).
+
+    Returns
+    -------
+    points : (n, 3) float64
+        The chunk's particles.
+    report : SolveReport
+    """
+    options.validate()
+    fine = adaptable.fine_source
+    if not 0 <= first < stop <= len(fine.strands):
+        raise InputError(f"strands {first}..{stop} are not a run of the {len(fine.strands)} normal strands",
+                         code="bad_fine_chunk")
+    target = prepare_target(adaptable, target)
+    body = collision_query(target.vertices, target.faces, target.name)
+    grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
+    problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,
+                                   fine, inputs, first, stop)
+    return solve_strands(problem, BodyDistance(body, CONTACT_BAND, grid), EnergyWeights(options.alpha, options.beta),
+                         shape_solve_options(options), start=start, progress=progress, should_stop=should_stop)
 
 
 def relocate_hairline(

@@ -1,4 +1,4 @@
-"""The Celery application: Redis broker, two queues per deployment, late acknowledgement, built on first use.
+"""The Celery application: Redis broker, three queues per deployment, late acknowledgement, built on first use.
 
 Jobs are acknowledged after they finish (``acks_late``), and a job whose worker process
 dies is handed back to the queue (``reject_on_worker_lost`` for a lost pool child); a job
@@ -24,13 +24,17 @@ from hairport.storage import deployment_id, queue_name
 
 PREPROCESS_QUEUE = "preprocess"
 RETARGET_QUEUE = "retarget"
-QUEUES = (PREPROCESS_QUEUE, RETARGET_QUEUE)
+#: chunks of one job's multi-scale fine level (:mod:`.fine`)
+FINE_QUEUE = "fine"
+QUEUES = (PREPROCESS_QUEUE, RETARGET_QUEUE, FINE_QUEUE)
 
 PREPROCESS_TASK = "hairport.preprocess"
 RETARGET_TASK = "hairport.retarget"
+FINE_TASK = "hairport.fine_chunk"
 PURGE_TASK = "hairport.purge"
 #: the queue of each task (short names: the broker's names are the deployment's, see :func:`queue_names`)
-ROUTES = {PREPROCESS_TASK: PREPROCESS_QUEUE, RETARGET_TASK: RETARGET_QUEUE, PURGE_TASK: RETARGET_QUEUE}
+ROUTES = {PREPROCESS_TASK: PREPROCESS_QUEUE, RETARGET_TASK: RETARGET_QUEUE, FINE_TASK: FINE_QUEUE,
+          PURGE_TASK: RETARGET_QUEUE}
 
 #: broker URL of the embedded (single-process, no Redis) mode
 MEMORY_BROKER = "memory://"

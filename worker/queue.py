@@ -15,7 +15,7 @@ import redis
 from celery import Celery
 from kombu.exceptions import KombuError
 
-from .app import PREPROCESS_TASK, QUEUES, RETARGET_TASK, ROUTES, celery_for, queue_names
+from .app import FINE_TASK, PREPROCESS_TASK, QUEUES, RETARGET_TASK, ROUTES, celery_for, queue_names
 from .runs import new_task_id
 from .sweeper import Sweeper
 
@@ -58,6 +58,10 @@ class TaskQueue:
     def send_retarget(self, job_id: str, task_id: str | None = None) -> str:
         """Run a retarget job; the task id."""
         return self._send(RETARGET_TASK, task_id, job_id)
+
+    def send_fine_chunk(self, job_id: str, run_token: str, index: int, task_id: str) -> str:
+        """Solve chunk ``index`` of the fine level of the job's run ``run_token``; the task id."""
+        return self._send(FINE_TASK, task_id, job_id, run_token, index)
 
     def revoke(self, task_id: str) -> None:
         """Ask workers not to start a queued task."""

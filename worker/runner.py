@@ -13,13 +13,10 @@ import json
 import logging
 import time
 import traceback
-from functools import lru_cache
-from pathlib import Path
 
 from celery.exceptions import SoftTimeLimitExceeded
 
 from hairport import solver
-from hairport.messages import safe_detail
 from hairport.outputs import json_default
 from hairport.records import (
     CANCELLED,
@@ -32,7 +29,6 @@ from hairport.records import (
     WAITING_STATES,
     ArtifactRecord,
     BlobRef,
-    CharacterRecord,
     ErrorInfo,
     HairstyleRecord,
     JobRecord,
@@ -45,6 +41,8 @@ from hairport.settings import Settings
 from hairport.solver.render.preview import write_result_preview
 from hairport.storage import Blob, retention_seconds
 
+from .fine import FineDispatch, SpreadFineLevel
+from .loading import error_info, job_inputs, read_source
 from .runs import Heartbeat, OwnRun, run_gone, start_run
 
 #: a running job writes its progress at most this often (s)
@@ -55,75 +53,12 @@ PURGE_INTERVAL_SECONDS = 3600.0
 PREPROCESS_POLL_LIMIT = 1800
 #: errors worth retrying: the task retries them with backoff, the job's state is left alone
 TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
-#: error code of a job or preprocessing that needed more memory than ``Settings.memory_budget_bytes``
-OVER_MEMORY_BUDGET = "over_memory_budget"
 
 log = logging.getLogger(__name__)
 
 
 class PreprocessingPending(Exception):
     """The job's hairstyle is still being preprocessed: run the job again later."""
-
-
-def limits(settings: Settings) -> dict:
-    return dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
-
-
-def blob_path(repository: Repository, ref: BlobRef | None) -> Path | None:
-    """The local path of a stored input, or an ``InputError`` (code ``gone``) if retention removed it."""
-    if ref is None:
-        return None
-    blob = repository.storage.blob(ref.sha256, ref.suffix)
-    if blob is None:
-        raise solver.InputError("a stored input is gone (purged by retention?)", ref.sha256[:12], "gone")
-    return blob.path
-
-
-def load_character(repository: Repository, settings: Settings,
-                   character_id: str) -> tuple[solver.Character, str | None, CharacterRecord]:
-    """The character of a record, loaded from its stored files: in meters when its units are
-    given or stated by its files (the units are returned), else in the file's own (None)."""
-    record = repository.get(CharacterRecord, character_id)
-    if record is None:
-        raise solver.InputError(f"character {character_id} does not exist", code="not_found")
-    character, units = solver.read_character(
-        blob_path(repository, record.mesh), skeleton_path=blob_path(repository, record.skeleton),
-        units=None if record.units == solver.AUTO else record.units, **limits(settings),
-    )
-    return character, units, record
-
-
-def read_source(repository: Repository, settings: Settings, hairstyle: HairstyleRecord) -> solver.SourceInputs:
-    """A hairstyle's source character and hair, in hairport's frame (see :func:`hairport.solver.canonical_source`)."""
-    source, source_units, character = load_character(repository, settings, hairstyle.source_character_id)
-    path = blob_path(repository, hairstyle.hair)
-    units = hairstyle.units if hairstyle.units not in (None, solver.AUTO) else (
-        solver.recorded_hair_units(path, hairstyle.format))
-    hair = solver.read_hair(path, units=units or "m", format=hairstyle.format, prim=hairstyle.prim,
-                            limits=solver.ReadLimits(settings.max_strands, settings.max_particles,
-                                                     settings.max_file_bytes,
-                                                     memory_budget_bytes=settings.memory_budget_bytes))
-    return solver.canonical_source(source, hair, source_units=source_units, hair_units=units,
-                                   up=character.up_axis, front=character.front_axis)
-
-
-@lru_cache(maxsize=2)
-def _adaptable(path: str) -> solver.AdaptableHairstyle:
-    # one worker process retargets one groom onto many bodies: keep the last artifacts loaded
-    return solver.load_adaptable(path)
-
-
-def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
-    """What a failed job or preprocessing reports: the problem of bad input, else the exception."""
-    if isinstance(error, solver.InputError):
-        # the problem only: the source of a stored input is a storage path, meaningless to the caller
-        return ErrorInfo(code=error.code or "bad_input", message=safe_detail(error.problem))
-    if isinstance(error, SoftTimeLimitExceeded):
-        return ErrorInfo(code="time_limit", message=f"the job ran over its time limit ({soft_time_limit:g} s)")
-    if isinstance(error, MemoryError):
-        return ErrorInfo(code=OVER_MEMORY_BUDGET, message="the job needed more memory than a job may use "
-                                                          "(HAIRPORT_MEMORY_BUDGET_BYTES)")
-    return ErrorInfo(code="internal", message=safe_detail(f"{type(error).__name__}: {error}"))
 
 
 def stored(blob: Blob, suffix: str) -> BlobRef:
@@ -208,9 +143,10 @@ class JobProgress:
 
 
 def run_retarget(repository: Repository, settings: Settings, job_id: str, worker: str, polls: int = 0,
-                 task_id: str | None = None) -> None:
+                 task_id: str | None = None, chunks: FineDispatch | None = None) -> None:
     """Retarget one hairstyle onto one target character (one job record), if the message ``task_id`` is
-    the job's current one and no live run has it (see :mod:`.runs`).
+    the job's current one and no live run has it (see :mod:`.runs`). With ``chunks`` (how to send and
+    revoke ``fine`` tasks), a large multi-scale fine level is spread over the workers (:mod:`.fine`).
 
     Raises :class:`PreprocessingPending` while the hairstyle is being preprocessed (after
     ``polls`` earlier checks; the job fails with ``preprocess_timeout`` after
@@ -257,7 +193,8 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
     began = time.perf_counter()
     try:
         with Heartbeat(run.beat, settings.heartbeat_seconds):
-            outputs, result = _retarget_and_store(repository, settings, job, artifact, progress)
+            spread = SpreadFineLevel(repository, settings, job_id, run, worker, chunks)
+            outputs, result = _retarget_and_store(repository, settings, job, artifact, progress, spread)
         timings = {**result.timings, "job": time.perf_counter() - began}
         run.write(state=SUCCEEDED, stage="done", progress=1.0, message="done", finished_at=now(),
                   metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
@@ -274,17 +211,14 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
 
 
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
-                        progress: JobProgress) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
-    adaptable = _adaptable(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
-    target, units, character = load_character(repository, settings, job.target_character_id)
-    target, target_input = solver.canonical_target(adaptable.source, target, units=units, up=character.up_axis,
-                                                   front=character.front_axis)
+                        progress: JobProgress, fine_runner) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
+    adaptable, target, target_input = job_inputs(repository, settings, job, artifact)
     frame = adaptable.frame  # results are written in the groom's units and axes, a drawn hairline read in them
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
     options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
                                      hairline=solver.edit_in_canonical(frame, edit))
     result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop,
-                             target_input=target_input)
+                             target_input=target_input, fine_runner=fine_runner)
     progress("storing", 0.99, "writing outputs")
     outputs = {}
     report = {**result.report(), "job": {"id": job.id, "hairstyle_id": job.hairstyle_id,

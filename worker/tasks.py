@@ -21,7 +21,9 @@ from hairport.settings import get_settings
 from hairport.storage import LocalStorage, deployment_id, queue_name, retention_seconds
 
 from . import runner
-from .app import PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK, ROUTES
+from .app import FINE_TASK, PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK, ROUTES, configured_celery
+from .embedded import embedded_worker_running
+from .fine import FineDispatch, run_fine_chunk
 from .memory import data_bytes, limit_memory
 from .queue import Sweeper, TaskQueue
 
@@ -82,9 +84,27 @@ def retarget_task(self, job_id: str, deployment: str | None = None) -> None:
         return
     try:
         runner.run_retarget(repository(), get_settings(), job_id, self.request.hostname, polls=self.request.retries,
-                            task_id=self.request.id)
+                            task_id=self.request.id, chunks=fine_dispatch())
     except runner.PreprocessingPending:
         raise self.retry(countdown=PREPROCESS_POLL_SECONDS, max_retries=runner.PREPROCESS_POLL_LIMIT) from None
+
+
+@shared_task(name=FINE_TASK, **JOB_TASK_OPTIONS)
+def fine_chunk_task(self, job_id: str, run_token: str, index: int, deployment: str | None = None) -> None:
+    """Solve one chunk of a job's multi-scale fine level (:mod:`.fine`)."""
+    if foreign(self, deployment):
+        return
+    run_fine_chunk(repository(), get_settings(), job_id, run_token, index, self.request.hostname,
+                   task_id=self.request.id)
+
+
+def fine_dispatch() -> FineDispatch | None:
+    """How a job's run sends its fine-level chunks: through the configured broker (none in the embedded mode,
+    whose single thread could not run them before the job ends)."""
+    if embedded_worker_running():
+        return None
+    queue = TaskQueue(configured_celery())
+    return FineDispatch(send=queue.send_fine_chunk, revoke=queue.revoke)
 
 
 @shared_task(name=PURGE_TASK)

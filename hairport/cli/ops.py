@@ -112,7 +112,8 @@ def start_warmup() -> subprocess.Popen:
 
 def add_worker(sub) -> None:
     p = sub.add_parser("worker", help="run a Celery worker against HAIRPORT_REDIS_URL")
-    p.add_argument("--queues", default="preprocess,retarget", help="comma-separated queues to consume")
+    p.add_argument("--queues", default=None,
+                   help="comma-separated queues to consume (default: every queue: preprocess, retarget, fine)")
     p.add_argument("--concurrency", type=int, default=1, help="jobs run at once (processes)")
     p.add_argument("--loglevel", default="INFO")
     p.add_argument("--hostname", default="hairport@%h", help="worker name (%%h: host name)")
@@ -131,7 +132,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         print(f"hairport: error: the storage folder {settings.storage_dir} does not exist (HAIRPORT_STORAGE_DIR): "
               "mount the deployment's storage, or start its API first", file=sys.stderr)
         return EXIT_BAD_INPUT
-    wanted = [name.strip() for name in args.queues.split(",") if name.strip()]
+    wanted = list(QUEUES) if args.queues is None else [name.strip() for name in args.queues.split(",") if name.strip()]
     unknown = sorted(set(wanted) - set(QUEUES))
     if unknown or not wanted:
         print(f"hairport: error: unknown queues {', '.join(unknown) or '(none)'}: choose from {', '.join(QUEUES)}",

@@ -6,7 +6,16 @@ from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
 from hairport import solver
-from hairport.records import CANCELLED, SUCCEEDED, TERMINAL_STATES, WAITING_STATES, BlobRef, JobRecord, now
+from hairport.records import (
+    CANCELLED,
+    CHUNK_QUEUED,
+    SUCCEEDED,
+    TERMINAL_STATES,
+    WAITING_STATES,
+    BlobRef,
+    JobRecord,
+    now,
+)
 from hairport.repository import Repository
 from hairport.worker.queue import TaskQueue
 
@@ -34,6 +43,9 @@ def cancel_job(repository: Repository, queue: TaskQueue, job: JobRecord) -> JobR
     job = repository.change_job(job.id, change)
     if job.state == CANCELLED and job.task_id:
         queue.revoke(job.task_id)
+    for chunk in job.fine.chunks if job.fine is not None else ():
+        if chunk.state == CHUNK_QUEUED and chunk.task_id:
+            queue.revoke(chunk.task_id)  # the job's run stops the running ones at their next iteration
     return job
 
 

@@ -29,6 +29,7 @@ from hairport.solver.adaptation.active_set import solve_strands
 from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
 from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
+from hairport.solver.adaptation.fine_chunks import FineInputs, FineSource
 from hairport.solver.adaptation.guides import select_guides
 from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator, neighbour_average
 from hairport.solver.adaptation.options import ENGINE_COMPILED, SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
@@ -103,29 +104,6 @@ def coarse_shape_model(hair: Hair, model: MultiscaleModel) -> ShapeModel:
     return ShapeModel.build(guide_hair.points, guide_hair.segments, K)
 
 
-@dataclass(frozen=True, eq=False)
-class FineSource:
-    """Source-only parts of the fine problem, one row per normal particle.
-
-    Attributes
-    ----------
-    strands : (R,) int64
-        Normal strand ids, ascending.
-    particles : (n,) int64
-        Their particles, ascending.
-    source_directions : (n, 3) float64
-    pull_weight : (n,) float64
-    source_features : (n, 3) float64
-        ``L-bar_i`` of Eq. 14.
-    """
-
-    strands: np.ndarray
-    particles: np.ndarray
-    source_directions: np.ndarray
-    pull_weight: np.ndarray
-    source_features: np.ndarray
-
-
 def fine_source(hair: Hair, model: MultiscaleModel) -> FineSource:
     """The fine problem's source-only arrays."""
     strands = np.flatnonzero(~model.is_guide(hair.n_strands))
@@ -164,6 +142,72 @@ class MultiscaleReport:
         return (self.coarse.pushed_out if self.coarse else 0) + sum(f.pushed_out for f in self.fine)
 
 
+@dataclass(eq=False)
+class FineLevel:
+    """One multi-scale solve's fine level once its guides are adapted (Eq. 14), for a
+    :data:`FineRunner` to solve: here (:func:`solve_here`) or in chunks elsewhere, where
+    :func:`.fine_chunks.chunk_problem` rebuilds any run of strands from the artifact, the
+    target and :attr:`inputs`.
+
+    Attributes
+    ----------
+    problem : StrandProblem
+        The normal strands (``len(fine.strands)``), uncoupled.
+    start : (n, 3) float64
+        Their first iterate.
+    body : MeshQuery
+        The target's collision surface.
+    grid : DistanceGrid or None
+    weights : EnergyWeights
+    options : SolveOptions
+    engine : str
+    workers : int
+        Processes :func:`solve_here` may use.
+    chunk_particles : int
+        Particles per chunk in this process.
+    inputs : FineInputs
+        What another process needs to rebuild the problem.
+    """
+
+    problem: StrandProblem
+    start: np.ndarray
+    body: MeshQuery
+    grid: DistanceGrid | None
+    weights: EnergyWeights
+    options: SolveOptions
+    engine: str
+    workers: int
+    chunk_particles: int
+    inputs: FineInputs
+
+    @property
+    def counts(self) -> np.ndarray:
+        """(R,) int64: particles of each normal strand."""
+        return np.diff(self.problem.offsets)
+
+
+#: solves a :class:`FineLevel`: ``(level, progress, should_stop) -> (points (n, 3), one report per chunk,
+#: processes used)``
+FineRunner = Callable[[FineLevel, "ProgressFn | None", "Callable[[], bool] | None"],
+                      tuple[np.ndarray, list[SolveReport], int]]
+
+
+def solve_here(level: FineLevel, progress: ProgressFn | None = None,
+               should_stop: Callable[[], bool] | None = None) -> tuple[np.ndarray, list[SolveReport], int]:
+    """The default :data:`FineRunner`: :func:`solve_fine_level` in this process (or its own pool)."""
+    return solve_fine_level(level.problem, level.start, level.body, level.weights, level.options, level.grid,
+                            level.workers, level.chunk_particles, level.engine, progress, should_stop)
+
+
+def solve_level_run(level: FineLevel, first: int, stop: int, progress: ProgressFn | None = None,
+                    should_stop: Callable[[], bool] | None = None) -> tuple[np.ndarray, SolveReport]:
+    """The normal strands ``first .. stop - 1`` of ``level``, in this process: ``points (n, 3)`` and the report
+    (what :func:`hairport.solver.pipeline.solve_fine_chunk` gives for them in another)."""
+    piece, rows = level.problem.strand_run(first, stop)
+    return solve_strands(piece, BodyDistance(level.body, CONTACT_BAND, level.grid), level.weights, level.options,
+                         start=level.start[rows], progress=progress, should_stop=should_stop, engine=level.engine)
+
+
 def chunk_strands(counts: np.ndarray, chunk_particles: int) -> list[np.ndarray]:
     """Split strands with ``counts (R,)`` particles into consecutive runs of at most ``chunk_particles`` particles
     (a strand longer than that is a chunk of its own)."""
@@ -195,7 +239,7 @@ def _solve_chunk(args) -> tuple[np.ndarray, SolveReport]:
 
 
 def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: np.ndarray, initial: np.ndarray,
-                 gamma: np.ndarray) -> StrandProblem:
+                 gamma: np.ndarray | None = None) -> StrandProblem:
     """Eq. 14 over the normal strands, with the guides where ``points`` has them.
 
     Each normal particle is pulled towards its guide neighbours' weighted mean plus its source
@@ -210,8 +254,8 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
         The whole hairstyle; only the guides' rows are read.
     initial : (N, 3) float64
         ``p-hat`` of the whole hairstyle.
-    gamma : (N,) float64
-        Eq. 21's weights.
+    gamma : (N,) float64, optional
+        Eq. 21's weights; 1 everywhere when omitted.
 
     Returns
     -------
@@ -224,7 +268,8 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     return StrandProblem(
         offsets, fine.source_directions, initial[fine.particles], sp.diags(fine.pull_weight, format="csr"),
-        pull_target, gamma[fine.particles], hair.is_root[fine.particles],
+        pull_target, np.ones(len(fine.particles)) if gamma is None else gamma[fine.particles],
+        hair.is_root[fine.particles],
     )
 
 
@@ -324,6 +369,7 @@ def solve_multiscale(
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
     engine: str = ENGINE_COMPILED,
+    fine_runner: FineRunner = solve_here,
 ) -> tuple[np.ndarray, MultiscaleReport]:
     """Eq. 1 by the two levels of Sec. 5.
 
@@ -363,6 +409,9 @@ def solve_multiscale(
     engine : str
         How the fine level's loop runs (:data:`.options.ENGINES`): compiled kernels, or the
         numpy reference.
+    fine_runner : FineRunner
+        Solves the fine level once the guides are adapted (:func:`solve_here` by default; a
+        service hands its chunks to other workers).
 
     Returns
     -------
@@ -372,7 +421,7 @@ def solve_multiscale(
     report = MultiscaleReport(guides=len(model.guides))
     coarse_progress = _labelled(rescaled(progress, 0.0, COARSE_PROGRESS_SHARE), "guides")
     fine_progress = rescaled(progress, COARSE_PROGRESS_SHARE, 1.0)
-    gamma_all = np.ones(hair.n_particles) if gamma is None else np.asarray(gamma, dtype=np.float64)
+    gamma = None if gamma is None else np.asarray(gamma, dtype=np.float64)
     first = np.asarray(initial if start is None else start, dtype=np.float64)
     points = first.copy()
 
@@ -384,7 +433,7 @@ def solve_multiscale(
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(
         coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights, options,
-        gamma=gamma_all[guide_particles], backend=backend, start=first[guide_particles],
+        gamma=None if gamma is None else gamma[guide_particles], backend=backend, start=first[guide_particles],
         grid=grid, band=CONTACT_BAND,
         progress=coarse_progress, should_stop=should_stop,
     )
@@ -393,11 +442,12 @@ def solve_multiscale(
 
     began = time.perf_counter()
     if len(fine.strands):
-        problem = fine_problem(hair, model, fine, points, initial, gamma_all)
-        points[fine.particles], report.fine, report.workers = solve_fine_level(
-            problem, first[fine.particles], target, weights, options, grid, workers, chunk_particles, engine,
-            fine_progress, should_stop,
-        )
+        problem = fine_problem(hair, model, fine, points, initial, gamma)
+        # without a hairline start the first iterate is p-hat itself: one (n, 3) gather, not two
+        fine_start = problem.initial if start is None else first[fine.particles]
+        level = FineLevel(problem, fine_start, target, grid, weights, options, engine, workers, chunk_particles,
+                          FineInputs(guide_points, initial, gamma, None if start is None else first))
+        points[fine.particles], report.fine, report.workers = fine_runner(level, fine_progress, should_stop)
         report.chunks = len(report.fine)
     report.fine_seconds = time.perf_counter() - began
     return points, report

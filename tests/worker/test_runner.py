@@ -350,7 +350,3 @@ def test_a_taken_over_run_writes_nothing_more(world):
     repository.set_job(job.id, run_token="theirs")
     assert not run.write(state="succeeded") and repository.job(job.id).state == "running"
 
-
-def test_memory_error_is_over_memory_budget():
-    info = runner.error_info(MemoryError(), 10)
-    assert info.code == runner.OVER_MEMORY_BUDGET == "over_memory_budget" and "MEMORY_BUDGET" in info.message
