@@ -43,6 +43,11 @@ MESSAGE_LOST = "message_lost"
 PreprocessingState = Literal["queued", "running", "ready", "failed"]
 READY = "ready"
 
+#: a batch's state, read from its jobs: none started, some not ended, every one ended
+BatchState = Literal["queued", "running", "done"]
+BATCH_STATES: tuple[str, ...] = get_args(BatchState)
+BATCH_QUEUED, BATCH_RUNNING, BATCH_DONE = BATCH_STATES
+
 ChunkState = Literal["queued", "running", "done", "failed"]
 CHUNK_STATES: tuple[str, ...] = get_args(ChunkState)
 CHUNK_QUEUED, CHUNK_RUNNING, CHUNK_DONE, CHUNK_FAILED = CHUNK_STATES
@@ -229,13 +234,31 @@ class JobRecord(Record, RunInfo):
     outputs: dict[str, BlobRef] | None = None
     #: the fine level's chunks when it ran over several workers (None: in the job's own process)
     fine: FineRun | None = None
+    #: the batch the job is a pair of
+    batch_id: str | None = None
 
 
 class IdempotencyRecord(Record):
     KIND: ClassVar[str] = "idempotency"
     request: str
     jobs: list[str] = Field(default_factory=list)
+    #: the batch a batch request created
+    batch_id: str | None = None
     created_at: float
+
+
+class BatchRecord(Record):
+    """Hairstyles x targets, one job per pair (``job_ids`` hairstyle by hairstyle, targets in order); its
+    state and counts are its jobs'."""
+
+    KIND: ClassVar[str] = "batches"
+    id: str
+    owner: str
+    created_at: float
+    hairstyle_ids: list[str]
+    target_character_ids: list[str]
+    output_format: str
+    job_ids: list[str]
 
 
 class PurgeClock(Record):

@@ -52,6 +52,7 @@ class Settings(BaseSettings):
     max_fine_chunks: int = Field(32, ge=1, description=(
         "Most chunks one job's fine level is split into (larger chunks beyond that)."))
     max_targets_per_request: int = Field(64, description="Largest target_character_ids list of one retarget request.")
+    max_batch_jobs: int = Field(256, ge=1, description="Most hairstyle x target pairs (jobs) of one batch.")
     max_attempts: int = Field(3, ge=1, description=(
         "Runs a job (or a preprocessing) may start: one whose worker died this many times fails with worker_lost."))
     heartbeat_seconds: float = Field(10.0, gt=0, description="A running job writes its heartbeat this often (s).")

@@ -16,7 +16,7 @@ from hairport.worker.queue import TaskQueue, connect
 
 from . import contract, docs, errors
 from .auth import check_configuration
-from .routers import characters, hairstyles, health, jobs, retargets
+from .routers import batches, characters, hairstyles, health, jobs, retargets
 
 DESCRIPTION = """Retarget strand hairstyles between characters of one mesh topology.
 
@@ -103,7 +103,7 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     if settings.cors_origin_list:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origin_list, allow_methods=["*"],
                            allow_headers=["*"], expose_headers=["Location"])
-    for router in (characters.router, hairstyles.router, retargets.router, jobs.router, health.router):
+    for router in (characters.router, hairstyles.router, retargets.router, batches.router, jobs.router, health.router):
         app.include_router(router)
     contract.install(app)
     docs.install(app)

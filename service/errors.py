@@ -85,7 +85,8 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
     401: ("no API key, or an unknown one (`WWW-Authenticate: Bearer`)", ("unauthorized",)),
     404: ("no such resource for this key: what another key created is not found either", ("not_found",)),
     405: ("the path does not take this method (`Allow` lists those it takes)", ("method_not_allowed",)),
-    409: ("the job has not succeeded (yet): it has no outputs", ("job_not_succeeded",)),
+    409: ("the job has not succeeded (yet): it has no outputs; or the batch has jobs that have not ended",
+          ("job_not_succeeded", "batch_not_finished")),
     410: ("the output was removed by the retention policy", ("gone",)),
     413: ("the body, an upload, a count in it or its estimated memory is above this deployment's limits",
           ("upload_too_large", "too_large", "over_memory_budget")),
@@ -96,7 +97,7 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
           "its check", ("invalid_request", "bad_units", "bad_axis", "bad_option", "no_skeleton", "too_many_targets",
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
                         "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
-                        "unknown_prim", "no_guide_flags")),
+                        "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair")),
     503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds",
           ("queue_unavailable",)),
 }

@@ -13,6 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from hairport import solver
 from hairport.records import (
     SUCCEEDED,
+    BatchState,
     CharacterRecord,
     ChunkState,
     ErrorInfo,
@@ -228,6 +229,63 @@ class JobsCreated(BaseModel):
 
 class JobPage(BaseModel):
     jobs: list[JobOut]
+    total: int
+    limit: int
+    offset: int
+    next_offset: int | None = None
+
+
+class BatchItemIn(BaseModel):
+    """Options of one pair of a batch, in place of the batch's (a hairline given here, even null, replaces the
+    batch's)."""
+
+    model_config = ConfigDict(extra="forbid")
+    hairstyle_id: str
+    target_character_id: str
+    options: RetargetOptionsIn | None = None
+    hairline: HairlineIn | None = None
+
+
+class BatchIn(BaseModel):
+    """Every hairstyle onto every target character: one job per pair."""
+
+    model_config = ConfigDict(extra="forbid")
+    hairstyle_ids: list[str] = Field(min_length=1, json_schema_extra={"uniqueItems": True})
+    target_character_ids: list[str] = Field(min_length=1, json_schema_extra={"uniqueItems": True})
+    options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
+    hairline: HairlineIn | None = None
+    items: list[BatchItemIn] = Field(default_factory=list, description="per-pair options replacing the batch's")
+    output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
+    flag_guides: bool = Field(False, description=f"write the guides as the attribute {solver.GUIDE_FLAG}")
+
+
+class BatchJobOut(BaseModel):
+    id: str
+    hairstyle_id: str
+    target_character_id: str
+    state: JobState
+    progress: float
+    error: ErrorInfo | None = None
+    links: dict[str, str]
+
+
+class BatchOut(BaseModel):
+    id: str
+    state: BatchState = Field(description=(
+        "queued: no job started; running: some job has not ended; done: every job ended (see counts)"))
+    counts: dict[str, int] = Field(description="jobs in each state")
+    progress: float = Field(description="mean progress of the jobs (an ended job counts 1)")
+    created_at: float
+    finished_at: float | None = None
+    hairstyle_ids: list[str]
+    target_character_ids: list[str]
+    output_format: HairFormat
+    jobs: list[BatchJobOut] = Field(description="one per pair, hairstyle by hairstyle, targets in order")
+    links: dict[str, str]
+
+
+class BatchPage(BaseModel):
+    batches: list[BatchOut]
     total: int
     limit: int
     offset: int

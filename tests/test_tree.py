@@ -21,6 +21,7 @@ TESTED_ELSEWHERE = {
     "service/services/hairstyles.py": "tests/service/routers/test_hairstyles.py",
     "service/services/retargets.py": "tests/service/routers/test_retargets.py",
     "service/services/jobs.py": "tests/service/routers/test_jobs.py",
+    "service/services/batches.py": "tests/service/routers/test_batches.py",
 }
 
 

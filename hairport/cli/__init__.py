@@ -14,7 +14,7 @@ import warnings
 
 from hairport.solver import InputError
 
-from . import convert, demo, ops, solve
+from . import batch, convert, demo, ops, solve
 from .common import EXIT_BAD_INPUT, EXIT_FAILURE, StageProgress, print_warning
 
 __all__ = ["EXIT_BAD_INPUT", "EXIT_FAILURE", "StageProgress", "build_parser", "main"]
@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     solve.add_preprocess(sub)
     solve.add_retarget(sub)
+    batch.add_batch(sub)
     demo.add_demo(sub)
     ops.add_assets(sub)
     ops.add_serve(sub)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
@@ -63,19 +65,19 @@ def blob_response(repository: Repository, ref: BlobRef, media_type: str, filenam
     return FileResponse(blob.path, media_type=media_type, filename=filename)
 
 
-def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> FileResponse:
-    """The result in ``fmt`` (default: the job's): stored, or converted from the lossless copy and
-    streamed from a scratch folder that is removed after the response."""
+def result_file(repository: Repository, job: JobRecord, fmt: str, folder: Path) -> Path:
+    """The job's result in ``fmt``: its stored file, or one converted into ``folder`` from the lossless copy
+    (410 when retention removed it; 415 for a format whose optional library this deployment lacks)."""
     outputs = outputs_of(job)
-    fmt = fmt or job.output_format
     if fmt in outputs:
-        return blob_response(repository, outputs[fmt], RESULT_MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
+        blob = repository.storage.blob(outputs[fmt].sha256, outputs[fmt].suffix)
+        if blob is None:
+            raise Problem(410, "gone", "this output was removed by the retention policy")
+        return blob.path
     lossless = outputs[LOSSLESS_FORMAT]
     source = repository.storage.blob(lossless.sha256, lossless.suffix)
     if source is None:
         raise Problem(410, "gone", "this output was removed by the retention policy")
-    work = repository.storage.work_dir()
-    folder = work.__enter__()
     path = folder / f"result.{fmt}"
     try:
         # the lossless copy is in the groom's units (it records them): convert in the same units
@@ -83,8 +85,21 @@ def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> 
         lossless_copy = solver.read_hair_report(source.path, units=units, limits=UNLIMITED)
         solver.write_hair(path, lossless_copy.hair, units=units, format=fmt, up_axis=lossless_copy.up_axis or "+y")
     except solver.InputError as error:  # a format whose optional library this deployment lacks
-        work.__exit__(None, None, None)
         raise input_problem(error, "format") from None
+    return path
+
+
+def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> FileResponse:
+    """The result in ``fmt`` (default: the job's): stored, or converted from the lossless copy and
+    streamed from a scratch folder that is removed after the response."""
+    fmt = fmt or job.output_format
+    outputs = outputs_of(job)
+    if fmt in outputs:
+        return blob_response(repository, outputs[fmt], RESULT_MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
+    work = repository.storage.work_dir()
+    folder = work.__enter__()
+    try:
+        path = result_file(repository, job, fmt, folder)
     except BaseException:
         work.__exit__(None, None, None)
         raise

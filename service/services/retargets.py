@@ -1,6 +1,13 @@
-"""Retargets: one job per target character; an ``Idempotency-Key`` makes a repeated request safe."""
+"""Retargets: one job per target character; an ``Idempotency-Key`` makes a repeated request safe.
+
+:func:`plan_job` checks one hairstyle x target pair and its options and makes its job record;
+:func:`submit_jobs` stores planned jobs and sends them (or keeps nothing when the broker does
+not answer). Batches (:mod:`.batches`) plan a grid of pairs with the same two steps.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 from hairport import solver
 from hairport.records import (
@@ -20,7 +27,7 @@ from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
 from ..deps import owned
 from ..errors import Problem
-from ..schemas import RetargetIn
+from ..schemas import RetargetIn, RetargetOptionsIn
 from ..uploads import input_problem
 from .hairstyles import queue_unavailable, start_preprocessing
 
@@ -28,66 +35,103 @@ from .hairstyles import queue_unavailable, start_preprocessing
 MAX_IDEMPOTENCY_KEY = 200
 
 
+@dataclass
+class PlannedJob:
+    """A job ready to be stored and sent, with the hairstyle and the artifact it needs."""
+
+    job: JobRecord
+    hairstyle: HairstyleRecord
+    variant: PreprocessSettings
+    key: str
+
+
+def idempotent_replay(repository: Repository, owner: str, idempotency_key: str | None,
+                      body: dict) -> tuple[str | None, IdempotencyRecord | None]:
+    """The id under which a request with ``idempotency_key`` is remembered, and the earlier request's record
+    when there is one (422 when that earlier request differs from ``body``)."""
+    if idempotency_key is None:
+        return None, None
+    if not 0 < len(idempotency_key) <= MAX_IDEMPOTENCY_KEY:
+        raise Problem(422, "bad_idempotency_key", f"Idempotency-Key must have 1-{MAX_IDEMPOTENCY_KEY} characters")
+    replay_id = owned_id(owner, digest("idempotency", idempotency_key))
+    previous = repository.get(IdempotencyRecord, replay_id)
+    if previous is not None and previous.request != digest(body):
+        raise Problem(422, "idempotency_conflict", "this Idempotency-Key was used with a different request")
+    return replay_id, previous
+
+
 def create_retargets(repository: Repository, queue: TaskQueue, settings: Settings, owner: str, request: RetargetIn,
                      idempotency_key: str | None) -> list[JobRecord]:
     """Create and send one job per target (or replay the jobs of an earlier request with the same key)."""
     body = request.model_dump(mode="json")
-    replay_id = None
-    if idempotency_key is not None:
-        if not 0 < len(idempotency_key) <= MAX_IDEMPOTENCY_KEY:
-            raise Problem(422, "bad_idempotency_key", f"Idempotency-Key must have 1-{MAX_IDEMPOTENCY_KEY} characters")
-        replay_id = owned_id(owner, digest("idempotency", idempotency_key))
-        previous = repository.get(IdempotencyRecord, replay_id)
-        if previous is not None:
-            if previous.request != digest(body):
-                raise Problem(422, "idempotency_conflict", "this Idempotency-Key was used with a different request")
-            return [job for job in map(repository.job, previous.jobs) if job is not None]
+    replay_id, previous = idempotent_replay(repository, owner, idempotency_key, body)
+    if previous is not None:
+        return [job for job in map(repository.job, previous.jobs) if job is not None]
     if len(request.target_character_ids) > settings.max_targets_per_request:
         raise Problem(422, "too_many_targets", f"at most {settings.max_targets_per_request} targets per request, "
                                                f"got {len(request.target_character_ids)}")
     hairstyle: HairstyleRecord = owned(repository, HairstyleRecord, owner, request.hairstyle_id, "hairstyle")
     targets = [owned(repository, CharacterRecord, owner, target_id, "character")
                for target_id in request.target_character_ids]
-    options = request.options.model_dump()
+    planned = [plan_job(repository, settings, owner, hairstyle, target, request.options, body["hairline"],
+                        request.output_format, request.flag_guides) for target in targets]
+    remember = None if replay_id is None else (replay_id, IdempotencyRecord(
+        request=digest(body), jobs=[plan.job.id for plan in planned], created_at=now()))
+    submit_jobs(repository, queue, settings, planned, remember)
+    return [plan.job for plan in planned]
+
+
+def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: HairstyleRecord,
+             target: CharacterRecord, options_in: RetargetOptionsIn, hairline: dict | None, output_format: str,
+             flag_guides: bool, batch_id: str | None = None) -> PlannedJob:
+    """The job of one pair, its options checked (422 for what the solver would refuse, named after the field)."""
+    options = options_in.model_dump()
     guides = options.pop("guides")  # a guide count asks for k-means guides, even of a hairstyle with flagged ones
     variant = PreprocessSettings(k=options.pop("k") or hairstyle.options.k,
                                  guides=guides or hairstyle.options.guides, anchoring=hairstyle.options.anchoring,
                                  guides_from=None if guides else hairstyle.options.guides_from)
-    check_options(options, variant, body["hairline"])
+    check_options(options, variant, hairline)
     try:
         solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=variant.k)
     except solver.InputError as error:
         raise input_problem(error, "options") from None
     key = (hairstyle.artifact_key if variant == hairstyle.options
            else repository.variant_key(hairstyle, variant, solver.ARTIFACT_FORMAT_VERSION))
-    jobs = []
-    for target in targets:
-        job = JobRecord(
-            id=new_job_id(), owner=owner, hairstyle_id=hairstyle.id, target_character_id=target.id, options=options,
-            hairline=body["hairline"], preprocess_options=variant, artifact_key=key,
-            output_format=request.output_format, flag_guides=request.flag_guides, created_at=now(), updated_at=now(),
-            task_id=new_task_id(),
-            enqueued_at=now(),
-        )
-        repository.create_job(job)
-        jobs.append(job)
-    if replay_id is not None:
-        repository.put(IdempotencyRecord(request=digest(body), jobs=[job.id for job in jobs], created_at=now()),
-                       replay_id)
+    job = JobRecord(
+        id=new_job_id(), owner=owner, hairstyle_id=hairstyle.id, target_character_id=target.id, options=options,
+        hairline=hairline, preprocess_options=variant, artifact_key=key, output_format=output_format,
+        flag_guides=flag_guides, created_at=now(), updated_at=now(), task_id=new_task_id(), enqueued_at=now(),
+        batch_id=batch_id,
+    )
+    return PlannedJob(job, hairstyle, variant, key)
+
+
+def submit_jobs(repository: Repository, queue: TaskQueue, settings: Settings, planned: list[PlannedJob],
+                remember: tuple[str, IdempotencyRecord] | None = None, undo=None) -> None:
+    """Store the planned jobs (and the idempotency record), start each artifact's preprocessing once, send the
+    jobs. When the broker does not take a task nothing of the request stays (``undo()`` removes the caller's
+    own records) and the answer is 503: a retry starts afresh; a message already sent finds no record."""
+    for plan in planned:
+        repository.create_job(plan.job)
+    if remember is not None:
+        repository.put(remember[1], remember[0])
     try:
-        start_preprocessing(repository, queue, settings, hairstyle, None if key == hairstyle.artifact_key else variant,
-                            key)
-        for job in jobs:
-            queue.send_retarget(job.id, job.task_id)
+        started = set()
+        for plan in planned:
+            if plan.key not in started:
+                started.add(plan.key)
+                start_preprocessing(repository, queue, settings, plan.hairstyle,
+                                    None if plan.key == plan.hairstyle.artifact_key else plan.variant, plan.key)
+        for plan in planned:
+            queue.send_retarget(plan.job.id, plan.job.task_id)
     except QueueUnavailable as error:
-        # nothing of this request stays: a retry (with the same Idempotency-Key) starts afresh; a message
-        # already sent finds no record and does nothing
-        if replay_id is not None:
-            repository.storage.delete_record(IdempotencyRecord.KIND, replay_id)
-        for job in jobs:
-            repository.delete_job(job)
+        if remember is not None:
+            repository.storage.delete_record(IdempotencyRecord.KIND, remember[0])
+        for plan in planned:
+            repository.delete_job(plan.job)
+        if undo is not None:
+            undo()
         raise queue_unavailable(error) from None
-    return jobs
 
 
 def check_options(options: dict, variant: PreprocessSettings, hairline: dict | None) -> None:

@@ -3,7 +3,7 @@ document (a bounded, derandomized run) with a real storage folder and a real Red
 (no worker: jobs stay queued), keys configured and sent.
 
 So that the run reaches past "not found", the app holds two real characters, a hairstyle, a queued
-job and a succeeded job with outputs, and each id the fuzzer generates (path or body) is either
+job and a succeeded job with outputs, a queued batch and a done one, and each id the fuzzer generates (path or body) is either
 kept or swapped for a real one of its kind (hypothesis picks, so both are tried).
 
 Checks: all of schemathesis' defaults (not_a_server_error, status_code_conformance,
@@ -39,7 +39,8 @@ POSITIVE_STATUSES = ["2xx", "3xx", "401", "403", "404", "409", "429", *CONTENT_R
 #: codes that mean "a rule the schema states was broken": a schema-valid request must never get one
 DOOR_CODES = frozenset({"invalid_request", "bad_units", "bad_axis", "bad_idempotency_key", "bad_request", "bad_option"})
 #: rules tying two fields together, which a schema does not state: (code, words of its detail)
-CROSS_FIELD_RULES = (("bad_axis", "perpendicular"), ("bad_option", "guides or guides_from, not both"))
+CROSS_FIELD_RULES = (("bad_axis", "perpendicular"), ("bad_option", "guides or guides_from, not both"),
+                     ("bad_option", "give exactly one of a hairline preset"))
 #: schemathesis' seed (its own, random unless given): with hypothesis derandomized, every run sends the same requests
 SEED = 20261124
 CONFIG = {
@@ -86,10 +87,18 @@ def seed(client: TestClient, folder) -> dict[str, list[str]]:
     assert jobs.status_code == 202, jobs.text
     queued, done = [job["id"] for job in jobs.json()["jobs"]]
     succeed(client.app.state.repository, done, folder)
+    batches = []
+    for target in characters:  # a batch still queued, and one whose only job succeeded (its results download)
+        batch = client.post("/v1/batches", headers=AUTH, json={"hairstyle_ids": [hairstyle.json()["id"]],
+                                                               "target_character_ids": [target]})
+        assert batch.status_code == 202, batch.text
+        batches.append(batch.json()["id"])
+    succeed(client.app.state.repository, batch.json()["jobs"][0]["id"], folder)
     solver.write_hair(folder / "groom.obj", solver.read_hair(folder / "groom.data"), format="obj")
     # files as text (a binary value would make schemathesis judge the case schema-violating), sent without a
     # file name: their format is recognised by their content
     return {"character_id": characters, "hairstyle_id": [hairstyle.json()["id"]], "job_id": [queued, done],
+            "batch_id": batches, "hairstyle_ids": [[hairstyle.json()["id"]]],
             "mesh": [files["target.obj"].decode()], "skeleton": [files["target.skeleton.json"].decode()],
             "hair": [(folder / "groom.obj").read_text()]}
 
@@ -132,7 +141,7 @@ def api_schema(redis_url, tmp_path_factory):
     # has none of: left out (None) they let a case through
     swaps = {**real, "source_character_id": real["character_id"][:1],
              "target_character_ids": [real["character_id"], real["character_id"][:1]],
-             "prim": [None], "guides_from": [None]}
+             "prim": [None], "guides_from": [None], "items": [[]]}
 
     @loaded.hook
     def flatmap_case(context, case):
@@ -167,4 +176,4 @@ def test_the_fuzz_got_past_the_door_of_every_operation():
         pytest.skip("runs after test_every_operation_keeps_its_contract in the same session")
     assert {label for label, statuses in ANSWERED.items() if not any(200 <= status < 300 for status in statuses)} \
         == {"GET /readyz"}  # no worker listens: the probe says not ready
-    assert len(ANSWERED) == 14
+    assert len(ANSWERED) == 19
