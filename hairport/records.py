@@ -149,6 +149,19 @@ class ArtifactRecord(Record):
     created_at: float
 
 
+class BodyRecord(Record):
+    """A target body's collision surface (the faces that separate its inside), kept for every job and worker:
+    keyed by the body's content digest (:func:`hairport.solver.body_key`), the mask stored as a ``.npy`` blob."""
+
+    KIND: ClassVar[str] = "bodies"
+    key: str
+    sha256: str
+    suffix: str = ".npy"
+    faces: int
+    seconds: float = Field(description="what building it took")
+    created_at: float
+
+
 class RunInfo(BaseModel):
     """Who runs a job or a preprocessing, and how recently it said so (see :mod:`hairport.records`)."""
 
@@ -193,7 +206,8 @@ class FineChunk(BaseModel):
     worker_pid: int | None = None
     heartbeat_at: float | None = None
     progress: float = 0.0
-    seconds: float | None = None
+    seconds: float | None = Field(None, description="from its claim to its points saved")
+    solve_seconds: float | None = Field(None, description="its solve alone (the rest: loading and building its problem)")
     error: ErrorInfo | None = None
 
 

@@ -176,7 +176,8 @@ class ChunkOut(BaseModel):
     worker: str | None = Field(None, description="the worker running (or that ran) the chunk")
     attempts: int = Field(0, description="runs so far: a chunk whose worker died runs again")
     progress: float = 0.0
-    seconds: float | None = None
+    seconds: float | None = Field(None, description="from its start to its points saved")
+    solve_seconds: float | None = Field(None, description="its solve alone (the rest: loading and building its problem)")
     error: ErrorInfo | None = None
 
 

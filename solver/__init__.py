@@ -65,6 +65,8 @@ _EXPORTS = {
     "TopologyMismatch": ("hairport.solver.model.errors", "TopologyMismatch"),
     "atomic_write": ("hairport.solver.model.files", "atomic_write"),
     "atomic_write_bytes": ("hairport.solver.model.files", "atomic_write_bytes"),
+    "body_key": ("hairport.solver.mesh.collision", "body_key"),
+    "collision_faces": ("hairport.solver.mesh.collision", "collision_faces"),
     "canonical_source": ("hairport.solver.inputs", "canonical_source"),
     "canonical_target": ("hairport.solver.inputs", "canonical_target"),
     "curve_document_in_frame": ("hairport.solver.inputs", "curve_document_in_frame"),

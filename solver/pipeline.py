@@ -165,6 +165,7 @@ def retarget(
     should_stop: Callable[[], bool] | None = None,
     target_input: dict | None = None,
     fine_runner: FineRunner = solve_here,
+    collision_surface: np.ndarray | None = None,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -184,6 +185,9 @@ def retarget(
     fine_runner : FineRunner
         Solves the multi-scale fine level (in this process by default; :func:`solve_fine_chunk`
         solves a run of its strands in another).
+    collision_surface : (F,) bool, optional
+        The target's :func:`~hairport.solver.mesh.collision.collision_faces`, kept from an earlier
+        build (a per-target cache); built here when omitted.
     """
     options.validate()
     progress = progress or no_progress
@@ -193,7 +197,7 @@ def retarget(
         progress("prepare", 0.0, "checking the target")
         target = prepare_target(adaptable, target)
         target_query = MeshQuery(target.vertices, target.faces)
-        body = collision_query(target.vertices, target.faces, target.name)
+        body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
     with timed(timings, "initial_transfer"):
         progress("initial_transfer", 0.05, "initial transfer")
         initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
@@ -321,6 +325,7 @@ def solve_fine_chunk(
     stop: int,
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    collision_surface: np.ndarray | None = None,
 ) -> tuple[np.ndarray, SolveReport]:
     """Solve the normal strands ``first .. stop - 1`` of a multi-scale retarget's fine level in this
     process, as :func:`retarget` with the same ``adaptable``, ``target`` and ``options`` would have
@@ -332,6 +337,8 @@ def solve_fine_chunk(
         The retarget's :attr:`FineLevel.inputs <.multiscale.FineLevel.inputs>` (its adapted guides).
     first, stop : int
         Indices into the normal strands (the hairstyle's strands that are not guides, in order).
+    collision_surface : (F,) bool, optional
+        As for :func:`retarget`.
 
     Returns
     -------
@@ -345,7 +352,7 @@ def solve_fine_chunk(
         raise InputError(f"strands {first}..{stop} are not a run of the {len(fine.strands)} normal strands",
                          code="bad_fine_chunk")
     target = prepare_target(adaptable, target)
-    body = collision_query(target.vertices, target.faces, target.name)
+    body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
     grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
     problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,
                                    fine, inputs, first, stop)

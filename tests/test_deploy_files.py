@@ -261,7 +261,7 @@ def test_worker_command_healthcheck_and_grace_period(services):
     worker = services["worker"]
     command = _command(worker["command"])
     assert command[:2] == ["hairport", "worker"]
-    assert command[command.index("--queues") + 1] == "preprocess,retarget"
+    assert command[command.index("--queues") + 1] == "preprocess,retarget,fine"
     assert "ports" not in worker
     check = _healthcheck_text(worker)
     assert "celery -A hairport.worker.app:celery_app inspect ping" in check
@@ -279,11 +279,15 @@ def test_compose_commands_are_valid_hairport_command_lines(services):
     assert (api.command, api.host, api.port) == ("serve", "0.0.0.0", 8000)
     worker = parser.parse_args(_command(services["worker"]["command"])[1:])
     assert worker.command == "worker"
-    assert worker.queues == "preprocess,retarget" and worker.concurrency == 2
+    assert worker.queues == "preprocess,retarget,fine" and worker.concurrency == 2
     # the healthcheck pings the node name the worker gives itself (default --hostname NAME@%h)
     prefix = worker.hostname.split("@")[0]
     assert worker.hostname.endswith("@%h")
     assert f"-d {prefix}@$$HOSTNAME" in _healthcheck_text(services["worker"])
+    fine = parser.parse_args(_command(services["fine-worker"]["command"])[1:])
+    assert (fine.command, fine.queues, fine.concurrency) == ("worker", "fine", 1)
+    assert f"-d {fine.hostname.split('@')[0]}@$$HOSTNAME" in _healthcheck_text(services["fine-worker"])
+    assert services["fine-worker"]["profiles"] == ["fine"]  # optional: the worker service consumes fine too
 
 
 def test_flower_is_optional_and_points_at_the_same_redis(services):

@@ -57,6 +57,7 @@ from hairport.records import (
 from hairport.repository import Repository
 from hairport.settings import Settings
 
+from . import bodies
 from .loading import error_info, job_inputs
 from .runs import HOST, Heartbeat, OwnRun, new_task_id, run_gone
 
@@ -244,10 +245,12 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
             folder = scratch_folder(repository, job_id, run_token)
             inputs = solver.FineInputs.load(folder / INPUTS_FILE, adaptable.hair, adaptable.multiscale.guides)
             options = solver.RetargetOptions(**job.options)
+            surface, _ = bodies.collision_surface(repository, settings, target)
             points, report = solver.solve_fine_chunk(adaptable, target, options, inputs, chunk.first_strand,
-                                                     chunk.stop_strand, progress, progress.should_stop)
+                                                     chunk.stop_strand, progress, progress.should_stop,
+                                                     collision_surface=surface)
             save_chunk_result(chunk_file(folder, index), points, report)
-        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began)
+        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began, solve_seconds=report.seconds)
     except solver.Cancelled:
         return  # the job is being cancelled or another run took the chunk: it decides
     except TRANSIENT_ERRORS:
@@ -356,7 +359,8 @@ class SpreadFineLevel:
         with Heartbeat(claim.beat, self.settings.heartbeat_seconds):
             results[chunk.index] = solver.solve_level_run(level, chunk.first_strand, chunk.stop_strand, report,
                                                           should_stop)
-        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began)
+        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began,
+                    solve_seconds=results[chunk.index][1].seconds)
         return True
 
     def _revoke(self, job: JobRecord | None) -> None:

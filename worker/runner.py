@@ -41,6 +41,7 @@ from hairport.settings import Settings
 from hairport.solver.render.preview import write_result_preview
 from hairport.storage import Blob, retention_seconds
 
+from . import bodies
 from .fine import FineDispatch, SpreadFineLevel
 from .loading import error_info, job_inputs, read_source
 from .runs import Heartbeat, OwnRun, run_gone, start_run
@@ -217,8 +218,10 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
     options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
                                      hairline=solver.edit_in_canonical(frame, edit))
+    surface, cache_timings = bodies.collision_surface(repository, settings, target)
     result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop,
-                             target_input=target_input, fine_runner=fine_runner)
+                             target_input=target_input, fine_runner=fine_runner, collision_surface=surface)
+    result.timings.update(cache_timings)
     progress("storing", 0.99, "writing outputs")
     outputs = {}
     report = {**result.report(), "job": {"id": job.id, "hairstyle_id": job.hairstyle_id,

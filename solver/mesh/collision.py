@@ -46,7 +46,29 @@ CACHED_BODIES = 4
 _LOCAL = threading.local()
 
 
-def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = None) -> MeshQuery:
+def body_key(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """The content digest of a body (``vertices (V, 3) float64``, ``faces (F, 3) int64``): 32 hex characters."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    return hashlib.blake2b(vertices.tobytes() + b"|" + faces.tobytes(), digest_size=16).hexdigest()
+
+
+def collision_faces(vertices: np.ndarray, faces: np.ndarray, name: str | None = None) -> np.ndarray:
+    """``(F,) bool``: the faces that separate the body's inside from outside (the expensive part of
+    :func:`collision_query`: a winding number at two points per face). ``no_inside`` when there are none."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    separating = exit_faces(vertices, faces, WindingNumber(vertices, faces))
+    if not separating.any():
+        raise InputError(
+            "the body encloses no volume: no face has the body behind it (are its faces oriented inward?)",
+            name, "no_inside",
+        )
+    return separating
+
+
+def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
+                    separating: np.ndarray | None = None) -> MeshQuery:
     """The collision surface of a body and its inside test.
 
     Finding the separating faces takes a winding number at two points per face (~0.25 s on
@@ -60,6 +82,8 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
         Counter-clockwise seen from outside.
     name : str, optional
         The body's name, for the error.
+    separating : (F,) bool, optional
+        :func:`collision_faces` of this body, when kept from an earlier build (another process's).
 
     Returns
     -------
@@ -81,21 +105,20 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
     if key in cache:
         cache.move_to_end(key)
         return cache[key]
-    query = _build(vertices, faces, name)
+    if separating is not None and np.shape(separating) != (len(faces),):
+        raise ValueError(f"separating faces of shape {np.shape(separating)} for a body of {len(faces)} faces")
+    query = _build(vertices, faces, name, separating)
     cache[key] = query
     while len(cache) > CACHED_BODIES:
         cache.popitem(last=False)
     return query
 
 
-def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None) -> MeshQuery:
+def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None, separating: np.ndarray | None) -> MeshQuery:
     winding = WindingNumber(vertices, faces)
-    separating = exit_faces(vertices, faces, winding)
-    if not separating.any():
-        raise InputError(
-            "the body encloses no volume: no face has the body behind it (are its faces oriented inward?)",
-            name, "no_inside",
-        )
+    if separating is None:
+        separating = collision_faces(vertices, faces, name)
+    separating = np.asarray(separating, dtype=bool)
     surface = faces[separating]
     if separating.all() and manifold_closed(faces) and shell_count(faces) == 1:
         inside = InsideTest(winding, closed=True)

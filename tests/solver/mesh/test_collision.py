@@ -6,7 +6,7 @@ import igl
 import numpy as np
 import pytest
 
-from hairport.solver.mesh.collision import collision_query
+from hairport.solver.mesh.collision import body_key, collision_faces, collision_query
 from hairport.solver.mesh.inside import WindingNumber
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
@@ -111,3 +111,30 @@ def test_a_body_is_analysed_once_per_thread():
     thread.start()
     thread.join()
     assert other[0] is not first and np.array_equal(other[0].faces, first.faces)
+
+
+def test_a_kept_collision_surface_gives_the_same_query():
+    """The faces kept from an earlier build (another process's, the per-target cache) give the same surface and
+    signs without the winding numbers over every face; a mask of another body is refused."""
+    outer, outer_faces = icosphere(radius=0.1)
+    inner, inner_faces = icosphere(radius=0.05)
+    vertices = np.vstack([outer, inner])
+    faces = np.vstack([outer_faces, inner_faces + len(outer)])
+    separating = collision_faces(vertices, faces)
+    assert separating.dtype == bool and separating.sum() == len(outer_faces) and not separating[len(outer_faces):].any()
+    built = collision_query(vertices, faces)
+    threaded = []  # another thread: an empty in-memory cache, so the kept mask is what it uses
+    thread = threading.Thread(target=lambda: threaded.append(collision_query(vertices, faces, separating=separating)))
+    thread.start()
+    thread.join()
+    kept = threaded[0]
+    assert kept is not built and np.array_equal(kept.faces, built.faces) and kept.closed == built.closed
+    points = np.random.default_rng(0).uniform(-0.12, 0.12, size=(500, 3))
+    np.testing.assert_array_equal(kept.signed_distance(points).distance, built.signed_distance(points).distance)
+    assert body_key(vertices, faces) == body_key(vertices.copy(), faces.astype(np.int32))
+    assert len(body_key(vertices, faces)) == 32 and body_key(vertices + 1e-9, faces) != body_key(vertices, faces)
+    with pytest.raises(ValueError, match="shape"):
+        collision_query(vertices + 1.0, faces, separating=separating[:-1])
+    with pytest.raises(InputError) as error:
+        collision_faces(outer, outer_faces[:, ::-1], "inverted")
+    assert error.value.code == "no_inside"
