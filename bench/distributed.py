@@ -29,7 +29,6 @@ import argparse
 import contextlib
 import os
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -39,19 +38,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
-from table4 import SOURCE, STYLE, TARGET, _machine, groom_shape  # noqa: E402 - bench/table4.py, beside this script
+from service_load import free_port  # noqa: E402 - bench/service_load.py, beside this script
+from table4 import SOURCE, STYLE, TARGET, _machine, groom_shape  # noqa: E402
 
 KEY = "bench-key"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 START_SECONDS = 120.0
 JOB_SECONDS = 3600.0
 GUIDES = 300
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def wait_until(check, what: str, seconds: float = START_SECONDS, pause: float = 0.2):
@@ -79,9 +73,9 @@ class Deployment:
                     "HAIRPORT_STORAGE_DIR": str(self.folder / "storage"), "HAIRPORT_API_KEYS": KEY,
                     "HAIRPORT_MAX_UPLOAD_BYTES": str(4 * 1024**3)}
         (self.folder / "storage").mkdir()
-        for name, value in self.env.items():
-            if name.startswith("HAIRPORT_"):
-                os.environ[name] = value
+        self.saved = {name: os.environ.get(name) for name in self.env if name.startswith("HAIRPORT_")}
+        for name in self.saved:  # the API in this process reads its settings from the environment
+            os.environ[name] = self.env[name]
         from fastapi.testclient import TestClient
 
         from hairport.service.app import create_app
@@ -104,6 +98,11 @@ class Deployment:
         self.redis.kill()
         self.redis.wait()
         shutil.rmtree(self.folder, ignore_errors=True)
+        for name, value in self.saved.items():  # the next configuration starts from the caller's environment
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
     def upload_character(self, path: Path) -> str:
         response = self.client.post("/v1/characters", headers=AUTH, files={
