@@ -59,7 +59,7 @@ from hairport.settings import Settings
 
 from . import bodies
 from .loading import error_info, job_inputs
-from .runs import HOST, Heartbeat, OwnRun, new_task_id, run_gone
+from .runs import HOST, TRANSIENT_ERRORS, Heartbeat, OwnRun, new_task_id, run_gone
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +70,6 @@ CHUNK_PROGRESS_SECONDS = 0.5
 #: the folder of every job's fine-level scratch under the storage's work/ folder
 FINE_FOLDER = "fine"
 INPUTS_FILE = "inputs.npz"
-#: errors worth retrying (the task's retry policy): the chunk goes back to the queue
-TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
 
 
 @dataclass(frozen=True)

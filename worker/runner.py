@@ -44,7 +44,7 @@ from hairport.storage import Blob, retention_seconds
 from . import bodies
 from .fine import FineDispatch, SpreadFineLevel
 from .loading import error_info, job_inputs, read_source
-from .runs import Heartbeat, OwnRun, run_gone, start_run
+from .runs import TRANSIENT_ERRORS, Heartbeat, OwnRun, run_gone, start_run
 
 #: a running job writes its progress at most this often (s)
 PROGRESS_INTERVAL_SECONDS = 0.5
@@ -52,8 +52,6 @@ PROGRESS_INTERVAL_SECONDS = 0.5
 PURGE_INTERVAL_SECONDS = 3600.0
 #: a retarget waits for its hairstyle's preprocessing this many checks at most (then fails)
 PREPROCESS_POLL_LIMIT = 1800
-#: errors worth retrying: the task retries them with backoff, the job's state is left alone
-TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
 
 log = logging.getLogger(__name__)
 

@@ -29,6 +29,9 @@ log = logging.getLogger(__name__)
 
 #: the name of this host, as runs record it
 HOST = socket.gethostname()
+#: errors worth retrying (I/O, the broker): the task retries them with backoff, and the run hands its record
+#: back to the queue instead of failing it
+TRANSIENT_ERRORS = (ConnectionError, TimeoutError, InterruptedError, BlockingIOError)
 
 
 def new_task_id() -> str:
