@@ -196,6 +196,53 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
     return SegmentFigures(count, angle_sum, angle_max, shape)
 
 
+#: the percentiles the length ratios are reported at
+LENGTH_PERCENTILES = (5, 50, 95)
+
+
+def length_ratios(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarray,
+                  chunk: int = METRICS_CHUNK) -> dict[str, dict[str, float]]:
+    """How segments and strands changed length: percentiles (:data:`LENGTH_PERCENTILES`) of each segment's
+    length over its source length (``segment_length_ratio``), of that over its strand's whole-length ratio
+    (``segment_length_ratio_in_strand``: 1 everywhere when a strand grew or shrank evenly) and of each strand's
+    length over its source's (``strand_length_ratio``). Segments of zero source length are left out.
+
+    Parameters
+    ----------
+    points, source_points : (N, 3) float64
+    offsets : (S+1,) int64
+    chunk : int
+        Particles per block (bounds the float64 temporaries; the ratios are kept as float32).
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    n, strands = len(points), len(offsets) - 1
+    segment_strand = np.repeat(np.arange(strands), np.maximum(np.diff(offsets) - 1, 0))
+    segment_start = np.flatnonzero(np.isin(np.arange(max(n - 1, 0)), offsets[1:] - 1, invert=True))
+    ratio = np.empty(len(segment_start), dtype=np.float32)
+    length, source_length = np.zeros(strands), np.zeros(strands)
+    for first in range(0, len(segment_start), max(1, int(chunk))):
+        rows = slice(first, first + max(1, int(chunk)))
+        starts = segment_start[rows]
+        now = np.linalg.norm(points[starts + 1] - points[starts], axis=1)
+        before = np.linalg.norm(source_points[starts + 1] - source_points[starts], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio[rows] = np.where(before > 0, now / before, np.nan)
+        length += np.bincount(segment_strand[rows], weights=now, minlength=strands)
+        source_length += np.bincount(segment_strand[rows], weights=before, minlength=strands)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        strand_ratio = np.where(source_length > 0, length / source_length, np.nan)
+    in_strand = ratio / strand_ratio[segment_strand].astype(np.float32)
+
+    def percentiles(values: np.ndarray) -> dict[str, float]:
+        values = values[np.isfinite(values)]
+        if len(values) == 0:
+            return {f"p{p}": float("nan") for p in LENGTH_PERCENTILES}
+        return {f"p{p}": float(v) for p, v in zip(LENGTH_PERCENTILES, np.percentile(values, LENGTH_PERCENTILES))}
+
+    return {"segment_length_ratio": percentiles(ratio), "segment_length_ratio_in_strand": percentiles(in_strand),
+            "strand_length_ratio": percentiles(strand_ratio)}
+
+
 def hairstyle_metrics(
     points: np.ndarray,
     source: Hair,
@@ -250,5 +297,6 @@ def hairstyle_metrics(
         "energy_hair_body_per_particle": terms.hair_body / n,
         "energy_total_per_particle": terms.total(weights) / n,
     }
+    metrics.update(length_ratios(points, source.points, source.offsets))
     metrics.update(root_errors(points[is_root], root_targets, query))
     return metrics

@@ -12,6 +12,7 @@ from hairport.solver.metrics import (
     interstrand_error,
     interstrand_residual,
     interstrand_residual_norms,
+    length_ratios,
     mean_particle_distance,
     mean_segment_angle,
     penetration,
@@ -95,6 +96,7 @@ def test_interstrand_error_and_all_metrics_of_a_moved_hairstyle():
     assert metrics["root_to_target_max"] == pytest.approx(0.002, rel=1e-12)  # the middle strand's root moved too
     assert metrics["root_to_target_mean"] == pytest.approx(0.002 / 3, rel=1e-12)
     assert metrics["min_signed_distance_m"] == pytest.approx(0.5 - 0.02 - 0.005, abs=1e-9)  # tip over the ball's pole
+    assert metrics["segment_length_ratio"] == metrics["strand_length_ratio"] == {"p5": 1.0, "p50": 1.0, "p95": 1.0}
 
 
 @pytest.mark.parametrize("chunk", [1, 7, 1 << 18])
@@ -117,3 +119,23 @@ def test_the_compiled_residual_norms_equal_the_numpy_residual_s():
     reference = np.linalg.norm(interstrand_residual(nb, moved, hair.points), axis=1)
     np.testing.assert_allclose(interstrand_residual_norms(nb, moved, hair.points), reference, rtol=1e-14, atol=1e-18)
     assert reference.min() > 0
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 1 << 18])
+def test_length_ratios_of_segments_within_their_strand_and_of_strands(chunk):
+    """Strand 1 doubles evenly; strand 2 keeps its length but bunches (0.5 then 1.25); a one-point strand has
+    no segment; a segment of zero source length is left out."""
+    offsets = np.array([0, 3, 6, 7, 9])
+    source = np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0], [1, 0, 0], [1, 1, 0], [1, 3, 0], [5, 5, 5],
+                       [2, 0, 0], [2, 0, 0]], float)
+    points = source.copy()
+    points[1:3] *= [1, 2, 1]
+    points[4] = [1, 0.5, 0]
+    ratios = length_ratios(points, source, offsets, chunk=chunk)
+    assert ratios["segment_length_ratio"]["p50"] == pytest.approx(np.percentile([2, 2, 0.5, 1.25], 50))
+    assert ratios["segment_length_ratio_in_strand"] == pytest.approx(
+        {f"p{p}": np.percentile([1, 1, 0.5, 1.25], p) for p in (5, 50, 95)}, rel=1e-6)
+    assert ratios["strand_length_ratio"] == pytest.approx({"p5": 1.05, "p50": 1.5, "p95": 1.95})
+    scaled = length_ratios(source * 1.1, source, offsets, chunk=chunk)  # a body 10 % larger: even growth
+    assert scaled["segment_length_ratio_in_strand"] == pytest.approx({"p5": 1.0, "p50": 1.0, "p95": 1.0}, rel=1e-6)
+    assert scaled["strand_length_ratio"] == pytest.approx({"p5": 1.1, "p50": 1.1, "p95": 1.1})
