@@ -140,6 +140,15 @@ class ChunkClaim:
     def write(self, **fields) -> bool:
         """Set ``fields`` of the chunk if the job still runs this fine level and the chunk is still this
         claim's; whether it was."""
+        return self._if_ours(lambda chunk: chunk.model_copy(update=fields))
+
+    def release(self) -> bool:
+        """Hand the chunk back to the queue (a transient error: the task is retried, the run did not die)."""
+        return self._if_ours(lambda chunk: chunk.model_copy(update=dict(
+            state=CHUNK_QUEUED, claim=None, attempts=max(0, chunk.attempts - 1))))
+
+    def _if_ours(self, update: Callable[[FineChunk], FineChunk]) -> bool:
+        """Apply ``update`` to the chunk under the job record's lock while it is this claim's; whether it was."""
         applied = False
 
         def change(job: JobRecord) -> JobRecord | None:
@@ -147,7 +156,7 @@ class ChunkClaim:
             chunk = _current_chunk(job, self.run_token, self.index)
             if chunk is None or chunk.claim != self.token or chunk.state != CHUNK_RUNNING:
                 return None
-            job.fine.chunks[self.index] = chunk.model_copy(update=fields)
+            job.fine.chunks[self.index] = update(chunk)
             applied = True
             return job
 
@@ -252,7 +261,7 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
     except solver.Cancelled:
         return  # the job is being cancelled or another run took the chunk: it decides
     except TRANSIENT_ERRORS:
-        claim.write(state=CHUNK_QUEUED, claim=None, attempts=max(0, _attempts(claim) - 1))
+        claim.release()
         raise
     except FileNotFoundError:
         if _current_chunk(repository.job(job_id), run_token, index) is None:
@@ -262,11 +271,6 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
         claim.write(state=CHUNK_FAILED, error=error_info(error, settings.task_soft_time_limit))
         if not isinstance(error, solver.InputError):
             traceback.print_exc()
-
-
-def _attempts(claim: ChunkClaim) -> int:
-    chunk = _current_chunk(claim.repository.job(claim.job_id), claim.run_token, claim.index)
-    return 0 if chunk is None else chunk.attempts
 
 
 class SpreadFineLevel:

@@ -17,7 +17,7 @@ from hairport.outputs import OutputSet
 from hairport.settings import get_settings
 from hairport.solver import InputError
 
-from .common import EXIT_BAD_INPUT, add_units, axes, mesh_limits, mesh_units, option_help, option_type
+from .common import EXIT_BAD_INPUT, add_units, axes, load_source, mesh_limits, mesh_units, option_help, option_type
 from .solve import _DEFAULTS, add_hairline_arguments, hairline_edit
 
 #: the summary's columns: the pair, its outcome, then the metrics every retarget reports
@@ -99,18 +99,13 @@ def _load_grooms(args: argparse.Namespace, settings, bar: ProgressBar) -> list[G
     for path in args.adaptable:
         bar.note(f"reading {path}")
         grooms.append(Groom(Path(path).stem, solver.load_adaptable(path)))
-    limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes,
-                               memory_budget_bytes=settings.memory_budget_bytes)
     options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides)
     options.validate()
     for source_path, hair_path in args.groom:
         bar.note(f"preprocessing {hair_path}")
-        source, source_units = solver.read_character(source_path, units=mesh_units(args, source_path, None),
-                                                     **mesh_limits(settings))
-        given = args.hair_units if args.hair_units not in (None, solver.AUTO) else args.units
-        units = given if given not in (None, solver.AUTO) else solver.recorded_hair_units(hair_path)
-        hair = solver.read_hair(hair_path, units=units or "m", limits=limits)
-        inputs = solver.canonical_source(source, hair, source_units=source_units, hair_units=units, **axes(args))
+        # the arguments of `hairport retarget --source --hair` for this groom: read as that command reads them
+        one = argparse.Namespace(**vars(args), source=source_path, hair=hair_path, source_skeleton=None, prim=None)
+        inputs = load_source(one, settings, lambda *_: None)
         grooms.append(Groom(Path(hair_path).stem, solver.preprocess(inputs.source, inputs.hair, options,
                                                                      frame=inputs.frame, input_report=inputs.report)))
     return grooms

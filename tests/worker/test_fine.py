@@ -167,3 +167,16 @@ def test_a_chunk_whose_process_died_or_went_silent_is_claimed_again(world, setti
                                    worker_host="elsewhere", worker_pid=1,
                                    heartbeat_at=now() - settings.stale_after_seconds - 1)
     assert claim_chunk(repository, settings, job.id, "run1", 0, "w@h", "t0") is not None
+
+
+def test_a_transient_error_hands_the_chunk_back_uncounted(world, settings):  # noqa: F811
+    repository = world["repository"]
+    job = _running_job_with_chunks(world, settings)
+    claim = claim_chunk(repository, settings, job.id, "run1", 1, "w@h", "t1")
+    assert repository.job(job.id).fine.chunks[1].attempts == 1
+    assert claim.release()
+    chunk = repository.job(job.id).fine.chunks[1]
+    assert (chunk.state, chunk.claim, chunk.attempts) == (CHUNK_QUEUED, None, 0)
+    assert not claim.release()  # no longer this claim's
+    again = claim_chunk(repository, settings, job.id, "run1", 1, "w@h", "t1")
+    assert again is not None and repository.job(job.id).fine.chunks[1].attempts == 1
