@@ -58,7 +58,6 @@ def main() -> None:
     from hairport.solver import jit
     from hairport.solver.adaptation import active_set, contact_qp
     from hairport.solver.adaptation.coupled import solve_hairstyle
-    from hairport.solver.adaptation.energies import EnergyWeights
     from hairport.solver.adaptation.multiscale import CONTACT_BAND
     from hairport.solver.adaptation.options import SolveOptions
     from hairport.solver.body.target import prepare_target
@@ -76,7 +75,7 @@ def main() -> None:
     options = solver.RetargetOptions(method="multiscale")
     target = prepare_target(adaptable, target)
     body = collision_query(target.vertices, target.faces, target.name)
-    initial, _ = initial_transfer(adaptable, target, options.eps_s)
+    initial, _ = initial_transfer(adaptable, target, options.eps_s, carry=options.carry)
     grid = DistanceGrid.build(body, region=(initial.min(axis=0) - GRID_REGION_MARGIN,
                                             initial.max(axis=0) + GRID_REGION_MARGIN))
     solve_options = SolveOptions(eps_c=options.eps_c, max_iterations=options.max_iterations,
@@ -105,7 +104,7 @@ def main() -> None:
             began, began_cpu = time.perf_counter(), time.process_time()
             points, report = solve_hairstyle(
                 adaptable.coarse_model, guide_offsets, initial[guide_particles], guide_roots, body,
-                EnergyWeights(options.alpha, options.beta), solve_options, grid=grid, band=CONTACT_BAND,
+                options.energy_weights(), solve_options, grid=grid, band=CONTACT_BAND,
             )
             return points, report, time.perf_counter() - began, time.process_time() - began_cpu
         finally:

@@ -33,7 +33,6 @@ def fine_level_case(size: int, guides: int, style: str = STYLE):
     """The fine level's inputs at ``size`` particles: (problem, start, body, grid, weights, options)."""
     from hairport import solver
     from hairport.solver.adaptation.coupled import solve_hairstyle
-    from hairport.solver.adaptation.energies import EnergyWeights
     from hairport.solver.adaptation.multiscale import CONTACT_BAND, fine_problem
     from hairport.solver.adaptation.options import SolveOptions
     from hairport.solver.body.target import prepare_target
@@ -49,10 +48,10 @@ def fine_level_case(size: int, guides: int, style: str = STYLE):
     hair = generate_groom(source, style, strands, per_strand, seed=0)
     adaptable = solver.preprocess(source, hair, solver.PreprocessOptions(guides=guides))
     options = solver.RetargetOptions(method="multiscale")
-    weights = EnergyWeights(options.alpha, options.beta)
+    weights = options.energy_weights()
     target = prepare_target(adaptable, target)
     body = collision_query(target.vertices, target.faces, target.name)
-    initial, _ = initial_transfer(adaptable, target, options.eps_s)
+    initial, _ = initial_transfer(adaptable, target, options.eps_s, carry=options.carry)
     grid = DistanceGrid.build(body, region=(initial.min(axis=0) - GRID_REGION_MARGIN,
                                             initial.max(axis=0) + GRID_REGION_MARGIN))
     solve_options = SolveOptions(eps_c=options.eps_c, max_iterations=options.max_iterations,

@@ -9,9 +9,10 @@ solver:
   callback), then the source-only arrays every retarget builds from it (the coarse level's
   operators, the fine level's source arrays, Eq. 5's strand Laplacian);
 * the retarget without the solve, as ``solver.retarget`` runs it: prepare the target,
-  initial transfer (Eq. 3-6), the distance grid of the multi-scale solve, the penetration
-  check and the metrics (of the initial transfer, standing in for a result; the metrics'
-  kNN over all strands is its own row, ``metrics_knn``).
+  initial transfer (Eq. 3-6; the shape carry after it is its own row, ``shape_carry``), the
+  distance grid of the multi-scale solve, the penetration check and the metrics (of the
+  initial transfer, standing in for a result; the metrics' kNN over all strands is its own
+  row, ``metrics_knn``).
 
 With ``--solve`` the retarget is ``solver.retarget`` itself, shape solve included (its
 stages as reported through its progress callback; the distance grid is then inside
@@ -181,6 +182,12 @@ def _retarget_without_solve(adaptable, target, meter: StageMeter, np) -> int:
         body = collision_query(target.vertices, target.faces, target.name)
     with meter.stage("initial_transfer"):
         initial, _ = initial_transfer(adaptable, target, options.eps_s, target_query)
+    carry = getattr(options, "carry", 0.0)  # an older checkout has none
+    if carry:
+        from hairport.solver.transfer.carry import carry_shapes
+
+        with meter.stage("shape_carry"):
+            initial = carry_shapes(initial, hair.points, hair.offsets, hair.is_root, carry)
     roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
     with meter.stage("distance_grid"):
         reach = (initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN)

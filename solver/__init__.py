@@ -48,6 +48,7 @@ _EXPORTS = {
     "check_memory": ("hairport.solver.budget", "check_memory"),
     "warm_up": ("hairport.solver.jit", "warm_up"),
     "OPTION_RANGES": ("hairport.solver.options", "OPTION_RANGES"),
+    "EVEN_SPACING_WEIGHT": ("hairport.solver.adaptation.spacing", "EVEN_SPACING_WEIGHT"),
     "PARAMETERIZATIONS": ("hairport.solver.mesh.parameterization", "PARAMETERIZATIONS"),
     "PenetrationRemaining": ("hairport.solver.model.errors", "PenetrationRemaining"),
     "PreprocessOptions": ("hairport.solver.options", "PreprocessOptions"),

@@ -196,6 +196,40 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
     return SegmentFigures(count, angle_sum, angle_max, shape)
 
 
+def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarray,
+                chunk: int = METRICS_CHUNK) -> tuple[float, float]:
+    """How each strand's bends changed: mean and max over interior particles of ``|turn - source turn|``
+    (rad), the turn being the angle between a particle's two segments.
+
+    Unlike the segment angles it does not see a strand turned as a whole, and it does see a kink
+    that a collapsed segment hides from them (a segment of almost no length may point anywhere).
+
+    Parameters
+    ----------
+    points, source_points : (N, 3) float64
+    offsets : (S+1,) int64
+    chunk : int
+        Particles per block (bounds the temporaries).
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    interior = np.ones(len(points), dtype=bool)
+    interior[offsets[:-1]] = False
+    interior[np.maximum(offsets[1:] - 1, 0)] = False
+    joints = np.flatnonzero(interior)
+    total, largest = 0.0, 0.0
+
+    def turns(p: np.ndarray, j: np.ndarray) -> np.ndarray:
+        before, after = p[j] - p[j - 1], p[j + 1] - p[j]
+        return np.arctan2(np.linalg.norm(np.cross(before, after), axis=1), np.einsum("ij,ij->i", before, after))
+
+    for start in range(0, len(joints), max(1, int(chunk))):
+        j = joints[start : start + max(1, int(chunk))]
+        error = np.abs(turns(points, j) - turns(source_points, j))
+        total += float(error.sum())
+        largest = max(largest, float(error.max(initial=0.0)))
+    return (total / len(joints) if len(joints) else 0.0), largest
+
+
 #: the percentiles the length ratios are reported at
 LENGTH_PERCENTILES = (5, 50, 95)
 
@@ -297,6 +331,7 @@ def hairstyle_metrics(
         "energy_hair_body_per_particle": terms.hair_body / n,
         "energy_total_per_particle": terms.total(weights) / n,
     }
+    metrics["mean_bend_error_rad"], metrics["max_bend_error_rad"] = bend_errors(points, source.points, source.offsets)
     metrics.update(length_ratios(points, source.points, source.offsets))
     metrics.update(root_errors(points[is_root], root_targets, query))
     return metrics

@@ -7,12 +7,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport.solver.adaptation.coupled import QP_BACKENDS
+from hairport.solver.adaptation.energies import EnergyWeights
 from hairport.solver.adaptation.guides import DEFAULT_GUIDES
 from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES
+from hairport.solver.adaptation.spacing import SPACING_BAND, SPACING_WEIGHT
 from hairport.solver.baselines import BASELINE_METHODS, parse_method
 from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.model.errors import InputError
 from hairport.solver.transfer.anchors import ANCHOR_AUTO, ANCHOR_SIGMA, ANCHORINGS
+from hairport.solver.transfer.carry import CARRY_LENGTH_M
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS
 
 #: the shape-adaptation solvers: guides then independent strands (Sec. 5), or all strands coupled
@@ -61,7 +64,11 @@ OPTION_RANGES: dict[str, OptionRange] = {
     "guide_seed": OptionRange(0, 2**32 - 1, True, "", "seed of the guide selection"),
     "alpha": OptionRange(0, 1e9, False, "", "inter-strand weight (Eq. 1)"),
     "beta": OptionRange(0, 1e9, False, "", "hair-body weight (Eq. 1)"),
+    "spacing": OptionRange(0, 1e6, False, "", "weight keeping particles evenly spaced along their strand "
+                           "(beyond the paper; 0: Eq. 1 exactly)"),
     "eps_c": OptionRange(0, 0.02, False, "m", "clearance to the body (Eq. 13)"),
+    "carry": OptionRange(0, 1, False, "m", "length over which the anchored strands take back their source shape "
+                         "(beyond the paper; 0: Eq. 2-6 alone)"),
     "eps_s": OptionRange(0, 100, False, "", "Laplacian discrepancy that marks a strand for smoothing (Eq. 6)"),
     "max_iterations": OptionRange(1, 1000, True, "iterations", "cap on outer solver iterations"),
     "step_tolerance": OptionRange(0, 0.01, False, "m", "converged when no particle moves more than this"),
@@ -123,12 +130,17 @@ class RetargetOptions:
     1), or in ``workers`` processes.
     ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
     active-set method of :mod:`~hairport.solver.adaptation.active_set` or OSQP. ``hairline`` edits the front
-    hairline (Sec. 6; solver methods only).
+    hairline (Sec. 6; solver methods only). ``spacing`` weighs the term beyond the paper that keeps
+    particles evenly spaced along their strands (:mod:`~hairport.solver.adaptation.spacing`); 0 solves
+    the paper's Eq. 1 exactly. ``carry`` (m) lets the anchored strands take back their source shape
+    before the solve (:mod:`~hairport.solver.transfer.carry`); 0 is the paper's initial transfer.
     """
 
     method: str = "multiscale"
     alpha: float = 3e3
     beta: float = 1e3
+    spacing: float = SPACING_WEIGHT
+    carry: float = CARRY_LENGTH_M
     eps_c: float = 5e-4
     eps_s: float = SMOOTHING_EPS
     max_iterations: int = 30
@@ -161,3 +173,7 @@ class RetargetOptions:
                     code="bad_option",
                 )
             self.hairline.validate()
+
+    def energy_weights(self) -> EnergyWeights:
+        """The weights of the energy the shape adaptation minimises."""
+        return EnergyWeights(self.alpha, self.beta, self.spacing, SPACING_BAND)

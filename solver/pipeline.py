@@ -55,6 +55,7 @@ from hairport.solver.model.hair import Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import OPTION_RANGES, SOLVER_METHODS, PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
+from hairport.solver.transfer.carry import carry_shapes
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
@@ -142,8 +143,10 @@ def initial_transfer(
     target: Character,
     eps_s: float = SMOOTHING_EPS,
     query: MeshQuery | None = None,
+    carry: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 3 then Eq. 4-6.
+    """Eq. 3, Eq. 4-6, then the shape carry over ``carry`` m (beyond the paper; 0: none,
+    :mod:`~hairport.solver.transfer.carry`).
 
     Returns
     -------
@@ -154,7 +157,8 @@ def initial_transfer(
     """
     hair = adaptable.hair
     anchored = place_anchors(adaptable.anchors, target, query)
-    return smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=adaptable.strand_laplacian)
+    smoothed, unsmooth = smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=adaptable.strand_laplacian)
+    return carry_shapes(smoothed, hair.points, hair.offsets, hair.is_root, carry), unsmooth
 
 
 def retarget(
@@ -200,7 +204,7 @@ def retarget(
         body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
     with timed(timings, "initial_transfer"):
         progress("initial_transfer", 0.05, "initial transfer")
-        initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query)
+        initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query, options.carry)
 
     roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
     start = gamma = relocation = None
@@ -210,7 +214,7 @@ def retarget(
         roots = relocation.roots
         timings["hairline"] = relocation.report["seconds"]
 
-    weights = EnergyWeights(options.alpha, options.beta)
+    weights = options.energy_weights()
     if options.method in SOLVER_METHODS:
         claims_outside = True
         with timed(timings, "solve"):
@@ -356,7 +360,7 @@ def solve_fine_chunk(
     grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
     problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,
                                    fine, inputs, first, stop)
-    return solve_strands(problem, BodyDistance(body, CONTACT_BAND, grid), EnergyWeights(options.alpha, options.beta),
+    return solve_strands(problem, BodyDistance(body, CONTACT_BAND, grid), options.energy_weights(),
                          shape_solve_options(options), start=start, progress=progress, should_stop=should_stop)
 
 

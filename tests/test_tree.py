@@ -65,6 +65,21 @@ def test_equations_name_existing_functions_and_tests():
                 assert f"def {test}(" in (ROOT / "tests" / current).read_text(), (current, test)
                 checked += 1
     assert checked >= 50
+    beyond = text[text.index("## Beyond the paper"):]
+    extra = [line for line in beyond.splitlines() if line.startswith("| ") and not line.startswith("| What")]
+    assert len(extra) >= 3
+    for row in extra:
+        implemented, tests = row.split("|")[2], row.split("|")[3]
+        named = re.findall(r"`(solver/[\w/]+\.py)` `([\w.]+)`", implemented)
+        assert named, row
+        for path, name in named:
+            assert re.search(rf"(def|class) {name.split('.')[-1]}\b", (ROOT / path).read_text()), (path, name)
+        current = None
+        for path, test in re.findall(r"`((?:solver|quality)/[\w/]+\.py)?(?:::(test_\w+))?(?:\[\w+\])?`", tests):
+            current = path or current
+            assert current and (ROOT / "tests" / current).is_file(), row
+            if test:
+                assert f"def {test}(" in (ROOT / "tests" / current).read_text(), (current, test)
 
 
 def test_the_architecture_table_names_existing_packages():

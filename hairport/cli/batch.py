@@ -48,6 +48,10 @@ def add_batch(sub) -> None:
                    help=option_help("max_iterations"))
     p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
                    help=option_help("energy_tolerance"))
+    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
+                                                 "segments within 0.8-1.25 of their strand's stretch (README, Fidelity)"))
+    p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
+                   help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
     add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
@@ -64,7 +68,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if not args.adaptable and not args.groom:
         raise InputError("give at least one groom: --adaptable FILE.hpa or --groom SOURCE HAIR", code="bad_option")
     options = solver.RetargetOptions(method=args.method, max_iterations=args.max_iterations,
-                                     energy_tolerance=args.energy_tolerance, hairline=hairline_edit(args))
+                                     energy_tolerance=args.energy_tolerance, spacing=args.spacing, carry=args.carry,
+                                     hairline=hairline_edit(args))
     options.validate()
     out = Path(args.out)
     bar = ProgressBar(len(args.targets) * (len(args.adaptable) + len(args.groom)), args.quiet)

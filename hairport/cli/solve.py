@@ -53,6 +53,10 @@ def add_retarget(sub) -> None:
     add_units(p)
     p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
+    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
+                                                 "segments within 0.8-1.25 of their strand's stretch (README, Fidelity)"))
+    p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
+                   help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
     p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))
     p.add_argument("--max-iterations", type=option_type("max_iterations"), default=_DEFAULTS.max_iterations, help=option_help("max_iterations"))
     p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
@@ -128,7 +132,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     out_format = solver.format_for_path(args.out)  # refuse unknown formats and options before any work
     if args.hair:
         solver.format_for_path(args.hair)
-    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, eps_c=args.eps_c,
+    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, spacing=args.spacing, carry=args.carry,
+                                     eps_c=args.eps_c,
                                      max_iterations=args.max_iterations, energy_tolerance=args.energy_tolerance,
                                      workers=args.workers,
                                      qp_backend=args.qp_backend, hairline=hairline_edit(args))

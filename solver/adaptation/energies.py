@@ -19,6 +19,8 @@ the coordinates of a segment's two particles only.
   ``K = diag(sum_j w_ij) - W`` from inverse-distance kNN weights (Eq. 9) over particles of
   other strands (or of guide strands only, Eq. 14) and ``L-bar = K p-bar``.
 * Hair-body (Eq. 11): ``sum_i gamma_i || p_i - p-hat_i ||^2``.
+* Spacing, beyond the paper (:mod:`.spacing`): ``sum_s ((l_s - t_s) / t_s)^2`` with rest lengths
+  ``t`` from the source and the initial transfer; weight ``lambda_s`` (0: Eq. 1 exactly).
 """
 
 from __future__ import annotations
@@ -28,6 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from hairport.solver.adaptation.spacing import (
+    segment_rest_lengths,
+    spacing_blocks,
+    spacing_gradients,
+    spacing_residuals,
+)
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 
 #: Eq. 7's negative curvature is kept down to this share of beta (per segment); a particle
@@ -75,6 +83,8 @@ class ShapeModel:
         Inter-strand Laplacian.
     source_features : (N, 3) float64
         ``L-bar = K p-bar``.
+    source_lengths : (M,) float64
+        Source segment lengths (the spacing term's, :mod:`.spacing`).
     """
 
     segments: np.ndarray
@@ -82,21 +92,29 @@ class ShapeModel:
     source_directions: np.ndarray
     K: sp.csr_matrix
     source_features: np.ndarray
+    source_lengths: np.ndarray
 
     @classmethod
     def build(cls, source_points: np.ndarray, segments: np.ndarray, K: sp.csr_matrix) -> "ShapeModel":
         """Assemble from source particles ``(N, 3)``, segments ``(M, 2)`` and ``K (N, N)``."""
         D = segment_operator(segments, len(source_points))
-        _, directions = unit_rows(D @ source_points)
-        return cls(segments, D, directions, K.tocsr(), K @ source_points)
+        differences = D @ source_points
+        _, directions = unit_rows(differences)
+        return cls(segments, D, directions, K.tocsr(), K @ source_points, np.linalg.norm(differences, axis=1))
+
+    def rest_lengths(self, initial: np.ndarray) -> np.ndarray:
+        """The spacing term's rest length per segment ``(M,)`` for the initial transfer ``(N, 3)``."""
+        return segment_rest_lengths(self.segments, self.source_lengths, initial)
 
 
 @dataclass(frozen=True)
 class EnergyWeights:
-    """Eq. 1's weights (Table 1, meters)."""
+    """Eq. 1's weights (Table 1, meters) and the spacing term's (:mod:`.spacing`; 0 here: the paper's Eq. 1)."""
 
     alpha: float = 3e3
     beta: float = 1e3
+    spacing: float = 0.0
+    spacing_band: tuple[float, float] = (1.0, 1.0)
 
 
 def shape_blocks(
@@ -193,23 +211,33 @@ def hessian(
     weights: EnergyWeights,
     gamma: np.ndarray | None = None,
     radial_damping: float = 0.0,
+    rest: np.ndarray | None = None,
 ) -> sp.csr_matrix:
     """Projected-Newton Hessian of Eq. 1 at ``points``, ``(3N, 3N)``, particle-major (x0 y0 z0 x1 ...).
 
     ``2 (D^T B D + (alpha K^T diag(gamma) K + beta diag(gamma)) (x) I_3)`` with ``B`` the
-    :func:`shape_blocks`.
+    :func:`shape_blocks`, plus the spacing term's blocks for rest lengths ``rest (M,)``
+    (:meth:`ShapeModel.rest_lengths`) when ``weights.spacing`` is not 0.
     """
     n = len(points)
     m = len(model.segments)
     g = np.ones(n) if gamma is None else gamma
     floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[model.segments[:, 0]], g[model.segments[:, 1]])
-    blocks = sp.bsr_matrix(
-        (shape_blocks(model, points, radial_damping, floor), np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m)
-    )
+    segment_blocks = shape_blocks(model, points, radial_damping, floor)
+    if weights.spacing:
+        length, unit = unit_rows(model.D @ points)
+        segment_blocks += 0.5 * spacing_blocks(unit, length, _rest(model, rest), weights.spacing, weights.spacing_band)
+    blocks = sp.bsr_matrix((segment_blocks, np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m))
     D3 = sp.kron(model.D, sp.identity(3), format="csr")
     shape = D3.T @ blocks.tocsr() @ D3
     coupled = weights.alpha * (model.K.T @ sp.diags(g) @ model.K) + weights.beta * sp.diags(g)
     return (2.0 * (shape + sp.kron(coupled, sp.identity(3)))).tocsr()
+
+
+def _rest(model: ShapeModel, rest: np.ndarray | None) -> np.ndarray:
+    if rest is None:
+        raise ValueError("the spacing term needs the rest lengths (ShapeModel.rest_lengths)")
+    return rest
 
 
 def gradient(
@@ -218,8 +246,10 @@ def gradient(
     initial: np.ndarray,
     weights: EnergyWeights,
     gamma: np.ndarray | None = None,
+    rest: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Exact gradient ``(N, 3)`` of Eq. 1 (with Eq. 21's weights) at ``points``.
+    """Exact gradient ``(N, 3)`` of Eq. 1 (with Eq. 21's weights) at ``points``, plus the spacing
+    term's for rest lengths ``rest (M,)`` when ``weights.spacing`` is not 0.
 
     Eq. 7's part is ``2 D^T [(u (u . d-bar) - d-bar) / l]`` per segment.
     """
@@ -227,6 +257,8 @@ def gradient(
     g = np.ones(len(points)) if gamma is None else gamma
     cosine = np.einsum("ij,ij->i", unit, model.source_directions)
     shape_residual = (unit * cosine[:, None] - model.source_directions) / length[:, None]
+    if weights.spacing:
+        shape_residual += 0.5 * spacing_gradients(unit, length, _rest(model, rest), weights.spacing, weights.spacing_band)
     inter_residual = model.K @ points - model.source_features
     return 2.0 * (
         model.D.T @ shape_residual
@@ -242,13 +274,16 @@ class EnergyTerms:
     strand_shape: float
     inter_strand: float
     hair_body: float
+    spacing: float = 0.0
 
     def total(self, weights: EnergyWeights) -> float:
-        return self.strand_shape + weights.alpha * self.inter_strand + weights.beta * self.hair_body
+        return (self.strand_shape + weights.alpha * self.inter_strand + weights.beta * self.hair_body
+                + weights.spacing * self.spacing)
 
 
-def energy_terms(model: ShapeModel, points: np.ndarray, initial: np.ndarray, gamma: np.ndarray | None = None) -> EnergyTerms:
-    """Exact (nonlinear) Eq. 7, Eq. 10 and Eq. 11 at ``points``.
+def energy_terms(model: ShapeModel, points: np.ndarray, initial: np.ndarray, gamma: np.ndarray | None = None,
+                 rest: np.ndarray | None = None, band: tuple[float, float] = (1.0, 1.0)) -> EnergyTerms:
+    """Exact (nonlinear) Eq. 7, Eq. 10 and Eq. 11 at ``points``, and the spacing term for rest lengths ``rest``.
 
     Parameters
     ----------
@@ -257,10 +292,15 @@ def energy_terms(model: ShapeModel, points: np.ndarray, initial: np.ndarray, gam
         ``p-hat`` of Eq. 11.
     gamma : (N,) float64, optional
         Eq. 21's weights.
+    rest : (M,) float64, optional
+        :meth:`ShapeModel.rest_lengths` (the spacing term is 0 without them).
+    band : (low, high)
+        The spacing term's free band (``EnergyWeights.spacing_band``).
     """
     g = np.ones(len(points)) if gamma is None else gamma
-    _, directions = unit_rows(model.D @ points)
+    length, directions = unit_rows(model.D @ points)
     shape = float(np.sum((directions - model.source_directions) ** 2))
     inter = float(np.sum(g * np.sum((model.K @ points - model.source_features) ** 2, axis=1)))
     body = float(np.sum(g * np.sum((points - initial) ** 2, axis=1)))
-    return EnergyTerms(shape, inter, body)
+    spacing = 0.0 if rest is None else float(np.sum(spacing_residuals(length, rest, band) ** 2))
+    return EnergyTerms(shape, inter, body, spacing)

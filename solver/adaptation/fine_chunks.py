@@ -18,6 +18,7 @@ import scipy.sparse as sp
 
 from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
 from hairport.solver.adaptation.strand_problem import StrandProblem
+from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair, particle_indices
 
@@ -124,9 +125,11 @@ def chunk_problem(hair: Hair, guides: np.ndarray, neighbours: Neighbours, fine: 
     rows_neighbours = Neighbours(neighbours.index[rows], neighbours.weight[rows])
     pull_target = neighbour_average(rows_neighbours, guide_points) + fine.source_features[rows]
     gamma = np.ones(len(particles)) if inputs.gamma is None else inputs.gamma[particles]
+    chunk_offsets = offsets[first:stop + 1] - offsets[first]
+    initial = inputs.initial[particles]
     problem = StrandProblem(
-        offsets[first:stop + 1] - offsets[first], fine.source_directions[rows], inputs.initial[particles],
-        sp.diags(fine.pull_weight[rows], format="csr"), pull_target, gamma, hair.is_root[particles],
+        chunk_offsets, fine.source_directions[rows], initial, sp.diags(fine.pull_weight[rows], format="csr"),
+        pull_target, gamma, hair.is_root[particles], rest_lengths(hair.points[particles], initial, chunk_offsets),
     )
     start = problem.initial if inputs.start is None else inputs.start[particles]
     return problem, start

@@ -124,12 +124,16 @@ def solve_uncoupled(
         pull_weight=pull_weight,
         features=np.ascontiguousarray(problem.features, dtype=np.float64),
         gamma=np.ascontiguousarray(problem.gamma, dtype=np.float64),
+        rest_lengths=np.ascontiguousarray(
+            np.zeros(problem.n_particles) if not weights.spacing else problem.spacing_rest(weights), dtype=np.float64),
         fixed=np.ascontiguousarray(problem.fixed, dtype=np.bool_),
     )
     fixed = arrays["fixed"]
     # the merit kernels' problem arguments, in their order
-    problem_arrays = (arrays["source_directions"], arrays["initial"], pull_weight, arrays["features"], arrays["gamma"])
+    problem_arrays = (arrays["source_directions"], arrays["initial"], pull_weight, arrays["features"], arrays["gamma"],
+                      arrays["rest_lengths"])
     alpha, beta, eps_c = float(weights.alpha), float(weights.beta), float(options.eps_c)
+    spacing = (float(weights.spacing), float(weights.spacing_band[0]), float(weights.spacing_band[1]))
     n_strands = problem.n_strands
     points = np.array(problem.initial if start is None else start, dtype=np.float64, order="C")
     report = SolveReport(groups=n_strands)
@@ -164,7 +168,8 @@ def solve_uncoupled(
             while True:
                 strand_kernels.newton_qp_steps(
                     qp_strands, offsets, points, dist, normal, near, arrays["source_directions"], arrays["initial"],
-                    pull_weight, arrays["features"], arrays["gamma"], fixed, alpha, beta, eps_c, damping, penalty,
+                    pull_weight, arrays["features"], arrays["gamma"], arrays["rest_lengths"], fixed, alpha, beta, *spacing,
+                    eps_c, damping, penalty,
                     active, step, qp_rounds, qp_predicted, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE,
                     PARALLEL_SINE, MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
                 )
@@ -187,7 +192,7 @@ def solve_uncoupled(
         finally:
             set_threads(all_threads)
         line_search_kernels.strand_merits(open_strands, offsets, offsets[open_strands], points, dist, *problem_arrays,
-                                          fixed, alpha, beta, penalty, eps_c, MIN_SEGMENT_LENGTH, merit_now)
+                                          fixed, alpha, beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, merit_now)
         if np.any(rounds < 0):
             raise np.linalg.LinAlgError("a strand's Newton system is not positive definite")
         report.active_set_rounds.append(int(rounds.max()))
@@ -219,7 +224,7 @@ def solve_uncoupled(
                 d[short], nrm[short], nr[short] = distance(moved[short])
             todo_merit = np.zeros(len(todo))
             line_search_kernels.strand_merits(strands, offsets, packed[:-1], moved, d, *problem_arrays, fixed, alpha,
-                                              beta, penalty, eps_c, MIN_SEGMENT_LENGTH, todo_merit)
+                                              beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, todo_merit)
             merit_trial[todo] = todo_merit
             if attempt == 0:
                 damping[open_strands] = adapt_damping(damping[open_strands], merit_trial - merit_now, predicted)

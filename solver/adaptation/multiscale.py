@@ -36,6 +36,7 @@ from hairport.solver.adaptation.options import ENGINE_COMPILED, SOLVE_STAGE, Can
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.jit import set_threads, threads
 from hairport.solver.mesh.distance_grid import DistanceGrid
+from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair, particle_indices
 from hairport.solver.model.progress import ProgressFn, rescaled
@@ -266,10 +267,11 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
     pull_target = neighbour_average(nb, points) + fine.source_features
     counts = hair.counts[fine.strands]
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    fine_initial = initial[fine.particles]
     return StrandProblem(
-        offsets, fine.source_directions, initial[fine.particles], sp.diags(fine.pull_weight, format="csr"),
+        offsets, fine.source_directions, fine_initial, sp.diags(fine.pull_weight, format="csr"),
         pull_target, np.ones(len(fine.particles)) if gamma is None else gamma[fine.particles],
-        hair.is_root[fine.particles],
+        hair.is_root[fine.particles], rest_lengths(hair.points[fine.particles], fine_initial, offsets),
     )
 
 

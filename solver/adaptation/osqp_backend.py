@@ -67,10 +67,10 @@ def _constraint_matrix(normals: np.ndarray) -> sp.csc_matrix:
     return sp.csc_matrix((normals.ravel(), indices, indptr), shape=(f, 3 * f))
 
 
-def _merit(model, points, initial, weights, gamma, distance, eps_c, penalty) -> float:
-    """Eq. 1's energy plus an l1 penalty on violated clearance (the line search's merit)."""
+def _merit(model, points, initial, weights, gamma, rest, distance, eps_c, penalty) -> float:
+    """Eq. 1's energy (and the spacing term's) plus an l1 penalty on violated clearance (the line search's merit)."""
     violation = float(np.sum(clearance_violation(distance, eps_c)))
-    return energy_terms(model, points, initial, gamma).total(weights) + penalty * violation
+    return energy_terms(model, points, initial, gamma, rest, weights.spacing_band).total(weights) + penalty * violation
 
 
 def solve_shape_adaptation(
@@ -85,7 +85,7 @@ def solve_shape_adaptation(
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
 ) -> tuple[np.ndarray, SolveReport]:
-    """Minimise Eq. 1 under Eq. 12-13 by sequential QPs.
+    """Minimise Eq. 1 (and the spacing term when ``weights.spacing`` is not 0) under Eq. 12-13 by sequential QPs.
 
     Parameters
     ----------
@@ -138,13 +138,14 @@ def solve_shape_adaptation(
     f = len(free)
     free3 = free_coordinates(fixed)
     sd = target.signed_distance(points[free])
+    rest = model.rest_lengths(initial) if weights.spacing else None
     for iteration in range(options.max_iterations):
         if should_stop is not None and should_stop():
             raise Cancelled("solve cancelled")
-        H = hessian(model, points, weights, gamma, radial_damping)[free3][:, free3]
+        H = hessian(model, points, weights, gamma, radial_damping, rest)[free3][:, free3]
         P = sp.triu(H, format="csc")
         P.sort_indices()
-        q = gradient(model, points, initial, weights, gamma)[free].ravel()
+        q = gradient(model, points, initial, weights, gamma, rest)[free].ravel()
         # one half-space per free particle: without a broad phase every one is constrained
         _, lower = linearised_clearance(sd.distance, options.eps_c)
         A = _constraint_matrix(sd.normal)
@@ -169,14 +170,14 @@ def solve_shape_adaptation(
         dual = result.y
         step = result.x.reshape(f, 3)
         penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(dual), initial=0.0)))
-        merit_now = _merit(model, points, initial, weights, gamma, sd.distance, options.eps_c, penalty)
+        merit_now = _merit(model, points, initial, weights, gamma, rest, sd.distance, options.eps_c, penalty)
         predicted = float(q @ result.x + 0.5 * result.x @ (H @ result.x))
         fraction = 1.0
         for attempt in range(MAX_BACKTRACKS):
             trial = points.copy()
             trial[free] += fraction * step
             trial_sd = target.signed_distance(trial[free])
-            merit_trial = _merit(model, trial, initial, weights, gamma, trial_sd.distance, options.eps_c, penalty)
+            merit_trial = _merit(model, trial, initial, weights, gamma, rest, trial_sd.distance, options.eps_c, penalty)
             if attempt == 0:
                 radial_damping = float(adapt_damping(radial_damping, merit_trial - merit_now, predicted))
             if merit_trial <= merit_now:

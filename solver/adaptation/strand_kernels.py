@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from hairport.solver.adaptation.band_kernels import BAND_REACH, band_cholesky, band_solve, block_matvec, pinned_band
+from hairport.solver.adaptation.spacing import band_excess
 from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 
 
@@ -96,9 +97,11 @@ def clamped_direction_hessian(unit, direction, floor, parallel_sine, out):
 
 
 @kernel
-def assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma,
-                    alpha, beta, damping, min_length, curvature_share, parallel_sine, diagonal, upper, gradient):
-    """One strand's Newton model of Eq. 1 (:func:`.strand_problem.newton_system` with ``K = diag(pull_weight)``).
+def assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma, rest_lengths,
+                    alpha, beta, spacing, spacing_low, spacing_high, damping, min_length, curvature_share, parallel_sine, diagonal, upper,
+                    gradient):
+    """One strand's Newton model of Eq. 1 and the spacing term (:func:`.strand_problem.newton_system` with
+    ``K = diag(pull_weight)``).
 
     Parameters
     ----------
@@ -107,8 +110,12 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
     points, source_directions, initial, features : (N, 3) float64
         The chunk's arrays.
     pull_weight, gamma : (N,) float64
-    alpha, beta : float
-        Eq. 1's weights.
+    rest_lengths : (N,) float64
+        The spacing term's rest lengths (0: no term).
+    alpha, beta, spacing : float
+        Eq. 1's weights and the spacing term's.
+    spacing_low, spacing_high : float
+        The spacing term's free band of ``l / t`` (:func:`.spacing.band_excess`).
     damping : float
         The strand's radial damping.
     min_length, curvature_share, parallel_sine : float
@@ -134,13 +141,22 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
         cosine = unit[0] * d[0] + unit[1] * d[1] + unit[2] * d[2]
         floor = curvature_share * beta * min(gamma[i], gamma[i + 1]) * length**2
         _clamped_block(unit[0], unit[1], unit[2], d[0], d[1], d[2], floor, parallel_sine, block)
+        rest = rest_lengths[i]
+        radial, tangential, pull = 0.0, 0.0, 0.0  # the spacing term's Hessian and gradient factors
+        if spacing != 0.0 and rest > 0.0:
+            excess = band_excess(length / rest, spacing_low, spacing_high)
+            if excess != 0.0:
+                tangential = 2.0 * spacing * (max(excess, 0.0) / (rest * length))
+                radial = 2.0 * spacing / (rest * rest) - tangential
+                pull = 2.0 * spacing * (excess / rest)
         for a in range(3):
             for b in range(3):
                 value = 2.0 * (block[a, b] + damping * unit[a] * unit[b]) / length**2
+                value += radial * unit[a] * unit[b] + (tangential if a == b else 0.0)
                 diagonal[j, a, b] += value
                 diagonal[j + 1, a, b] += value
                 upper[j, a, b] = -value
-            shape_residual = 2.0 * ((unit[a] * cosine - d[a]) / length)
+            shape_residual = 2.0 * ((unit[a] * cosine - d[a]) / length) + pull * unit[a]
             gradient[j, a] -= shape_residual
             gradient[j + 1, a] += shape_residual
     for j in range(count):
@@ -298,8 +314,8 @@ def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, 
 
 @parallel_kernel
 def newton_qp_steps(strands, offsets, points, distance, normal, near, source_directions, initial, pull_weight,
-                    features, gamma, fixed, alpha, beta, eps_c, damping, penalty, active, step, rounds, predicted,
-                    min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
+                    features, gamma, rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, eps_c, damping,
+                    penalty, active, step, rounds, predicted, min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
     """One outer iteration's QP of every listed strand: the step, the raised merit penalty, the model's change.
 
     Parameters
@@ -314,9 +330,9 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
     near : (N,) bool
         Particles that get a linearised Eq. 13 half-space (:func:`.constraints.linearised_clearance`).
     source_directions, initial, features : (N, 3) float64
-    pull_weight, gamma : (N,) float64
+    pull_weight, gamma, rest_lengths : (N,) float64
     fixed : (N,) bool
-    alpha, beta, eps_c : float
+    alpha, beta, spacing, spacing_low, spacing_high, eps_c : float
     damping : (S,) float64
         Radial damping per strand.
     penalty : (S,) float64
@@ -339,8 +355,9 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
         diagonal = np.empty((count, 3, 3))
         upper = np.empty((count, 3, 3))
         gradient = np.empty((count, 3))
-        assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma,
-                        alpha, beta, damping[s], min_length, curvature_share, parallel_sine, diagonal, upper, gradient)
+        assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma, rest_lengths,
+                        alpha, beta, spacing, spacing_low, spacing_high, damping[s], min_length, curvature_share, parallel_sine, diagonal, upper,
+                        gradient)
         constrained = np.empty(count, dtype=np.bool_)
         frames = np.empty((count, 3, 3))
         lower = np.empty(count)
@@ -390,6 +407,6 @@ def _warm() -> None:
     normal[:, 0] = 1.0
     near = np.isfinite(distance)
     newton_qp_steps(np.arange(2, dtype=np.int64), offsets, points, distance, normal, near, directions, points,
-                    np.ones(n), points, np.ones(n), fixed, 3e3, 1e3, 5e-4, np.ones(2), np.zeros(2),
+                    np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed, 3e3, 1e3, 1.0, 0.9, 1.1, 5e-4, np.ones(2), np.zeros(2),
                     np.zeros(n, dtype=np.bool_), np.zeros((n, 3)), np.zeros(2, dtype=np.int64), np.zeros(2),
                     1e-9, 0.2, 1e-12, 2.0, 50)

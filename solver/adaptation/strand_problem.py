@@ -17,11 +17,13 @@ from hairport.solver.adaptation.energies import (
     clamped_direction_hessians,
     unit_rows,
 )
+from hairport.solver.adaptation.spacing import spacing_blocks, spacing_gradients, spacing_residuals
 
 
 @dataclass(frozen=True, eq=False)
 class StrandProblem:
-    """Eq. 1 over a set of strands: ``sum_seg ||u - d||^2 + alpha sum_i gamma_i ||(K p)_i - f_i||^2 + beta sum_i gamma_i ||p_i - p-hat_i||^2``.
+    """Eq. 1 over a set of strands: ``sum_seg ||u - d||^2 + alpha sum_i gamma_i ||(K p)_i - f_i||^2 + beta sum_i gamma_i ||p_i - p-hat_i||^2``,
+    plus the spacing term ``lambda_s sum_seg ((l - t) / t)^2`` (:mod:`.spacing`) where ``weights.spacing`` is not 0.
 
     Attributes
     ----------
@@ -39,6 +41,9 @@ class StrandProblem:
         Eq. 21's weights.
     fixed : (N,) bool
         Particles that do not move (roots).
+    rest_lengths : (N,) float64 or None
+        The spacing term's rest length of the segment starting at each particle (0: no term;
+        :func:`.spacing.rest_lengths`); None only for a problem solved without it (``weights.spacing`` 0).
     """
 
     offsets: np.ndarray
@@ -48,6 +53,21 @@ class StrandProblem:
     features: np.ndarray
     gamma: np.ndarray
     fixed: np.ndarray
+    rest_lengths: np.ndarray | None = None
+
+    def spacing_rest(self, weights: EnergyWeights) -> np.ndarray | None:
+        """The rest lengths ``(N,)`` when ``weights`` turn the spacing term on, else None.
+
+        Raises
+        ------
+        ValueError
+            If the term is on and the problem has no rest lengths.
+        """
+        if not weights.spacing:
+            return None
+        if self.rest_lengths is None:
+            raise ValueError("the spacing term is on (weights.spacing) but the problem has no rest lengths")
+        return self.rest_lengths
 
     @property
     def n_particles(self) -> int:
@@ -105,6 +125,7 @@ class StrandProblem:
                 self.features[index],
                 self.gamma[index],
                 self.fixed[index],
+                None if self.rest_lengths is None else self.rest_lengths[index],
             ),
             index,
         )
@@ -126,6 +147,7 @@ class StrandProblem:
                 self.features[rows],
                 self.gamma[rows],
                 self.fixed[rows],
+                None if self.rest_lengths is None else self.rest_lengths[rows],
             ),
             rows,
         )
@@ -134,14 +156,18 @@ class StrandProblem:
 def problem_from_shape_model(
     model: ShapeModel, offsets: np.ndarray, initial: np.ndarray, fixed: np.ndarray, gamma: np.ndarray | None = None
 ) -> StrandProblem:
-    """The :class:`StrandProblem` of a whole hairstyle's :class:`.energies.ShapeModel`."""
+    """The :class:`StrandProblem` of a whole hairstyle's :class:`.energies.ShapeModel` (with its spacing
+    term's rest lengths for this initial transfer)."""
     n = len(initial)
+    initial = np.asarray(initial, dtype=np.float64)
     directions = np.zeros((n, 3))
     directions[model.segments[:, 0]] = model.source_directions
+    rest = np.zeros(n)
+    rest[model.segments[:, 0]] = model.rest_lengths(initial)
     return StrandProblem(
-        np.asarray(offsets, dtype=np.int64), directions, np.asarray(initial, dtype=np.float64), model.K,
+        np.asarray(offsets, dtype=np.int64), directions, initial, model.K,
         model.source_features, np.ones(n) if gamma is None else np.asarray(gamma, dtype=np.float64),
-        np.asarray(fixed, dtype=bool),
+        np.asarray(fixed, dtype=bool), rest,
     )
 
 
@@ -154,9 +180,12 @@ def group_energies(
     (:func:`.constraints.clearance_violation`) when ``distance (N,)`` is given: the
     active-set line search's merit."""
     seg = problem.segment_starts
-    _, unit = unit_rows(points[seg + 1] - points[seg])
+    length, unit = unit_rows(points[seg + 1] - points[seg])
     per_particle = np.zeros(problem.n_particles)
     per_particle[seg] = np.sum((unit - problem.source_directions[seg]) ** 2, axis=1)
+    rest = problem.spacing_rest(weights)
+    if rest is not None:
+        per_particle[seg] += weights.spacing * spacing_residuals(length, rest[seg], weights.spacing_band) ** 2
     residual = problem.coupling @ points - problem.features
     per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
     per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
@@ -211,6 +240,10 @@ def newton_system(
     projected = clamped_direction_hessians(unit, d, floor)
     mu = radial_damping[seg]
     blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
+    rest = problem.spacing_rest(weights)
+    if rest is not None:
+        rest = rest[seg]
+        blocks += spacing_blocks(unit, length, rest, weights.spacing, weights.spacing_band)
 
     K = problem.coupling
     kdiag = problem.gram.diagonal()
@@ -224,6 +257,8 @@ def newton_system(
     coupling = 2.0 * weights.alpha * off_diagonal if off_diagonal.nnz else None
 
     shape_residual = (unit * cosine[:, None] - d) / length[:, None]
+    if rest is not None:
+        shape_residual += 0.5 * spacing_gradients(unit, length, rest, weights.spacing, weights.spacing_band)
     gradient = np.zeros((n, 3))
     gradient[seg] -= 2.0 * shape_residual
     gradient[seg + 1] += 2.0 * shape_residual

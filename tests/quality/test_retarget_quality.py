@@ -7,6 +7,7 @@ transfers penetrate the body by thousands of particles. Grooms with 3-5 mm segme
 import pytest
 
 from hairport.solver import pipeline
+from hairport.solver.adaptation.spacing import EVEN_SPACING_WEIGHT
 from hairport.solver.baselines import BASELINE_METHODS
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.synthetic.groom import generate_groom
@@ -69,11 +70,33 @@ def test_segment_angles_lower_than_every_pushed_out_baseline(case):
             assert ours.metrics["mean_segment_angle_rad"] < metrics["mean_segment_angle_rad"], method
 
 
-#: the issue asks for 0.1 rad; long hair over the much larger shoulders measures 0.106-0.116
-#: (3-5 mm segments) and is held to what it reaches until the solver improves (README, limits)
-ANGLE_BOUND_RAD = {"fringe": 0.1, "long": 0.12}
+#: issue 2 asked for 0.1 rad; long hair over the much larger shoulders measured 0.106-0.116 with the
+#: paper's initial transfer, 0.084 with the shape carry (issue 16; README, Fidelity)
+ANGLE_BOUND_RAD = {"fringe": 0.1, "long": 0.1}
 
 
 def test_mean_segment_angle_within_bound(case):
     style, _, ours, _, _ = case
     assert ours.metrics["mean_segment_angle_rad"] <= ANGLE_BOUND_RAD[style]
+
+
+#: issue 16: each segment's length over its strand's whole-length ratio, p5 and p95, within this band
+IN_STRAND_BAND = (0.8, 1.25)
+
+
+def test_the_spacing_term_keeps_particles_evenly_spaced_and_bends_where_the_papers_method_bunches_them(case):
+    """The paper's method (no spacing term, no shape carry) bunches and stretches segments within
+    strands on this pair and kinks strands in the collapsed ones; the spacing term at its even-spacing
+    weight (with the default shape carry) keeps every segment's share of its strand within the band
+    and the bends twice as close to the source's."""
+    _, hair, _, _, target = case
+    adaptable = pipeline.preprocess(build_character(PRESETS["average-female"]), hair)
+    paper = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(spacing=0.0, carry=0.0))
+    ours = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(spacing=EVEN_SPACING_WEIGHT))
+    low, high = IN_STRAND_BAND
+    bunched = paper.metrics["segment_length_ratio_in_strand"]
+    assert bunched["p5"] < low or bunched["p95"] > high, bunched
+    within = ours.metrics["segment_length_ratio_in_strand"]
+    assert low <= within["p5"] and within["p95"] <= high, within
+    assert ours.metrics["mean_bend_error_rad"] < 0.5 * paper.metrics["mean_bend_error_rad"]
+    assert paper.metrics["penetrating_particles"] == ours.metrics["penetrating_particles"] == 0

@@ -19,6 +19,7 @@ import trimesh
 from hairport.solver.adaptation.energies import ShapeModel, unit_rows
 from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
 from hairport.solver.adaptation.strand_problem import StrandProblem
+from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.triangles import interpolate_barycentric
 from hairport.solver.model.character import Character, Skeleton
@@ -102,13 +103,14 @@ def model_of(hair: Hair, k=5) -> ShapeModel:
 def fine_problem(hair: Hair, start: np.ndarray, pull_weight: np.ndarray, pull_target: np.ndarray,
                  fixed: np.ndarray | None = None) -> StrandProblem:
     """A decoupled problem (Eq. 14 form: K diagonal) over ``hair``'s strands, from ``start (N, 3)``,
-    each particle pulled with ``pull_weight (N,)`` towards ``pull_target (N, 3)``; roots fixed by default."""
+    each particle pulled with ``pull_weight (N,)`` towards ``pull_target (N, 3)``; roots fixed by default;
+    with the spacing term's rest lengths for ``start`` as the initial transfer."""
     directions = np.zeros_like(hair.points)
     _, unit = unit_rows(hair.points[1:] - hair.points[:-1])
     directions[:-1] = unit
     return StrandProblem(
         hair.offsets, directions, start, sp.diags(pull_weight, format="csr"), pull_target,
-        np.ones(hair.n_particles), hair.is_root if fixed is None else fixed,
+        np.ones(hair.n_particles), hair.is_root if fixed is None else fixed, rest_lengths(hair.points, start, hair.offsets),
     )
 
 

@@ -8,6 +8,7 @@ from hairport.solver.adaptation.energies import EnergyWeights, energy_terms
 from hairport.solver.adaptation.neighbours import knn_other_strands
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import (
+    bend_errors,
     hairstyle_metrics,
     interstrand_error,
     interstrand_residual,
@@ -87,6 +88,7 @@ def test_interstrand_error_and_all_metrics_of_a_moved_hairstyle():
     n = hair.n_particles
     assert metrics["particles"] == n and metrics["penetrating_particles"] == metrics["particles_below_clearance"] == 0
     assert metrics["mean_segment_angle_rad"] == metrics["max_segment_angle_rad"] == 0.0  # a translated strand
+    assert metrics["mean_bend_error_rad"] == metrics["max_bend_error_rad"] == 0.0
     assert metrics["mean_distance_to_initial_m"] == pytest.approx(0.002 * 5 / n, rel=1e-12)
     assert metrics["interstrand_error_m"] == pytest.approx(expected, rel=1e-13)
     terms = energy_terms(model, shifted, hair.points)
@@ -110,6 +112,20 @@ def test_segment_figures_equal_the_per_segment_angles_and_eq7_in_any_block_size(
     assert figures.angle_sum == pytest.approx(angles.sum(), rel=1e-13) and figures.angle_max == angles.max() > 0.05
     assert figures.strand_shape == pytest.approx(energy_terms(model_of(hair, k=2), bent, hair.points).strand_shape,
                                                  rel=1e-13)
+
+
+@pytest.mark.parametrize("chunk", [1, 3, 1 << 18])
+def test_bend_errors_see_a_kink_and_not_a_turned_strand(chunk):
+    straight = np.array([[0.0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 3, 0], [5, 0, 0], [5, 1, 0], [5, 2, 0]])
+    offsets = np.array([0, 4, 7])
+    turned = straight.copy()
+    turned[4:] = [[5, 0, 0], [6, 0, 0], [7, 0, 0]]  # the second strand turned as a whole: no bend changed
+    assert bend_errors(turned, straight, offsets, chunk) == (0.0, 0.0)
+    kinked = straight.copy()
+    kinked[2:4] = [[1, 1, 0], [2, 1, 0]]  # a right angle at particle 1, on straight at particle 2
+    mean, largest = bend_errors(kinked, straight, offsets, chunk)
+    assert largest == pytest.approx(np.pi / 2) and mean == pytest.approx(np.pi / 2 / 3)  # 3 interior particles
+    assert bend_errors(straight[:2], straight[:2], np.array([0, 2]), chunk) == (0.0, 0.0)  # no interior particle
 
 
 def test_the_compiled_residual_norms_equal_the_numpy_residual_s():

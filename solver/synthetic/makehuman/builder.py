@@ -94,6 +94,10 @@ PRESETS: dict[str, MakeHumanParams] = {
                  "neck/neck-scale-horiz-incr": 0.8, "neck/neck-scale-depth-incr": 0.6,
                  "neck/neck-double-incr": 0.5},
     ),
+    "muscular-male": MakeHumanParams(
+        gender=1.0, age=age_from_years(30.0), muscle=1.0, weight=0.6, height=0.55, proportions=0.7,
+        targets={"neck/neck-scale-horiz-incr": 0.6, "neck/neck-scale-depth-incr": 0.4},
+    ),
     "slim-tall-female": MakeHumanParams(
         gender=0.0, age=age_from_years(22.0), muscle=0.4, weight=0.15, height=0.7, proportions=0.9,
         african=0.0, asian=0.7, caucasian=0.3,

@@ -28,7 +28,7 @@ def test_an_unknown_preset_is_one_line(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--source-preset", "giant", "--quiet"]) == 2
     assert capsys.readouterr().err.strip() == (
         "hairport: error: unknown preset 'giant'; expected one of average-female, average-male, heavy-male, "
-        "slim-tall-female, child")
+        "muscular-male, slim-tall-female, child")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from hairport.solver.adaptation.active_set import BACKEND, solve_strands
 from hairport.solver.adaptation.constraints import BodyDistance
-from hairport.solver.adaptation.energies import ShapeModel, segment_operator
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, segment_operator
 from hairport.solver.adaptation.options import STALLED_ITERATIONS, Cancelled, SolveOptions
 from hairport.solver.adaptation.osqp_backend import solve_shape_adaptation
 from hairport.solver.adaptation.strand_problem import problem_from_shape_model
@@ -28,7 +28,8 @@ def shape_model_of(problem, source_points):
     seg = problem.segment_starts
     segments = np.stack([seg, seg + 1], axis=1)
     return ShapeModel(segments, segment_operator(segments, problem.n_particles), problem.source_directions[seg],
-                      problem.coupling, problem.features)
+                      problem.coupling, problem.features,
+                      np.linalg.norm(source_points[seg + 1] - source_points[seg], axis=1))
 
 
 def test_source_is_a_fixed_point(sphere):
@@ -51,8 +52,10 @@ def test_penetrating_start_is_pushed_out_with_clearance_and_roots_stay(sphere):
     np.testing.assert_array_equal(points[hair.is_root], start[hair.is_root])
 
 
-def test_fine_solve_matches_osqp_reference_on_single_strands(sphere):
-    """Issue 3: a few strands with fixed neighbours (Eq. 14), each solved alone by the OSQP loop."""
+@pytest.mark.parametrize("spacing", [0.0, 1.0], ids=["eq1", "spacing"])
+def test_fine_solve_matches_osqp_reference_on_single_strands(sphere, spacing):
+    """Issue 3: a few strands with fixed neighbours (Eq. 14), each solved alone by the OSQP loop
+    (issue 16: with the spacing term too, which the OSQP loop takes from the ShapeModel's rest lengths)."""
     source, query = sphere
     hair = outward_strands(source, n_strands=4, n_points=12, seed=5)
     start = tilt_into_surface(hair, query, np.radians(92.0))  # strands dip into the sphere
@@ -61,12 +64,13 @@ def test_fine_solve_matches_osqp_reference_on_single_strands(sphere):
     pull_weight = np.ones(hair.n_particles)
     pull_target = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)  # guides' pull, elsewhere
     problem = fine_problem(hair, start, pull_weight, pull_target)
-    together, report = solve_strands(problem, BodyDistance(query), options=TIGHT)
+    weights = EnergyWeights(spacing=spacing)
+    together, report = solve_strands(problem, BodyDistance(query), weights, options=TIGHT)
     assert report.converged
     for s in range(hair.n_strands):
         single, index = problem.subset(np.array([s]))
         reference, ref_report = solve_shape_adaptation(
-            shape_model_of(single, hair.points[index]), single.initial, single.fixed, query, options=TIGHT
+            shape_model_of(single, hair.points[index]), single.initial, single.fixed, query, weights, options=TIGHT
         )
         assert ref_report.converged
         assert np.abs(together[index] - reference).max() <= 1e-6, s

@@ -49,12 +49,14 @@ class ChunksElsewhere:
         return np.concatenate(pieces), reports, 1
 
 
-@pytest.mark.parametrize("hairline", [None, HairlineEdit(preset="receding", amount=0.5)], ids=["plain", "hairline"])
-def test_chunks_solved_elsewhere_equal_the_in_process_solve_bit_for_bit(case, tmp_path, hairline):
+@pytest.mark.parametrize("hairline, spacing", [(None, 0.0), (HairlineEdit(preset="receding", amount=0.5), 0.0),
+                                               (None, 0.3)], ids=["plain", "hairline", "spacing"])
+def test_chunks_solved_elsewhere_equal_the_in_process_solve_bit_for_bit(case, tmp_path, hairline, spacing):
     adaptable, target, artifact_path = case
-    options = pipeline.RetargetOptions(method="multiscale", hairline=hairline)
+    options = pipeline.RetargetOptions(method="multiscale", hairline=hairline, spacing=spacing)
     here = pipeline.retarget(adaptable, target, options)
-    runner = ChunksElsewhere(artifact_path, target, pipeline.RetargetOptions(method="multiscale"), tmp_path, 37)
+    runner = ChunksElsewhere(artifact_path, target, pipeline.RetargetOptions(method="multiscale", spacing=spacing),
+                             tmp_path, 37)
     elsewhere = pipeline.retarget(load_adaptable(artifact_path), target, options, fine_runner=runner)
     assert len(runner.chunks) == 3  # 100 normal strands in runs of 37
     assert np.array_equal(here.hair.points, elsewhere.hair.points)

@@ -27,11 +27,13 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
 
     moved_distance = rng.normal(scale=1e-3, size=len(index))
     moved_distance[::4] = np.inf
-    arrays = (problem.source_directions, problem.initial, problem.coupling.diagonal(), problem.features, problem.gamma)
+    arrays = (problem.source_directions, problem.initial, problem.coupling.diagonal(), problem.features, problem.gamma,
+              problem.rest_lengths)
     penalty = rng.uniform(0.0, 10.0, problem.n_strands)
     merit = np.zeros(3)
     line_search_kernels.strand_merits(strands, problem.offsets, packed[:-1], moved, moved_distance, *arrays,
-                                      problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, penalty, 5e-4, MIN_SEGMENT_LENGTH, merit)
+                                      problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
+                                      MIN_SEGMENT_LENGTH, merit)
     trial = points.copy()
     trial[index] = moved
     trial_distance = np.full(n, np.inf)
@@ -43,7 +45,8 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
     at_iterate = np.zeros(3)
     distance = np.where(np.arange(n) % 3 == 0, np.inf, rng.normal(scale=1e-3, size=n))
     line_search_kernels.strand_merits(strands, problem.offsets, problem.offsets[strands], points, distance, *arrays,
-                                      problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, penalty, 5e-4, MIN_SEGMENT_LENGTH,
+                                      problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
+                                      MIN_SEGMENT_LENGTH,
                                       at_iterate)
     expected = group_energies(problem, points, WEIGHTS, problem.strand_of, problem.n_strands,
                               penalty[problem.strand_of], distance, 5e-4)

@@ -16,7 +16,9 @@ from hairport.solver.adaptation.strand_problem import StrandProblem, newton_syst
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 from tests.solver.adaptation.test_banded import random_block_tridiagonal
 
-WEIGHTS = EnergyWeights(alpha=3e3, beta=1e3)
+#: with the spacing term on, and a free band (segments inside and outside it): the kernels and their
+#: references carry it (issue 16)
+WEIGHTS = EnergyWeights(alpha=3e3, beta=1e3, spacing=1.0, spacing_band=(0.9, 1.1))
 
 
 def unit(v):
@@ -24,7 +26,8 @@ def unit(v):
 
 
 def random_problem(rng, counts=(7, 2, 1, 12, 5)):
-    """Strands of ``counts`` particles (4 mm segments, directions off their sources), a diagonal ``K``."""
+    """Strands of ``counts`` particles (4 mm segments, directions off their sources), a diagonal ``K``,
+    rest lengths of 2-6 mm (segments stretched and compressed; a few without the spacing term)."""
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     n = offsets[-1]
     points = np.cumsum(rng.normal(scale=0.004, size=(n, 3)), axis=0)
@@ -32,7 +35,8 @@ def random_problem(rng, counts=(7, 2, 1, 12, 5)):
     fixed[offsets[:-1]] = True
     problem = StrandProblem(offsets, unit(rng.normal(size=(n, 3))), points + rng.normal(scale=2e-3, size=(n, 3)),
                             sp.diags(rng.uniform(0.5, 2.0, n), format="csr"), rng.normal(scale=0.01, size=(n, 3)),
-                            rng.uniform(0.2, 1.0, n), fixed)
+                            rng.uniform(0.2, 1.0, n), fixed,
+                            np.where(np.arange(n) % 5 == 2, 0.0, rng.uniform(0.002, 0.006, n)))
     return problem, points
 
 
@@ -45,7 +49,8 @@ def strand_blocks(problem, points, damping):
         a, b = problem.offsets[s], problem.offsets[s + 1]
         strand_kernels.assemble_strand(
             a, b - a, points, problem.source_directions, problem.initial, w, problem.features, problem.gamma,
-            WEIGHTS.alpha, WEIGHTS.beta, damping[s], MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
+            problem.rest_lengths, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, damping[s], MIN_SEGMENT_LENGTH,
+            NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
             diagonal[a:b], upper[a:b], gradient[a:b],
         )
     return diagonal, upper, gradient
@@ -152,8 +157,8 @@ def test_newton_qp_steps_give_the_steps_and_predictions_of_the_numpy_model():
     predicted = np.zeros(4)
     strand_kernels.newton_qp_steps(
         strands, problem.offsets, points, distance, normal, near, problem.source_directions, problem.initial,
-        problem.coupling.diagonal(), problem.features, problem.gamma, problem.fixed, WEIGHTS.alpha, WEIGHTS.beta,
-        eps_c, damping, penalty, active, step, rounds, predicted, MIN_SEGMENT_LENGTH,
+        problem.coupling.diagonal(), problem.features, problem.gamma, problem.rest_lengths, problem.fixed,
+        WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, eps_c, damping, penalty, active, step, rounds, predicted, MIN_SEGMENT_LENGTH,
         NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, 2.0, 50)
     for t, strand in enumerate(strands):
         sub, rows = problem.strand_run(int(strand), int(strand) + 1)
