@@ -28,18 +28,25 @@ def mean_particle_distance(points: np.ndarray, reference: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(points - reference, axis=1))) if len(points) else 0.0
 
 
-def segment_angles(points: np.ndarray, reference: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Angle (rad) between corresponding segments ``(M, 2)`` of two hairstyles.
-
-    Uses ``atan2(|a x b|, a . b)``, accurate for tiny angles.
+def vector_angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (rad) between rows of ``(M, 3)`` vectors, ``atan2(|a x b|, a . b)``: accurate for tiny angles.
 
     Returns
     -------
     angles : (M,) float64
     """
-    a = points[segments[:, 1]] - points[segments[:, 0]]
-    b = reference[segments[:, 1]] - reference[segments[:, 0]]
     return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+
+
+def segment_angles(points: np.ndarray, reference: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Angle (rad) between corresponding segments ``(M, 2)`` of two hairstyles (:func:`vector_angles`).
+
+    Returns
+    -------
+    angles : (M,) float64
+    """
+    return vector_angles(points[segments[:, 1]] - points[segments[:, 0]],
+                         reference[segments[:, 1]] - reference[segments[:, 0]])
 
 
 def mean_segment_angle(points: np.ndarray, reference: np.ndarray, segments: np.ndarray) -> float:
@@ -186,7 +193,7 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
         starts = ~is_tip[start:stop]
         a = np.diff(points[start : stop + 1], axis=0)[starts]
         b = np.diff(source_points[start : stop + 1], axis=0)[starts]
-        angles = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+        angles = vector_angles(a, b)
         _, unit = unit_rows(a)
         _, source_unit = unit_rows(b)
         count += len(angles)
@@ -198,19 +205,11 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
 
 def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarray,
                 chunk: int = METRICS_CHUNK) -> tuple[float, float]:
-    """How each strand's bends changed: mean and max over interior particles of ``|turn - source turn|``
-    (rad), the turn being the angle between a particle's two segments.
-
-    Unlike the segment angles it does not see a strand turned as a whole, and it does see a kink
-    that a collapsed segment hides from them (a segment of almost no length may point anywhere).
-
-    Parameters
-    ----------
-    points, source_points : (N, 3) float64
-    offsets : (S+1,) int64
-    chunk : int
-        Particles per block (bounds the temporaries).
-    """
+    """How each strand's bends changed, a block of ``chunk`` joints at a time: mean and max over interior
+    particles ``(N, 3)`` (CSR ``offsets``) of ``|turn - source turn|`` (rad), the turn being the angle
+    between a particle's two segments. Unlike the segment angles it does not see a strand turned as a
+    whole, and it does see a kink that a collapsed segment hides from them (a segment of almost no
+    length may point anywhere)."""
     offsets = np.asarray(offsets, dtype=np.int64)
     interior = np.ones(len(points), dtype=bool)
     interior[offsets[:-1]] = False
@@ -219,8 +218,7 @@ def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarr
     total, largest = 0.0, 0.0
 
     def turns(p: np.ndarray, j: np.ndarray) -> np.ndarray:
-        before, after = p[j] - p[j - 1], p[j + 1] - p[j]
-        return np.arctan2(np.linalg.norm(np.cross(before, after), axis=1), np.einsum("ij,ij->i", before, after))
+        return vector_angles(p[j] - p[j - 1], p[j + 1] - p[j])
 
     for start in range(0, len(joints), max(1, int(chunk))):
         j = joints[start : start + max(1, int(chunk))]
