@@ -68,7 +68,7 @@ def fine_level_case(size: int, guides: int, style: str = STYLE):
         grid=grid, band=CONTACT_BAND,
     )
     fine = adaptable.fine_source
-    problem = fine_problem(hair, model, fine, points, initial, np.ones(hair.n_particles))
+    problem = fine_problem(hair, model, fine, points, initial, np.ones(hair.n_particles), spacing=bool(weights.spacing))
     return problem, initial[fine.particles], body, grid, weights, solve_options
 
 

@@ -359,7 +359,7 @@ def solve_fine_chunk(
     body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
     grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
     problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,
-                                   fine, inputs, first, stop)
+                                   fine, inputs, first, stop, spacing=bool(options.spacing))
     return solve_strands(problem, BodyDistance(body, CONTACT_BAND, grid), options.energy_weights(),
                          shape_solve_options(options), start=start, progress=progress, should_stop=should_stop)
 

@@ -19,13 +19,16 @@ from hairport.solver import InputError
 
 from .common import StageProgress
 
-#: metrics printed side by side, with their labels and formats
+#: metrics printed side by side (``a.b``: key ``b`` of metric ``a``), with their labels and formats
 TABLE_ROWS = (
     ("penetrating_particles", "penetrating particles", "{:d}"),
     ("particles_below_clearance", "particles closer than eps_c", "{:d}"),
     ("min_signed_distance_m", "min signed distance (m)", "{:.2e}"),
     ("root_to_target_max", "max root error (m)", "{:.1e}"),
     ("mean_segment_angle_rad", "mean segment angle (rad)", "{:.4f}"),
+    ("mean_bend_error_rad", "mean bend error (rad)", "{:.4f}"),
+    ("segment_length_ratio_in_strand.p5", "segment length in strand, p5", "{:.3f}"),
+    ("segment_length_ratio_in_strand.p95", "segment length in strand, p95", "{:.3f}"),
     ("interstrand_error_m", "inter-strand error (m)", "{:.2e}"),
     ("mean_distance_to_initial_m", "mean dist. to initial transfer (m)", "{:.2e}"),
     ("energy_total_per_particle", "Eq. 1 energy per particle", "{:.3e}"),
@@ -129,5 +132,13 @@ def format_table(ours: dict, baseline: dict, baseline_name: str) -> str:
     head = f"{'metric':<{width}}  {'hairport':>12}  {baseline_name:>22}"
     lines = [head, "-" * len(head)]
     for key, label, fmt in TABLE_ROWS:
-        lines.append(f"{label:<{width}}  {fmt.format(ours[key]):>12}  {fmt.format(baseline[key]):>22}")
+        lines.append(f"{label:<{width}}  {fmt.format(_metric(ours, key)):>12}  {fmt.format(_metric(baseline, key)):>22}")
     return "\n".join(lines)
+
+
+def _metric(metrics: dict, key: str):
+    """``metrics[key]``, or ``metrics[a][b]`` for ``key = "a.b"``."""
+    value = metrics
+    for part in key.split("."):
+        value = value[part]
+    return value

@@ -95,7 +95,7 @@ class FineInputs:
 
 
 def chunk_problem(hair: Hair, guides: np.ndarray, neighbours: Neighbours, fine: FineSource, inputs: FineInputs,
-                  first: int, stop: int) -> tuple[StrandProblem, np.ndarray]:
+                  first: int, stop: int, *, spacing: bool) -> tuple[StrandProblem, np.ndarray]:
     """The problem of the normal strands ``first .. stop - 1`` (indices into ``fine.strands``) and its
     first iterate: the rows of :func:`.multiscale.fine_problem`'s problem (its :meth:`~.StrandProblem.strand_run`)
     for those strands, computed from those rows only.
@@ -110,6 +110,8 @@ def chunk_problem(hair: Hair, guides: np.ndarray, neighbours: Neighbours, fine: 
     fine : FineSource
     inputs : FineInputs
     first, stop : int
+    spacing : bool
+        Whether the spacing term is on (its rest lengths are then built).
 
     Returns
     -------
@@ -129,7 +131,8 @@ def chunk_problem(hair: Hair, guides: np.ndarray, neighbours: Neighbours, fine: 
     initial = inputs.initial[particles]
     problem = StrandProblem(
         chunk_offsets, fine.source_directions[rows], initial, sp.diags(fine.pull_weight[rows], format="csr"),
-        pull_target, gamma, hair.is_root[particles], rest_lengths(hair.points[particles], initial, chunk_offsets),
+        pull_target, gamma, hair.is_root[particles],
+        rest_lengths(hair.points[particles], initial, chunk_offsets) if spacing else None,
     )
     start = problem.initial if inputs.start is None else inputs.start[particles]
     return problem, start

@@ -124,8 +124,9 @@ def solve_uncoupled(
         pull_weight=pull_weight,
         features=np.ascontiguousarray(problem.features, dtype=np.float64),
         gamma=np.ascontiguousarray(problem.gamma, dtype=np.float64),
-        rest_lengths=np.ascontiguousarray(
-            np.zeros(problem.n_particles) if not weights.spacing else problem.spacing_rest(weights), dtype=np.float64),
+        # without the term the kernels read no rest length: one stub instead of N zeros
+        rest_lengths=np.ascontiguousarray(problem.spacing_rest(weights) if weights.spacing else np.zeros(1),
+                                          dtype=np.float64),
         fixed=np.ascontiguousarray(problem.fixed, dtype=np.bool_),
     )
     fixed = arrays["fixed"]

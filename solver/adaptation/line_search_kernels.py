@@ -59,8 +59,8 @@ def strand_merit(first, count, points, distance, rows, source_directions, initia
             length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
             d = source_directions[i]
             value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
-            rest = rest_lengths[i]
-            if spacing != 0.0 and rest > 0.0:
+            rest = rest_lengths[i] if spacing != 0.0 else 0.0  # unread without the term (may be a stub)
+            if rest > 0.0:
                 value += spacing * band_excess(length / rest, spacing_low, spacing_high) ** 2
         w = pull_weight[i]
         inter = 0.0

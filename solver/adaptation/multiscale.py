@@ -240,7 +240,7 @@ def _solve_chunk(args) -> tuple[np.ndarray, SolveReport]:
 
 
 def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: np.ndarray, initial: np.ndarray,
-                 gamma: np.ndarray | None = None) -> StrandProblem:
+                 gamma: np.ndarray | None = None, *, spacing: bool) -> StrandProblem:
     """Eq. 14 over the normal strands, with the guides where ``points`` has them.
 
     Each normal particle is pulled towards its guide neighbours' weighted mean plus its source
@@ -257,6 +257,9 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
         ``p-hat`` of the whole hairstyle.
     gamma : (N,) float64, optional
         Eq. 21's weights; 1 everywhere when omitted.
+    spacing : bool
+        Whether the spacing term is on (the rest lengths are then built; 8 bytes a particle, and
+        more while they are).
 
     Returns
     -------
@@ -271,7 +274,7 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
     return StrandProblem(
         offsets, fine.source_directions, fine_initial, sp.diags(fine.pull_weight, format="csr"),
         pull_target, np.ones(len(fine.particles)) if gamma is None else gamma[fine.particles],
-        hair.is_root[fine.particles], rest_lengths(hair.points[fine.particles], fine_initial, offsets),
+        hair.is_root[fine.particles], rest_lengths(hair.points[fine.particles], fine_initial, offsets) if spacing else None,
     )
 
 
@@ -444,7 +447,7 @@ def solve_multiscale(
 
     began = time.perf_counter()
     if len(fine.strands):
-        problem = fine_problem(hair, model, fine, points, initial, gamma)
+        problem = fine_problem(hair, model, fine, points, initial, gamma, spacing=bool(weights.spacing))
         # without a hairline start the first iterate is p-hat itself: one (n, 3) gather, not two
         fine_start = problem.initial if start is None else first[fine.particles]
         level = FineLevel(problem, fine_start, target, grid, weights, options, engine, workers, chunk_particles,

@@ -111,7 +111,7 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
         The chunk's arrays.
     pull_weight, gamma : (N,) float64
     rest_lengths : (N,) float64
-        The spacing term's rest lengths (0: no term).
+        The spacing term's rest lengths (0: no term; unread, and any length, when ``spacing`` is 0).
     alpha, beta, spacing : float
         Eq. 1's weights and the spacing term's.
     spacing_low, spacing_high : float
@@ -141,9 +141,9 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
         cosine = unit[0] * d[0] + unit[1] * d[1] + unit[2] * d[2]
         floor = curvature_share * beta * min(gamma[i], gamma[i + 1]) * length**2
         _clamped_block(unit[0], unit[1], unit[2], d[0], d[1], d[2], floor, parallel_sine, block)
-        rest = rest_lengths[i]
+        rest = rest_lengths[i] if spacing != 0.0 else 0.0  # unread without the term (may be a stub)
         radial, tangential, pull = 0.0, 0.0, 0.0  # the spacing term's Hessian and gradient factors
-        if spacing != 0.0 and rest > 0.0:
+        if rest > 0.0:
             excess = band_excess(length / rest, spacing_low, spacing_high)
             if excess != 0.0:
                 tangential = 2.0 * spacing * (max(excess, 0.0) / (rest * length))

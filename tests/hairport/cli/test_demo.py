@@ -33,7 +33,10 @@ def test_an_unknown_preset_is_one_line(tmp_path, capsys):
 
 
 def test_table_lines_up_ours_and_the_baseline():
-    metrics = {key: 0 if fmt == "{:d}" else 0.5 for key, _, fmt in TABLE_ROWS}
+    metrics = {key: 0 if fmt == "{:d}" else 0.5 for key, _, fmt in TABLE_ROWS if "." not in key}
+    metrics["segment_length_ratio_in_strand"] = {"p5": 0.125, "p50": 1.0, "p95": 2.5}
     lines = format_table(metrics, metrics, "rbf-warp").splitlines()
     assert len(lines) == 2 + len(TABLE_ROWS) and len({len(line) for line in lines}) == 1
     assert lines[2].startswith("penetrating particles") and lines[2].endswith("0")
+    in_strand = [line for line in lines if line.startswith("segment length in strand")]
+    assert [line.split()[-1] for line in in_strand] == ["0.125", "2.500"]
