@@ -12,7 +12,9 @@ import numpy as np
 
 from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, unit_rows
 from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
+from hairport.solver.adaptation.spacing import spacing_residuals
 from hairport.solver.jit import parallel_kernel, prange, warms
+from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import Hair
 
@@ -228,6 +230,15 @@ def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarr
     return (total / len(joints) if len(joints) else 0.0), largest
 
 
+def spacing_energy(points: np.ndarray, source: Hair, initial: np.ndarray, band: tuple[float, float]) -> float:
+    """The spacing term's value (unweighted) at ``points (N, 3)``, its rest lengths from ``initial``
+    (:mod:`.adaptation.spacing`)."""
+    rest = rest_lengths(source.points, initial, source.offsets)
+    starts = np.flatnonzero(rest > 0)
+    length = np.linalg.norm(points[starts + 1] - points[starts], axis=1)
+    return float(np.sum(spacing_residuals(length, rest[starts], band) ** 2))
+
+
 #: the percentiles the length ratios are reported at
 LENGTH_PERCENTILES = (5, 50, 95)
 
@@ -314,7 +325,8 @@ def hairstyle_metrics(
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))
                     for rows in (slice(start, start + METRICS_CHUNK) for start in range(0, n, METRICS_CHUNK)))
-    terms = EnergyTerms(segments.strand_shape, float(np.sum(residual_norm**2)), hair_body)
+    spacing = spacing_energy(points, source, initial, weights.spacing_band) if weights.spacing else 0.0
+    terms = EnergyTerms(segments.strand_shape, float(np.sum(residual_norm**2)), hair_body, spacing)
     metrics = {
         "particles": n,
         "mean_segment_angle_rad": segments.angle_sum / segments.count if segments.count else 0.0,
@@ -329,6 +341,8 @@ def hairstyle_metrics(
         "energy_hair_body_per_particle": terms.hair_body / n,
         "energy_total_per_particle": terms.total(weights) / n,
     }
+    if weights.spacing:
+        metrics["energy_spacing_per_particle"] = terms.spacing / n
     metrics["mean_bend_error_rad"], metrics["max_bend_error_rad"] = bend_errors(points, source.points, source.offsets)
     metrics.update(length_ratios(points, source.points, source.offsets))
     metrics.update(root_errors(points[is_root], root_targets, query))

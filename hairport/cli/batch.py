@@ -22,7 +22,7 @@ from .solve import _DEFAULTS, add_hairline_arguments, hairline_edit
 
 #: the summary's columns: the pair, its outcome, then the metrics every retarget reports
 SUMMARY_COLUMNS = ("groom", "target", "folder", "status", "error", "seconds", "particles", "penetrating_particles",
-                   "mean_segment_angle_rad", "interstrand_error_m", "root_to_target_max")
+                   "mean_segment_angle_rad", "mean_bend_error_rad", "interstrand_error_m", "root_to_target_max")
 #: width of the progress bar (characters)
 BAR_WIDTH = 30
 

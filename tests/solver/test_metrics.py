@@ -6,6 +6,7 @@ import trimesh
 
 from hairport.solver.adaptation.energies import EnergyWeights, energy_terms
 from hairport.solver.adaptation.neighbours import knn_other_strands
+from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import (
     bend_errors,
@@ -155,3 +156,26 @@ def test_length_ratios_of_segments_within_their_strand_and_of_strands(chunk):
     scaled = length_ratios(source * 1.1, source, offsets, chunk=chunk)  # a body 10 % larger: even growth
     assert scaled["segment_length_ratio_in_strand"] == pytest.approx({"p5": 1.0, "p50": 1.0, "p95": 1.0}, rel=1e-6)
     assert scaled["strand_length_ratio"] == pytest.approx({"p5": 1.1, "p50": 1.1, "p95": 1.1})
+
+
+def test_with_the_spacing_term_on_the_energy_counts_it():
+    hair = parallel_strands(n_strands=3, n_points=5)
+    nb = knn_other_strands(hair.points, hair.strand_of, 2)
+    body = trimesh.creation.icosphere(2, radius=0.005)
+    query = MeshQuery(np.asarray(body.vertices) + [0.0, -0.5, 0.0], body.faces)
+    stretched = hair.points.copy()
+    stretched[hair.offsets[0] + 1:hair.offsets[1]] *= [1.0, 1.5, 1.0]  # the first strand's segments 1.5x along y
+    stretched[hair.offsets[0] + 1:hair.offsets[1], 1] -= 0.5 * hair.points[hair.offsets[0], 1]
+    roots = hair.points[hair.roots]
+    plain = hairstyle_metrics(stretched, hair, hair.points, roots, nb, query, eps_c=5e-4)
+    assert "energy_spacing_per_particle" not in plain
+    weights = EnergyWeights(spacing=2.0)
+    spaced = hairstyle_metrics(stretched, hair, hair.points, roots, nb, query, eps_c=5e-4, weights=weights)
+    rest = rest_lengths(hair.points, hair.points, hair.offsets)
+    starts = np.flatnonzero(rest > 0)
+    length = np.linalg.norm(stretched[starts + 1] - stretched[starts], axis=1)
+    expected = np.sum((length / rest[starts] - 1.0) ** 2) / hair.n_particles
+    assert expected > 0.05
+    assert spaced["energy_spacing_per_particle"] == pytest.approx(expected, rel=1e-12)
+    assert spaced["energy_total_per_particle"] == pytest.approx(plain["energy_total_per_particle"] + 2.0 * expected,
+                                                                rel=1e-12)
