@@ -19,8 +19,9 @@ the coordinates of a segment's two particles only.
   ``K = diag(sum_j w_ij) - W`` from inverse-distance kNN weights (Eq. 9) over particles of
   other strands (or of guide strands only, Eq. 14) and ``L-bar = K p-bar``.
 * Hair-body (Eq. 11): ``sum_i gamma_i || p_i - p-hat_i ||^2``.
-* Spacing, beyond the paper (:mod:`.spacing`): ``sum_s ((l_s - t_s) / t_s)^2`` with rest lengths
-  ``t`` from the source and the initial transfer; weight ``lambda_s`` (0: Eq. 1 exactly).
+* Spacing, beyond the paper (:mod:`.spacing`): ``sum_s excess(l_s / t_s)^2``, how far each segment's
+  length over its rest length ``t`` (from the source and the initial transfer) lies outside a free
+  band; weight ``lambda_s`` (0: Eq. 1 exactly).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from hairport.solver.adaptation.spacing import spacing_blocks, spacing_gradients
 @dataclass(frozen=True, eq=False)
 class StrandProblem:
     """Eq. 1 over a set of strands: ``sum_seg ||u - d||^2 + alpha sum_i gamma_i ||(K p)_i - f_i||^2 + beta sum_i gamma_i ||p_i - p-hat_i||^2``,
-    plus the spacing term ``lambda_s sum_seg ((l - t) / t)^2`` (:mod:`.spacing`) where ``weights.spacing`` is not 0.
+    plus the spacing term ``lambda_s sum_seg excess(l / t)^2`` (:mod:`.spacing`) where ``weights.spacing`` is not 0.
 
     Attributes
     ----------
@@ -43,7 +43,8 @@ class StrandProblem:
         Particles that do not move (roots).
     rest_lengths : (N,) float64 or None
         The spacing term's rest length of the segment starting at each particle (0: no term;
-        :func:`.spacing.rest_lengths`); None only for a problem solved without it (``weights.spacing`` 0).
+        :func:`~hairport.solver.mesh.polyline.rest_lengths`); None only for a problem solved without it
+        (``weights.spacing`` 0).
     """
 
     offsets: np.ndarray
