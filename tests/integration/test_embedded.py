@@ -65,7 +65,8 @@ def test_embedded_server_runs_a_retarget_without_redis(server, tmp_path):
     hairstyle = httpx.post(f"{server}/v1/hairstyles", data={"source_character_id": ids["source"]},
                            files={"hair": ("g.hair", (tmp_path / "hair.hair").read_bytes())}, timeout=60).json()
     job = httpx.post(f"{server}/v1/retargets", json={"hairstyle_id": hairstyle["id"], "target_character_ids": [ids["target"]],
-                                                      "options": {"max_iterations": 5}, "output_format": "hair"},
+                                                      "options": {"max_iterations": 5, "spacing": 10, "carry": 0.05},
+                                                      "output_format": "hair"},
                      timeout=60).json()["jobs"][0]
     deadline = time.time() + 180
     while (state := httpx.get(f"{server}/v1/jobs/{job['id']}", timeout=10).json())["state"] not in (
@@ -74,6 +75,7 @@ def test_embedded_server_runs_a_retarget_without_redis(server, tmp_path):
         time.sleep(0.3)
     assert state["state"] == "succeeded", state
     assert state["metrics"]["penetrating_particles"] == 0
+    assert state["metrics"]["energy_spacing_per_particle"] >= 0.0  # the spacing term reached the solver
     result = httpx.get(f"{server}/v1/jobs/{job['id']}/result", timeout=30)
     assert read_hair_bytes(result.content, "hair").n_strands == 30
 

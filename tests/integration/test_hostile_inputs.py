@@ -146,7 +146,8 @@ def test_malformed_inputs_through_the_api(api, inputs):
     assert hairstyle.status_code == 201, hairstyle.text
     request = {"hairstyle_id": hairstyle.json()["id"], "target_character_ids": [source_id]}
     absurd = [{"k": 10**9}, {"eps_c": 1e308}, {"alpha": -1}, {"guides": 10**9}, {"max_iterations": 10**9},
-              {"step_tolerance": -0.0001}, {"method": "x" * 10_000}, {"eps_s": "NaN"}]
+              {"step_tolerance": -0.0001}, {"method": "x" * 10_000}, {"eps_s": "NaN"}, {"spacing": -1},
+              {"spacing": 1e300}, {"carry": 2.0}]
     for options in absurd:
         response = client.post("/v1/retargets", headers=AUTH, json={**request, "options": options})
         _check(response, f"options-{options}"[:40], outcomes)
