@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Header, Request
 
 from hairport.records import CharacterRecord, HairstyleRecord, JobRecord, Record
 from hairport.repository import Repository
@@ -46,6 +46,11 @@ SettingsDep = Annotated[Settings, Depends(get_app_settings)]
 StorageDep = Annotated[LocalStorage, Depends(get_app_storage)]
 RepositoryDep = Annotated[Repository, Depends(get_repository)]
 QueueDep = Annotated[TaskQueue, Depends(get_queue)]
+
+#: longest Idempotency-Key accepted (characters)
+MAX_IDEMPOTENCY_KEY = 200
+IdempotencyKey = Annotated[str | None, Header(description="repeat a request safely", min_length=1,
+                                              max_length=MAX_IDEMPOTENCY_KEY)]
 
 
 def owned(repository: Repository, model: type[Record], owner: str, record_id: str, noun: str):

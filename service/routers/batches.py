@@ -4,17 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Header, Query, Response
+from fastapi import APIRouter, Depends, Query, Response
 from fastapi.responses import FileResponse
 
 from hairport.records import BatchRecord
 
 from ..auth import Owner
-from ..deps import QueueDep, RepositoryDep, SettingsDep, owned
+from ..deps import IdempotencyKey, QueueDep, RepositoryDep, SettingsDep, owned
 from ..errors import problem_responses
 from ..schemas import BatchIn, BatchOut, BatchPage
 from ..services import batches
-from ..services.retargets import MAX_IDEMPOTENCY_KEY
 
 router = APIRouter(prefix="/v1/batches", tags=["batches"])
 #: largest page of GET /v1/batches
@@ -38,8 +37,7 @@ def create_batch(
     queue: QueueDep,
     request: BatchIn,
     response: Response,
-    idempotency_key: Annotated[str | None, Header(description="repeat a request safely", min_length=1,
-                                                  max_length=MAX_IDEMPOTENCY_KEY)] = None,
+    idempotency_key: IdempotencyKey = None,
 ) -> BatchOut:
     batch = batches.create_batch(repository, queue, settings, owner, request, idempotency_key)
     response.headers["Location"] = f"/v1/batches/{batch.id}"

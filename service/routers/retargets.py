@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Annotated
-
-from fastapi import APIRouter, Header, Response
+from fastapi import APIRouter, Response
 
 from ..auth import Owner
-from ..deps import QueueDep, RepositoryDep, SettingsDep
+from ..deps import IdempotencyKey, QueueDep, RepositoryDep, SettingsDep
 from ..errors import problem_responses
 from ..schemas import JobOut, JobsCreated, RetargetIn
 from ..services import retargets
-from ..services.retargets import MAX_IDEMPOTENCY_KEY
 
 router = APIRouter(prefix="/v1/retargets", tags=["retargets"])
 
@@ -25,8 +22,7 @@ def create_retargets(
     queue: QueueDep,
     request: RetargetIn,
     response: Response,
-    idempotency_key: Annotated[str | None, Header(description="repeat a request safely", min_length=1,
-                                                  max_length=MAX_IDEMPOTENCY_KEY)] = None,
+    idempotency_key: IdempotencyKey = None,
 ) -> JobsCreated:
     jobs = retargets.create_retargets(repository, queue, settings, owner, request, idempotency_key)
     response.headers["Location"] = f"/v1/jobs/{jobs[0].id}"

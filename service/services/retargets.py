@@ -25,14 +25,11 @@ from hairport.repository import Repository
 from hairport.settings import Settings
 from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
-from ..deps import owned
+from ..deps import MAX_IDEMPOTENCY_KEY, owned
 from ..errors import Problem
 from ..schemas import RetargetIn, RetargetOptionsIn
 from ..uploads import input_problem
 from .hairstyles import queue_unavailable, start_preprocessing
-
-#: longest Idempotency-Key accepted (characters)
-MAX_IDEMPOTENCY_KEY = 200
 
 
 @dataclass
