@@ -11,15 +11,13 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from .test_service_api import AUTH, KEY, OTHER_KEY, upload_character, wait_for
+from .deployment import in_process_app, service_env, spawn_worker
+from .test_service_api import AUTH, upload_character, wait_for
 
 #: particles per chunk for this module's deployment, and the iteration cap that keeps each chunk busy
 CHUNK_PARTICLES = 3_000
@@ -30,36 +28,12 @@ JOB_TIMEOUT = 300
 DONE = ("succeeded", "failed", "cancelled")
 
 
-def _env(storage: Path, redis_url: str) -> dict:
-    return {**os.environ, **PERIODS, "HAIRPORT_REDIS_URL": redis_url, "HAIRPORT_STORAGE_DIR": str(storage),
-            "HAIRPORT_API_KEYS": f"{KEY},{OTHER_KEY}", "HAIRPORT_INSECURE_DEV": "false"}
-
-
 @pytest.fixture(scope="module")
 def spread(tmp_path_factory, redis_url):
     storage = tmp_path_factory.mktemp("spread-storage")
-    env = _env(storage, redis_url)
-    with pytest.MonkeyPatch.context() as patch:
-        for name, value in env.items():
-            if name.startswith("HAIRPORT_"):
-                patch.setenv(name, value)
-        from fastapi.testclient import TestClient
-
-        from hairport.service.app import create_app
-        from hairport.settings import Settings, get_settings
-        from hairport.worker.app import make_celery
-        from hairport.worker.queue import TaskQueue
-
-        get_settings.cache_clear()
-        settings = Settings()
-        queue = TaskQueue(make_celery(settings))
-        client = TestClient(create_app(settings, queue=queue))
-        workers: dict[str, subprocess.Popen] = {}
-        for name in ("s1", "s2", "s3"):
-            workers[name] = subprocess.Popen(
-                [sys.executable, "-m", "hairport.cli", "worker", "--no-warmup", "--concurrency", "1",
-                 "--hostname", f"{name}@%h", "--loglevel", "WARNING"], env=env, stdout=subprocess.DEVNULL,
-                stderr=open(storage / f"{name}.log", "wb"), start_new_session=True)
+    env = service_env(storage, redis_url, **PERIODS)
+    with in_process_app(env) as (settings, queue, client):
+        workers = {name: spawn_worker(name, env, storage, warmup=False) for name in ("s1", "s2", "s3")}
         deadline = time.time() + 90
         while len(set(queue.workers(0.5))) < 3:
             assert time.time() < deadline and all(p.poll() is None for p in workers.values()), \
@@ -69,7 +43,6 @@ def spread(tmp_path_factory, redis_url):
             if process.poll() is None:
                 os.killpg(process.pid, signal.SIGKILL)
             process.wait(30)
-        get_settings.cache_clear()
 
 
 @pytest.fixture(scope="module")

@@ -10,14 +10,14 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-KEY, OTHER_KEY = "test-key-1", "test-key-2"
+from .deployment import KEY, OTHER_KEY, in_process_app, service_env, spawn_worker
+
 AUTH = {"Authorization": f"Bearer {KEY}"}
 OTHER = {"X-API-Key": OTHER_KEY}
 #: seconds a dead worker's job waits before Redis hands it out again (short for the test)
@@ -25,49 +25,21 @@ VISIBILITY_TIMEOUT = 6
 JOB_TIMEOUT = 240
 
 
-def _env(storage: Path, redis_url: str) -> dict:
-    env = dict(os.environ)
-    env.update(
-        HAIRPORT_REDIS_URL=redis_url, HAIRPORT_STORAGE_DIR=str(storage), HAIRPORT_API_KEYS=f"{KEY},{OTHER_KEY}",
-        HAIRPORT_VISIBILITY_TIMEOUT=str(VISIBILITY_TIMEOUT), HAIRPORT_INSECURE_DEV="false",
-    )
-    return env
-
-
 @pytest.fixture(scope="module")
 def service(tmp_path_factory, redis_url):
     """Storage folder, settings, the app, and a started worker process (the environment is
     restored afterwards)."""
     storage = tmp_path_factory.mktemp("service-storage")
-    with pytest.MonkeyPatch.context() as patch:
-        for name, value in _env(storage, redis_url).items():
-            if name.startswith("HAIRPORT_"):
-                patch.setenv(name, value)
-        yield from _service(storage, redis_url)
+    env = service_env(storage, redis_url, HAIRPORT_VISIBILITY_TIMEOUT=str(VISIBILITY_TIMEOUT))
+    with in_process_app(env) as (settings, queue, client):
+        yield from _service(storage, env, settings, queue, client)
 
 
-def _service(storage: Path, redis_url: str):
-    from fastapi.testclient import TestClient
-
-    from hairport.service.app import create_app
-    from hairport.settings import Settings, get_settings
-    from hairport.worker.app import make_celery
-    from hairport.worker.queue import TaskQueue
-
-    get_settings.cache_clear()
-    settings = Settings()
-    queue = TaskQueue(make_celery(settings))
-
-    client = TestClient(create_app(settings, queue=queue))
+def _service(storage: Path, env: dict, settings, queue, client):
     workers = []
 
     def start_worker(name: str) -> subprocess.Popen:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "hairport.cli", "worker", "--concurrency", "1", "--hostname", f"{name}@%h",
-             "--loglevel", "WARNING"],
-            env=_env(storage, redis_url), stdout=subprocess.DEVNULL, stderr=open(storage / f"{name}.log", "wb"),
-            start_new_session=True,
-        )
+        process = spawn_worker(name, env, storage)
         workers.append((name, process))
         deadline = time.time() + 60
         while time.time() < deadline:
@@ -88,7 +60,6 @@ def _service(storage: Path, redis_url: str):
             process.wait(timeout=20)
         except subprocess.TimeoutExpired:
             os.killpg(process.pid, signal.SIGKILL)
-    get_settings.cache_clear()
 
 
 @pytest.fixture(scope="module")

@@ -13,13 +13,13 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 from ..conftest import free_port
+from .deployment import in_process_app, service_env, spawn_worker
 from .test_service_api import AUTH, KEY, OTHER_KEY, assert_problem, files, upload_character, wait_for  # noqa: F401
 
 #: short periods for the test (s): heartbeat, stale threshold, sweep period, lost-message deadline
@@ -61,8 +61,7 @@ class RedisServer:
 
 
 def _env(storage: Path, redis_url: str) -> dict:
-    return {**os.environ, **PERIODS, "HAIRPORT_REDIS_URL": redis_url, "HAIRPORT_STORAGE_DIR": str(storage),
-            "HAIRPORT_API_KEYS": f"{KEY},{OTHER_KEY}", "HAIRPORT_INSECURE_DEV": "false"}
+    return service_env(storage, redis_url, **PERIODS)
 
 
 @pytest.fixture(scope="module")
@@ -73,28 +72,11 @@ def faults(tmp_path_factory):
     server.start()
     storage = tmp_path_factory.mktemp("faults-storage")
     env = _env(storage, server.url)
-    with pytest.MonkeyPatch.context() as patch:
-        for name, value in env.items():
-            if name.startswith("HAIRPORT_"):
-                patch.setenv(name, value)
-        from fastapi.testclient import TestClient
-
-        from hairport.service.app import create_app
-        from hairport.settings import Settings, get_settings
-        from hairport.worker.app import make_celery
-        from hairport.worker.queue import TaskQueue
-
-        get_settings.cache_clear()
-        settings = Settings()
-        queue = TaskQueue(make_celery(settings))
-        client = TestClient(create_app(settings, queue=queue))
+    with in_process_app(env) as (settings, queue, client):
         workers: dict[str, subprocess.Popen] = {}
 
         def start_worker(name: str, folder: Path = storage) -> subprocess.Popen:
-            process = subprocess.Popen(
-                [sys.executable, "-m", "hairport.cli", "worker", "--no-warmup", "--concurrency", "1", "--hostname", f"{name}@%h",
-                 "--loglevel", "WARNING"], env=_env(folder, server.url), stdout=subprocess.DEVNULL,
-                stderr=open(storage / f"{name}.log", "wb"), start_new_session=True)
+            process = spawn_worker(name, _env(folder, server.url), storage, warmup=False)
             workers[name] = process
             deadline = time.time() + 60
             while not any(name in reply for reply in map(str, queue.ping_workers(0.5))):
@@ -111,7 +93,6 @@ def faults(tmp_path_factory):
         for name in list(workers):
             stop_worker(name, signal.SIGKILL)
         server.stop()
-        get_settings.cache_clear()
 
 
 @pytest.fixture(scope="module")

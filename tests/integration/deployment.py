@@ -1,0 +1,54 @@
+"""A deployment for the integration tests: the environment of a storage folder and a Redis, the FastAPI app
+in-process on it, and ``hairport worker`` processes of one child each."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+KEY, OTHER_KEY = "test-key-1", "test-key-2"
+
+
+def service_env(storage: Path, redis_url: str, **settings: str) -> dict:
+    """This process's environment with the deployment's: storage, Redis, the two test keys, and ``settings``
+    (``HAIRPORT_...`` names)."""
+    return {**os.environ, "HAIRPORT_REDIS_URL": redis_url, "HAIRPORT_STORAGE_DIR": str(storage),
+            "HAIRPORT_API_KEYS": f"{KEY},{OTHER_KEY}", "HAIRPORT_INSECURE_DEV": "false", **settings}
+
+
+@contextmanager
+def in_process_app(env: dict):
+    """``(settings, queue, client)`` of the app built with ``env``'s ``HAIRPORT_`` variables set; the variables
+    and the settings cache are restored afterwards."""
+    with pytest.MonkeyPatch.context() as patch:
+        for name, value in env.items():
+            if name.startswith("HAIRPORT_"):
+                patch.setenv(name, value)
+        from fastapi.testclient import TestClient
+
+        from hairport.service.app import create_app
+        from hairport.settings import Settings, get_settings
+        from hairport.worker.app import make_celery
+        from hairport.worker.queue import TaskQueue
+
+        get_settings.cache_clear()
+        settings = Settings()
+        queue = TaskQueue(make_celery(settings))
+        try:
+            yield settings, queue, TestClient(create_app(settings, queue=queue))
+        finally:
+            get_settings.cache_clear()
+
+
+def spawn_worker(name: str, env: dict, log_folder: Path, warmup: bool = True) -> subprocess.Popen:
+    """A ``hairport worker`` process of one child, hostname ``name@%h``, in a session of its own (for
+    ``os.killpg``), its stderr in ``log_folder / f"{name}.log"``."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "hairport.cli", "worker", *([] if warmup else ["--no-warmup"]), "--concurrency", "1",
+         "--hostname", f"{name}@%h", "--loglevel", "WARNING"],
+        env=env, stdout=subprocess.DEVNULL, stderr=open(log_folder / f"{name}.log", "wb"), start_new_session=True)
