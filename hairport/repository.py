@@ -88,6 +88,14 @@ class Repository:
 
     # ---------------------------------------------------------------- jobs
 
+    def list_owned(self, model: type[R], owner: str, limit: int, offset: int) -> tuple[list[R], int]:
+        """``owner``'s records of a kind, newest first: the page and the total (reads every record of the kind:
+        unlike jobs, these have no index)."""
+        mine = [model.model_validate(document) for document in self.storage.list_records(model.KIND)
+                if document.get("owner") == owner]
+        mine.sort(key=lambda record: record.created_at, reverse=True)
+        return mine[offset:offset + limit], len(mine)
+
     def create_job(self, job: JobRecord) -> None:
         """Store a new job and its index entry."""
         self.storage.put_record(job.KIND, job.id, job.model_dump(mode="json"), written=self._reindex)

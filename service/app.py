@@ -14,7 +14,7 @@ from hairport.settings import Settings, get_settings
 from hairport.storage import LocalStorage, deployment_id
 from hairport.worker.queue import TaskQueue, connect
 
-from . import contract, docs, errors
+from . import contract, dashboard_ui, docs, errors
 from .auth import check_configuration
 from .routers import batches, characters, hairstyles, health, jobs, retargets
 
@@ -107,4 +107,5 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
         app.include_router(router)
     contract.install(app)
     docs.install(app)
+    dashboard_ui.install(app)
     return app

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, Header, Request
+from fastapi import Depends, Header, Query, Request
 
 from hairport.records import CharacterRecord, HairstyleRecord, JobRecord, Record
 from hairport.repository import Repository
@@ -46,6 +46,12 @@ SettingsDep = Annotated[Settings, Depends(get_app_settings)]
 StorageDep = Annotated[LocalStorage, Depends(get_app_storage)]
 RepositoryDep = Annotated[Repository, Depends(get_repository)]
 QueueDep = Annotated[TaskQueue, Depends(get_queue)]
+
+#: largest page of a listing (GET /v1/jobs, /v1/batches, /v1/characters, /v1/hairstyles)
+MAX_PAGE = 200
+DEFAULT_PAGE = 50
+PageLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="most items in the page")]
+PageOffset = Annotated[int, Query(ge=0, description="items skipped, newest first")]
 
 #: longest Idempotency-Key accepted (characters)
 MAX_IDEMPOTENCY_KEY = 200

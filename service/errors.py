@@ -85,8 +85,9 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
     401: ("no API key, or an unknown one (`WWW-Authenticate: Bearer`)", ("unauthorized",)),
     404: ("no such resource for this key: what another key created is not found either", ("not_found",)),
     405: ("the path does not take this method (`Allow` lists those it takes)", ("method_not_allowed",)),
-    409: ("the job has not succeeded (yet): it has no outputs; or the batch has jobs that have not ended",
-          ("job_not_succeeded", "batch_not_finished")),
+    409: ("the job has not succeeded (yet): it has no outputs; or the batch has jobs that have not ended; or the "
+          "job ran before hairport saved what the dashboard draws, or its groom has no front hairline",
+          ("job_not_succeeded", "batch_not_finished", "no_scene", "no_hairline")),
     410: ("the output was removed by the retention policy", ("gone",)),
     413: ("the body, an upload, a count in it or its estimated memory is above this deployment's limits",
           ("upload_too_large", "too_large", "over_memory_budget")),
@@ -98,8 +99,8 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
                         "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
                         "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair")),
-    503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds",
-          ("queue_unavailable",)),
+    503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds (or, at `/ui`, "
+          "the dashboard was not built)", ("queue_unavailable", "dashboard_not_built")),
 }
 #: the Problem schema in the OpenAPI document (service/contract.py puts it there)
 PROBLEM_SCHEMA_REF = "#/components/schemas/Problem"

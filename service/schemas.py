@@ -73,6 +73,14 @@ class CharacterOut(BaseModel):
         )
 
 
+class CharacterPage(BaseModel):
+    characters: list[CharacterOut]
+    total: int
+    limit: int
+    offset: int
+    next_offset: int | None = None
+
+
 class PreprocessingOut(BaseModel):
     state: PreprocessingState
     error: ErrorInfo | None = None
@@ -100,6 +108,14 @@ class HairstyleOut(BaseModel):
         )
 
 
+class HairstylePage(BaseModel):
+    hairstyles: list[HairstyleOut]
+    total: int
+    limit: int
+    offset: int
+    next_offset: int | None = None
+
+
 def ranged(name: str, default=None):
     """A ``Field`` whose bounds and description come from the solver's range of option ``name``
     (:data:`hairport.solver.OPTION_RANGES`): values outside it are 422 at the door."""
@@ -115,7 +131,9 @@ class RetargetOptionsIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    method: str = _RETARGET.method
+    method: str = Field(_RETARGET.method, description=(
+        "the paper's solvers (multiscale, global) or a naive baseline; a baseline may carry the suffix +pushout"),
+        json_schema_extra={"examples": list(solver.METHODS)})
     guides: int | None = ranged("guides")
     k: int | None = ranged("k")
     alpha: float = ranged("alpha", _RETARGET.alpha)
@@ -167,6 +185,30 @@ class RetargetIn(BaseModel):
                                                  "formats with attributes")
 
 
+#: the strand layers a job draws: its result, and the groom on its source character
+StrandLayer = Literal["result", "source"]
+#: the bodies a job draws
+BodyLayer = Literal["target", "source"]
+DISPLAY_DESCRIPTION = (
+    "`application/vnd.hairport.display`: the ASCII magic `HPD1`, a little-endian uint32 header length, a JSON "
+    "header (`arrays`: name, dtype, shape, offset from the end of the header), then the arrays, 8-byte aligned. "
+    "Strands: `positions` (M, 3) float32 meters in hairport's frame (+Y up, face toward +Z), `starts` (K+1,) "
+    "uint32, `inside` (M,) uint8 (1: inside the target body), `color` (M, 3) uint8 when the groom has colours. "
+    "Bodies: `vertices` (V, 3) float32, `faces` (F, 3) uint32, and the header's `up` vector.")
+
+
+class HairlineOut(BaseModel):
+    """A job target's front hairline: draw a new one from it and send it as ``hairline.curve`` (in the groom's
+    axes: ``groom_rotation`` R maps them to hairport's, so a point p drawn here is sent as R^T p)."""
+
+    units: Literal["m"] = "m"
+    points: list[list[float]] = Field(description="the current hairline, ear to ear, hairport's frame (meters)")
+    turning_points: list[int] = Field(description="indices of its corners (the ends included)")
+    presets: dict[str, list[list[float]]] = Field(description="each preset's edit of it at amount 1")
+    groom_rotation: list[list[float]] = Field(description="R with hairport's frame = R @ the groom's axes")
+    groom_units: str = Field(description="the groom file's units")
+
+
 class ChunkOut(BaseModel):
     """One chunk of a job's multi-scale fine level, solved by whichever worker took it."""
 
@@ -193,6 +235,8 @@ class JobOut(BaseModel):
     target_character_id: str
     output_format: HairFormat
     options: dict
+    hairline: dict | None = Field(None, description="the hairline edit asked for (a preset or a drawn curve)")
+    flag_guides: bool = False
     attempts: int = Field(0, description="starts so far: a job whose worker died runs again, up to "
                                          "HAIRPORT_MAX_ATTEMPTS starts (then it fails with worker_lost)")
     worker: str | None = Field(None, description="the worker running (or last running) the job")

@@ -28,6 +28,7 @@ from hairport import __version__
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.multiscale import MultiscaleModel
 from hairport.solver.adaptation.neighbours import Neighbours
+from hairport.solver.display import colors_u8
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write
@@ -206,3 +207,29 @@ def load_adaptable(path: str | os.PathLike):
         raise InputError("adaptable hairstyle arrays disagree in particle count", str(path), "bad_artifact")
     return AdaptableHairstyle(source, hair, anchors, multiscale, options, bone_names, dict(meta.get("timings", {})),
                               frame, dict(meta.get("input_report") or {}))
+
+
+#: what :func:`source_scene` reads of an artifact: the source groom and body (hairport's frame)
+SOURCE_SCENE_MEMBERS = {"hair_points": "points", "hair_offsets": "offsets", "hair_color": "color",
+                        "source_vertices": "body_vertices", "source_faces": "body_faces"}
+
+
+def source_scene(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The source groom and body of an artifact for display (:mod:`~hairport.solver.display`): ``points`` (N, 3)
+    float32, ``offsets``, ``color`` (N, 3) uint8 when the groom has colours, ``body_vertices`` float32 and
+    ``body_faces`` uint32. Only those members are read (the artifact's digest, which covers them all, is checked
+    when a retarget loads it)."""
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[member] for member, name in SOURCE_SCENE_MEMBERS.items() if member in archive.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as error:
+        raise InputError(f"not a readable adaptable hairstyle ({error})", str(path), "bad_artifact") from None
+    missing = {"points", "offsets", "body_vertices", "body_faces"} - set(arrays)
+    if missing:
+        raise InputError(f"not an adaptable hairstyle: no {', '.join(sorted(missing))}", str(path), "bad_artifact")
+    arrays["points"] = arrays["points"].astype(np.float32)
+    arrays["body_vertices"] = arrays["body_vertices"].astype(np.float32)
+    arrays["body_faces"] = arrays["body_faces"].astype(np.uint32)
+    if "color" in arrays:
+        arrays["color"] = colors_u8(arrays["color"])
+    return arrays

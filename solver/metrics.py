@@ -296,6 +296,7 @@ def hairstyle_metrics(
     eps_c: float,
     weights: EnergyWeights = EnergyWeights(),
     body: MeshQuery | None = None,
+    penetration_stats: dict | None = None,
 ) -> dict:
     """All section-4 metrics of a retargeted hairstyle, as a JSON-ready dict.
 
@@ -317,10 +318,12 @@ def hairstyle_metrics(
     body : MeshQuery, optional
         The target's collision surface (:func:`.mesh.collision.collision_query`) for the
         penetration figures; ``query`` by default.
+    penetration_stats : dict, optional
+        :func:`penetration` of ``points`` against that body, when the caller measured it already.
     """
     n = len(points)
     is_root = source.is_root
-    pen = penetration(points, is_root, query if body is None else body, eps_c)
+    pen = penetration_stats or penetration(points, is_root, query if body is None else body, eps_c)
     segments = segment_figures(points, source.points, source.offsets)
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))

@@ -12,6 +12,7 @@ roots' metrics against its whole mesh.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -38,8 +39,10 @@ from hairport.solver.adaptation.multiscale import (
 from hairport.solver.adaptation.options import SolveOptions, SolveReport
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
+from hairport.solver.display import scene_arrays
 from hairport.solver.hairline.curve import HairlineCurve
 from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.hairline.presets import PRESETS as HAIRLINE_PRESETS
 from hairport.solver.hairline.presets import parse_preset
 from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
 from hairport.solver.hairline.weights import adaptive_weights
@@ -47,7 +50,7 @@ from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.metrics import hairstyle_metrics
+from hairport.solver.metrics import hairstyle_metrics, penetration
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
@@ -74,6 +77,8 @@ class RetargetResult:
     timings: dict
     solve: SolveReport | MultiscaleReport | None = None
     relocation: Relocation | None = None
+    #: (N,) bool: the particles inside the target body (the metrics' penetration test)
+    inside: np.ndarray | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -236,8 +241,11 @@ def retarget(
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
+        body_distance = penetration(points, hair.is_root, body, options.eps_c)
         metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query, options.eps_c,
-                                    weights, body=body)
+                                    weights, body=body, penetration_stats=body_distance)
+        inside = np.zeros(hair.n_particles, dtype=bool)
+        inside[~hair.is_root] = body_distance["distance"] < 0.0
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved
@@ -250,7 +258,7 @@ def retarget(
             metrics["input"] = {**adaptable.input_report, **({"target": target_input} if target_input else {})}
     progress("done", 1.0, "done")
     return RetargetResult(
-        hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation
+        hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside
     )
 
 
@@ -402,16 +410,42 @@ def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: 
     """The target's current front hairline (or a preset's edit of it) as a curve document,
     ``{"units": "m", "points": [[x, y, z], ...], "turning_points": [...]}``, ready to be
     edited and passed back as a hairline curve (same ends, same turning points)."""
+    return hairline_documents(adaptable, target, (preset,), parameterization)[preset]
+
+
+def hairline_documents(adaptable: AdaptableHairstyle, target: Character, presets: tuple[str | None, ...],
+                       parameterization: str = "harmonic") -> dict[str | None, dict]:
+    """:func:`hairline_document` for several presets (None: the current hairline), the scalp chart built once."""
     target = prepare_target(adaptable, target)
     roots = adaptable.hair.roots
     setup = scalp_chart(target, adaptable.anchors.face[roots], parameterization)
-    if preset is None:
-        curve = HairlineCurve(setup.rest[setup.front], setup.turning)
-    else:
-        name, amount = parse_preset(preset)
-        curve = edit_curve(setup, HairlineEdit(preset=name, amount=amount))
-    points, turning = np.round(curve.points, 7).tolist(), np.asarray(curve.turning_points).tolist()
-    return {"units": "m", "points": points, "turning_points": turning}
+    documents = {}
+    for preset in presets:
+        if preset is None:
+            curve = HairlineCurve(setup.rest[setup.front], setup.turning)
+        else:
+            name, amount = parse_preset(preset)
+            curve = edit_curve(setup, HairlineEdit(preset=name, amount=amount))
+        documents[preset] = {"units": "m", "points": np.round(curve.points, 7).tolist(),
+                             "turning_points": np.asarray(curve.turning_points).tolist()}
+    return documents
+
+
+def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> dict[str, np.ndarray]:
+    """What the dashboard draws of a retarget (:func:`~hairport.solver.display.scene_arrays`): the result, its
+    particles inside the body, the target, and the target's current front hairline with every preset's edit of
+    it (left out, with the reason in ``meta``, when the groom has no front hairline to find)."""
+    inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
+    try:
+        documents = hairline_documents(adaptable, target, (None, *HAIRLINE_PRESETS))
+        hairline, hairline_error = documents.pop(None), None
+    except InputError as error:
+        documents, hairline, hairline_error = {}, {"points": [], "turning_points": []}, error.problem
+    arrays = scene_arrays(result.hair.points, result.hair.offsets, inside, result.hair.color, target.vertices,
+                          target.faces, adaptable.frame.rotation, hairline, documents)
+    meta = {"groom_units": adaptable.frame.units, "hairline_error": hairline_error}
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    return arrays
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:

@@ -22,6 +22,7 @@ TESTED_ELSEWHERE = {
     "service/services/retargets.py": "tests/service/routers/test_retargets.py",
     "service/services/jobs.py": "tests/service/routers/test_jobs.py",
     "service/services/batches.py": "tests/service/routers/test_batches.py",
+    "service/services/display.py": "tests/service/routers/test_jobs.py",
 }
 
 

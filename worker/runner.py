@@ -238,6 +238,8 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
         path = work / "preview.png"
         write_result_preview(path, adaptable, result, target)
         outputs["preview"] = stored(storage.save_file(path, ".png"), ".png")
+        path = solver.save_scene(work / "scene.npz", solver.display_scene(adaptable, result, target))
+        outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
     return outputs, result
 
 

@@ -4,21 +4,18 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Query, Response
+from fastapi import APIRouter, Depends, Response
 from fastapi.responses import FileResponse
 
 from hairport.records import BatchRecord
 
 from ..auth import Owner
-from ..deps import IdempotencyKey, QueueDep, RepositoryDep, SettingsDep, owned
+from ..deps import DEFAULT_PAGE, IdempotencyKey, PageLimit, PageOffset, QueueDep, RepositoryDep, SettingsDep, owned
 from ..errors import problem_responses
 from ..schemas import BatchIn, BatchOut, BatchPage
 from ..services import batches
 
 router = APIRouter(prefix="/v1/batches", tags=["batches"])
-#: largest page of GET /v1/batches
-MAX_PAGE = 200
-DEFAULT_PAGE = 50
 
 
 async def owned_batch(batch_id: str, owner: Owner, repository: RepositoryDep) -> BatchRecord:
@@ -49,10 +46,10 @@ def create_batch(
 def list_batches(
     owner: Owner,
     repository: RepositoryDep,
-    limit: Annotated[int, Query(ge=1, le=MAX_PAGE)] = DEFAULT_PAGE,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: PageLimit = DEFAULT_PAGE,
+    offset: PageOffset = 0,
 ) -> BatchPage:
-    page, total = batches.list_batches(repository, owner, limit, offset)
+    page, total = repository.list_owned(BatchRecord, owner, limit, offset)
     following = offset + limit if offset + limit < total else None
     return BatchPage(batches=[batches.batch_out(repository, batch) for batch in page], total=total, limit=limit,
                      offset=offset, next_offset=following)

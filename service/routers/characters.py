@@ -4,13 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form
+from fastapi import APIRouter, File, Form, Response
+
+from hairport import solver
+from hairport.records import CharacterRecord
 
 from ..auth import Owner
-from ..deps import OwnedCharacter, RepositoryDep, SettingsDep
+from ..deps import DEFAULT_PAGE, OwnedCharacter, PageLimit, PageOffset, RepositoryDep, SettingsDep
 from ..errors import problem_responses
-from ..schemas import AXIS_ENUM, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut
-from ..services import characters
+from ..schemas import AXIS_ENUM, DISPLAY_DESCRIPTION, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut, CharacterPage
+from ..services import characters, display
 from ..uploads import FilePart, as_upload
 
 router = APIRouter(prefix="/v1/characters", tags=["characters"])
@@ -35,6 +38,23 @@ async def create_character(
     return CharacterOut.of(await characters.create_character(repository, settings, owner, as_upload(mesh),
                                                              as_upload(skeleton), units,
                                                              up_axis, front_axis))
+
+
+@router.get("", response_model=CharacterPage, summary="The caller's characters, newest first",
+            responses=problem_responses(401, 422))
+def list_characters(owner: Owner, repository: RepositoryDep, limit: PageLimit = DEFAULT_PAGE,
+                    offset: PageOffset = 0) -> CharacterPage:
+    page, total = repository.list_owned(CharacterRecord, owner, limit, offset)
+    return CharacterPage(characters=[CharacterOut.of(record) for record in page], total=total, limit=limit,
+                         offset=offset, next_offset=offset + limit if offset + limit < total else None)
+
+
+@router.get("/{character_id}/mesh", summary="The character's mesh for drawing (its own units and axes)",
+            response_class=Response, responses={200: {"description": DISPLAY_DESCRIPTION, "content": {
+                solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
+                **problem_responses(401, 404, 410, 422)})
+def get_mesh(repository: RepositoryDep, settings: SettingsDep, character: OwnedCharacter):
+    return Response(display.character_mesh(repository, settings, character), media_type=solver.DISPLAY_MEDIA_TYPE)
 
 
 @router.get("/{character_id}", response_model=CharacterOut, summary="A character",

@@ -7,11 +7,12 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form
 
 from hairport import solver
+from hairport.records import HairstyleRecord
 
 from ..auth import Owner
-from ..deps import OwnedHairstyle, QueueDep, RepositoryDep, SettingsDep
+from ..deps import DEFAULT_PAGE, OwnedHairstyle, PageLimit, PageOffset, QueueDep, RepositoryDep, SettingsDep
 from ..errors import problem_responses
-from ..schemas import HAIR_FILE_DESCRIPTION, UNITS_ENUM, Anchoring, HairstyleOut
+from ..schemas import HAIR_FILE_DESCRIPTION, UNITS_ENUM, Anchoring, HairstyleOut, HairstylePage
 from ..services import hairstyles
 from ..uploads import FilePart, as_upload
 
@@ -58,6 +59,15 @@ async def create_hairstyle(
     record = await hairstyles.create_hairstyle(repository, queue, settings, owner, source_character_id, as_upload(hair),
                                                units, k, guides, anchoring, prim, guides_from)
     return hairstyles.hairstyle_out(repository, record)
+
+
+@router.get("", response_model=HairstylePage, summary="The caller's hairstyles, newest first",
+            responses=problem_responses(401, 422))
+def list_hairstyles(owner: Owner, repository: RepositoryDep, limit: PageLimit = DEFAULT_PAGE,
+                    offset: PageOffset = 0) -> HairstylePage:
+    page, total = repository.list_owned(HairstyleRecord, owner, limit, offset)
+    return HairstylePage(hairstyles=[hairstyles.hairstyle_out(repository, record) for record in page], total=total,
+                         limit=limit, offset=offset, next_offset=offset + limit if offset + limit < total else None)
 
 
 @router.get("/{hairstyle_id}", response_model=HairstyleOut, summary="A hairstyle and its preprocessing state",

@@ -4,19 +4,29 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Response
 from fastapi.responses import FileResponse
 
+from hairport import solver
+
 from ..auth import Owner
-from ..deps import OwnedJob, QueueDep, RepositoryDep
+from ..deps import DEFAULT_PAGE, OwnedJob, PageLimit, PageOffset, QueueDep, RepositoryDep
 from ..errors import problem_responses
-from ..schemas import RESULT_DESCRIPTION, HairFormat, JobOut, JobPage, JobState, result_content
-from ..services import jobs
+from ..schemas import (
+    DISPLAY_DESCRIPTION,
+    RESULT_DESCRIPTION,
+    BodyLayer,
+    HairFormat,
+    HairlineOut,
+    JobOut,
+    JobPage,
+    JobState,
+    StrandLayer,
+    result_content,
+)
+from ..services import display, jobs
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
-#: largest page of GET /v1/jobs
-MAX_PAGE = 200
-DEFAULT_PAGE = 50
 
 
 @router.get("", response_model=JobPage, summary="The caller's jobs, newest first",
@@ -25,8 +35,8 @@ def list_jobs(
     owner: Owner,
     repository: RepositoryDep,
     state: Annotated[JobState | None, Query(description="only jobs in this state")] = None,
-    limit: Annotated[int, Query(ge=1, le=MAX_PAGE)] = DEFAULT_PAGE,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: PageLimit = DEFAULT_PAGE,
+    offset: PageOffset = 0,
 ) -> JobPage:
     page, total = repository.list_jobs(owner, state, limit, offset)
     following = offset + limit if offset + limit < total else None
@@ -59,6 +69,42 @@ def get_preview(repository: RepositoryDep, job: OwnedJob):
             responses={200: {"content": {"application/json": {}}}, **problem_responses(401, 404, 409, 410, 422)})
 def get_report(repository: RepositoryDep, job: OwnedJob):
     return jobs.blob_response(repository, jobs.outputs_of(job)["report"], "application/json", f"{job.id}.json")
+
+
+DISPLAY_CONTENT = {200: {"description": DISPLAY_DESCRIPTION, "content": {
+    solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}}}
+
+
+@router.get("/{job_id}/display", summary="The result or source strands, decimated for drawing",
+            response_class=Response, responses={**DISPLAY_CONTENT, **problem_responses(401, 404, 409, 410, 422)})
+def get_display(
+    repository: RepositoryDep,
+    job: OwnedJob,
+    layer: Annotated[StrandLayer, Query(description="result: the retargeted groom with the particles inside the "
+                                                    "target flagged; source: the groom on its source character")
+                     ] = "result",
+    strands: Annotated[int | None, Query(ge=1, description="strands drawn, spread over the groom (default: as "
+                                                           "many as the vertex budget allows)")] = None,
+    stride: Annotated[int | None, Query(ge=1, le=solver.MAX_DISPLAY_STRIDE, description=(
+        "every stride-th particle of a strand, and its tip (default: the smallest that fits the budget)"))] = None,
+    max_vertices: Annotated[int, Query(ge=1, le=solver.MAX_DISPLAY_VERTICES, description=(
+        "the vertex budget when strands or stride is left out"))] = solver.DEFAULT_DISPLAY_VERTICES,
+):
+    return Response(display.strands(repository, job, layer, strands, stride, max_vertices),
+                    media_type=solver.DISPLAY_MEDIA_TYPE)
+
+
+@router.get("/{job_id}/body", summary="The target (as solved) or source body, for drawing", response_class=Response,
+            responses={**DISPLAY_CONTENT, **problem_responses(401, 404, 409, 410, 422)})
+def get_body(repository: RepositoryDep, job: OwnedJob, layer: BodyLayer = "target"):
+    return Response(display.body(repository, job, layer), media_type=solver.DISPLAY_MEDIA_TYPE)
+
+
+@router.get("/{job_id}/hairline", response_model=HairlineOut,
+            summary="The target's current front hairline and each preset's edit of it, to draw a new one from",
+            responses=problem_responses(401, 404, 409, 410, 422))
+def get_hairline(repository: RepositoryDep, job: OwnedJob) -> HairlineOut:
+    return HairlineOut(**display.hairline(repository, job))
 
 
 @router.delete("/{job_id}", response_model=JobOut, summary="Cancel a job",

@@ -131,14 +131,6 @@ def batch_state(jobs: list[JobRecord]) -> str:
     return BATCH_RUNNING
 
 
-def list_batches(repository: Repository, owner: str, limit: int, offset: int) -> tuple[list[BatchRecord], int]:
-    """``owner``'s batches, newest first: the page and the total."""
-    mine = [BatchRecord.model_validate(document) for document in repository.storage.list_records(BatchRecord.KIND)
-            if document.get("owner") == owner]
-    mine.sort(key=lambda batch: batch.created_at, reverse=True)
-    return mine[offset:offset + limit], len(mine)
-
-
 def cancel_batch(repository: Repository, queue: TaskQueue, batch: BatchRecord) -> BatchOut:
     """Cancel every job of the batch that has not ended (a running one stops at its solver's next iteration)."""
     for job in batch_jobs(repository, batch):

@@ -4,6 +4,7 @@ in-process on it, and ``hairport worker`` processes of one child each."""
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from contextlib import contextmanager
@@ -52,3 +53,21 @@ def spawn_worker(name: str, env: dict, log_folder: Path, warmup: bool = True) ->
         [sys.executable, "-m", "hairport.cli", "worker", *([] if warmup else ["--no-warmup"]), "--concurrency", "1",
          "--hostname", f"{name}@%h", "--loglevel", "WARNING"],
         env=env, stdout=subprocess.DEVNULL, stderr=open(log_folder / f"{name}.log", "wb"), start_new_session=True)
+
+
+def spawn_server(env: dict, port: int, log_folder: Path) -> subprocess.Popen:
+    """A ``hairport serve`` process on ``port`` in a session of its own, its output in ``log_folder / "serve.log"``."""
+    return subprocess.Popen([sys.executable, "-m", "hairport.cli", "serve", "--port", str(port)], env=env,
+                            stdout=subprocess.DEVNULL, stderr=open(log_folder / "serve.log", "wb"),
+                            start_new_session=True)
+
+
+def stop(process: subprocess.Popen, grace_seconds: float = 20) -> None:
+    """Stop a process started in a session of its own (SIGTERM, then SIGKILL after ``grace_seconds``)."""
+    if process.poll() is None:
+        os.killpg(process.pid, signal.SIGTERM)
+    try:
+        process.wait(timeout=grace_seconds)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()

@@ -253,3 +253,17 @@ def test_artifacts_written_before_surface_anchoring_read_as_anchored_by_bones(sa
     with open(tmp_path / "old.hpa", "wb") as handle:
         np.savez(handle, **arrays)
     assert artifact.load_adaptable(tmp_path / "old.hpa").options.anchoring == "bones"
+
+
+def test_the_source_scene_reads_the_groom_and_body_in_hairport_frame_as_float32(case, saved, tmp_path):
+    source, _, hair, _ = case
+    scene = artifact.source_scene(saved)
+    assert scene["points"].dtype == np.float32 and scene["body_faces"].dtype == np.uint32
+    np.testing.assert_allclose(scene["points"], hair.points, atol=1e-6)
+    np.testing.assert_array_equal(scene["offsets"], hair.offsets)
+    np.testing.assert_allclose(scene["body_vertices"], source.vertices, atol=1e-6)
+    assert "color" not in scene
+    (tmp_path / "cut.hpa").write_bytes(saved.read_bytes()[:1000])
+    with pytest.raises(InputError) as error:
+        artifact.source_scene(tmp_path / "cut.hpa")
+    assert error.value.code == "bad_artifact"

@@ -127,7 +127,7 @@ def test_a_retarget_stores_every_output_and_its_metrics(world):
     assert done.state == "succeeded" and done.attempts == 1 and done.worker == "w1@host", done.error
     assert done.progress == 1.0 and done.metrics["penetrating_particles"] == 0
     assert done.metrics["root_to_target_max"] < 1e-9 and done.timings["job"] >= done.timings["solve"] > 0
-    assert sorted(done.outputs) == ["npz", "ply", "preview", "report"]
+    assert sorted(done.outputs) == ["npz", "ply", "preview", "report", "scene"]
     ply = repository.storage.blob(done.outputs["ply"].sha256, ".ply")
     result = solver.read_hair(ply.path)
     assert (result.n_strands, result.n_particles) == (30, 240)

@@ -1,5 +1,6 @@
 """``/v1/characters``: uploads validated and content-addressed per key."""
 
+import numpy as np
 import pytest
 
 from hairport.solver.synthetic import toy
@@ -67,3 +68,35 @@ def test_units_and_axes_are_stated_given_or_left_to_inference(client, files):
                         ({"up_axis": "z", "front_axis": "-z"}, "perpendicular")):
         refused = client.post("/v1/characters", headers=AUTH, files=upload, data=form)
         assert (refused.status_code, refused.json()["code"]) == (422, "bad_axis") and words in refused.json()["detail"]
+
+
+def test_the_caller_lists_its_own_characters_newest_first(client, files):
+    ids = [client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"])},
+                       data={"units": units}).json()["id"] for units in ("m", "cm", "mm")]
+    page = client.get("/v1/characters", headers=AUTH, params={"limit": 2}).json()
+    assert [item["id"] for item in page["characters"]] == ids[::-1][:2] and page["total"] == 3
+    assert page["next_offset"] == 2 and page["characters"][0]["units"] == "mm"
+    assert client.get("/v1/characters", headers={"X-API-Key": "nobody"}).status_code == 401
+    assert client.get("/v1/characters", headers=AUTH, params={"limit": 0}).status_code == 422
+
+
+def test_a_character_mesh_is_drawn_in_its_own_axes_up_its_given_axis_or_its_longest_extent(client, files):
+    from hairport.solver import display
+
+    character = client.post("/v1/characters", headers=AUTH, files={"mesh": ("toy.obj", files["mesh"])},
+                            data={"units": "m"}).json()
+    header, upright = display.decode(client.get(f"/v1/characters/{character['id']}/mesh", headers=AUTH).content)
+    assert upright["vertices"].shape == (3842, 3) and upright["faces"].shape == (character["faces"], 3)
+    assert header["up"] == [0.0, 1.0, 0.0] and header["up_found"] == "longest extent" and header["units"] == "m"
+    # the same body Z up in millimetres, its up axis given
+    body = toy.toy_character(name="toy")
+    z_up = body.vertices[:, [0, 2, 1]] * [1000.0, -1000.0, 1000.0]
+    text = "".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in z_up)
+    text += "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in body.faces)
+    rotated = client.post("/v1/characters", headers=AUTH, files={"mesh": ("z.obj", text.encode())},
+                          data={"up_axis": "z", "units": "mm"}).json()
+    header, lying = display.decode(client.get(f"/v1/characters/{rotated['id']}/mesh", headers=AUTH).content)
+    assert header["up"] == [0.0, 0.0, 1.0] and header["up_found"] == "given" and header["units"] == "mm"
+    np.testing.assert_allclose(np.ptp(lying["vertices"], axis=0)[[0, 2, 1]], np.ptp(upright["vertices"], axis=0),
+                               rtol=1e-5)
+    assert client.get("/v1/characters/" + "0" * 32 + "/mesh", headers=AUTH).status_code == 404

@@ -109,3 +109,14 @@ def test_units_are_inferred_and_a_groom_in_other_units_is_refused_at_upload(clie
     assert (refused.status_code, refused.json()["code"]) == (422, "units_mismatch")
     assert refused.json()["detail"].startswith("hair: ") and "units=mm" in refused.json()["detail"]
     assert waiting(client, PREPROCESS_QUEUE) == 2  # the refused one sent nothing
+
+
+def test_the_caller_lists_its_own_hairstyles_with_their_preprocessing(client, files):
+    source = upload_character(client, files, "source")
+    ids = [client.post("/v1/hairstyles", headers=AUTH, data={"source_character_id": source, "guides": guides},
+                       files={"hair": ("g.data", files["groom.data"])}).json()["id"] for guides in ("4", "5")]
+    page = client.get("/v1/hairstyles", headers=AUTH).json()
+    assert [item["id"] for item in page["hairstyles"]] == ids[::-1] and page["total"] == 2
+    assert {item["preprocessing"]["state"] for item in page["hairstyles"]} == {"queued"}
+    assert client.get("/v1/hairstyles", headers={"X-API-Key": "other"}).status_code == 401
+    assert client.get("/v1/hairstyles", headers=AUTH, params={"offset": -1}).status_code == 422

@@ -1,10 +1,14 @@
 """``/v1/jobs``: listing from the index, one job, outputs of unfinished jobs, cancelling a queued job."""
 
+import json
+
 import numpy as np
+import pytest
 
 from hairport import solver
 from hairport.records import BlobRef, JobRecord, PreprocessSettings, now
 from hairport.service.auth import owner_of
+from hairport.solver import display as solver_display
 
 from ..conftest import AUTH, KEY
 
@@ -91,3 +95,89 @@ def test_a_result_in_millimetres_converts_in_millimetres(client, tmp_path):
     assert converted.status_code == 200, converted.text
     in_file = solver.read_hair(write(tmp_path / "c.obj", converted.content)).points  # the file's own numbers
     np.testing.assert_allclose(in_file, hair.points * 1000.0, atol=1e-4)
+
+
+#: the frame of a groom file with Z up (its rotation takes a drawn curve to the file's axes)
+Z_UP = solver.InputFrame(units="cm", up="+z", front="-y")
+
+
+def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=True) -> str:
+    """A succeeded job whose outputs hold a scene (a 3-strand result, 2 particles inside, a hairline) and whose
+    artifact is a real preprocessed groom on an icosphere head."""
+    from hairport.records import ArtifactRecord
+    from hairport.solver import pipeline
+    from tests.solver.hair_shapes import outward_strands, sphere_character
+
+    repository = client.app.state.repository
+    job_id = add_jobs(client, 1)[0]
+    head = sphere_character()
+    groom = outward_strands(head, n_strands=12, n_points=6)
+    result = groom.with_points(groom.points + 0.001)
+    inside = np.zeros(groom.n_particles, bool)
+    inside[[3, 7]] = True
+    hairline = {"points": [[0.05, 0.0, 0.0], [0.0, 0.02, 0.05], [-0.05, 0.0, 0.0]], "turning_points": [0, 2]}
+    scene = solver.scene_arrays(result.points, result.offsets, inside, None, head.vertices, head.faces,
+                                Z_UP.rotation, hairline if hairline_error is None else
+                                {"points": [], "turning_points": []}, {} if hairline_error else {"round": hairline})
+    scene["meta"] = np.frombuffer(json.dumps({"groom_units": "cm", "hairline_error": hairline_error}).encode(), np.uint8)
+    solver.save_scene(tmp_path / "scene.npz", scene)
+    blob = repository.storage.save_file(tmp_path / "scene.npz", ".npz")
+    repository.set_job(job_id, state="succeeded", outputs={"scene": BlobRef(sha256=blob.sha256, suffix=".npz")})
+    if with_artifact:
+        solver.save_adaptable(pipeline.preprocess(head, groom), tmp_path / "groom.hpa")
+        saved = repository.storage.save_file(tmp_path / "groom.hpa", ".hpa")
+        repository.put(ArtifactRecord(key="a" * 64, sha256=saved.sha256, size=saved.size, format_version=3,
+                                      seconds=0.1, guides=9, created_at=now()), "a" * 64)
+    return job_id
+
+
+def test_a_job_draws_its_result_decimated_with_the_particles_inside_flagged(client, tmp_path):
+    job_id = succeeded_with_scene(client, tmp_path)
+    response = client.get(f"/v1/jobs/{job_id}/display", headers=AUTH)
+    assert response.status_code == 200 and response.headers["content-type"] == solver.DISPLAY_MEDIA_TYPE
+    header, arrays = solver_display.decode(response.content)
+    assert header["drawn_strands"] == 12 and header["drawn_vertices"] == 72 and header["inside"] == 2
+    assert arrays["positions"].shape == (72, 3) and arrays["inside"].sum() == 2
+    strided = solver_display.decode(client.get(f"/v1/jobs/{job_id}/display", headers=AUTH,
+                                               params={"strands": 4, "stride": 2}).content)
+    assert strided[0]["drawn_strands"] == 4 and strided[0]["drawn_vertices"] == 4 * 4
+    source = solver_display.decode(client.get(f"/v1/jobs/{job_id}/display", headers=AUTH,
+                                              params={"layer": "source"}).content)
+    assert source[0]["inside"] is None and source[0]["drawn_vertices"] == 72
+    assert np.abs(source[1]["positions"] - arrays["positions"]).max() == pytest.approx(0.001, abs=1e-6)
+    for params, status in (({"stride": 0}, 422), ({"max_vertices": solver.MAX_DISPLAY_VERTICES + 1}, 422),
+                           ({"layer": "initial"}, 422), ({"strands": 0}, 422)):
+        assert client.get(f"/v1/jobs/{job_id}/display", headers=AUTH, params=params).status_code == status
+
+
+def test_a_job_draws_its_bodies_and_hands_out_its_hairlines(client, tmp_path):
+    job_id = succeeded_with_scene(client, tmp_path)
+    target = solver_display.decode(client.get(f"/v1/jobs/{job_id}/body", headers=AUTH).content)
+    source = solver_display.decode(client.get(f"/v1/jobs/{job_id}/body", headers=AUTH,
+                                              params={"layer": "source"}).content)
+    assert target[0]["up"] == [0.0, 1.0, 0.0] and target[1]["faces"].dtype == np.uint32
+    np.testing.assert_array_equal(target[1]["faces"], source[1]["faces"])
+    hairline = client.get(f"/v1/jobs/{job_id}/hairline", headers=AUTH).json()
+    assert hairline["points"][1] == [0.0, 0.02, 0.05] and hairline["turning_points"] == [0, 2]
+    assert set(hairline["presets"]) == {"round"} and hairline["groom_units"] == "cm"
+    assert hairline["groom_rotation"] == Z_UP.rotation.tolist()
+
+
+def test_display_answers_name_what_is_missing(client, tmp_path):
+    queued = add_jobs(client, 1)[0]
+    for tail in ("display", "body", "hairline"):
+        response = client.get(f"/v1/jobs/{queued}/{tail}", headers=AUTH)
+        assert response.status_code == 409 and response.json()["code"] == "job_not_succeeded"
+    older = add_jobs(client, 1)[0]  # a job that ran before scenes were saved
+    client.app.state.repository.set_job(older, state="succeeded", outputs={})
+    response = client.get(f"/v1/jobs/{older}/display", headers=AUTH)
+    assert response.status_code == 409 and response.json()["code"] == "no_scene"
+    bald = succeeded_with_scene(client, tmp_path, hairline_error="no front hairline: the roots cover the whole head",
+                                with_artifact=False)
+    response = client.get(f"/v1/jobs/{bald}/hairline", headers=AUTH)
+    assert response.status_code == 409 and response.json()["code"] == "no_hairline"
+    assert "cover the whole head" in response.json()["detail"]
+    response = client.get(f"/v1/jobs/{bald}/display", headers=AUTH, params={"layer": "source"})
+    assert response.status_code == 410 and response.json()["code"] == "gone"
+    other = client.get(f"/v1/jobs/{bald}/display", headers={"X-API-Key": "someone-else"})
+    assert other.status_code == 401

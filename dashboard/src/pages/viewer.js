@@ -1,0 +1,138 @@
+// The 3D viewer of a job: the target body and the result strands, the source next to them, another job of the
+// same pair (a baseline) overlaid for comparison; particles inside the body drawn red.
+import { decodeDisplay, get, openapi, post } from "../api.js";
+import { fill, formatNumber, guarded, h, poll, short, showMessage } from "../ui.js";
+import { LAYER_RGB, THREE, Viewer, bodyMesh, strandLines } from "../scene.js";
+import { ENDED } from "./jobs.js";
+import { component, select } from "./forms.js";
+
+/** Display budgets offered (vertices); the API's default is the first choice. */
+const BUDGETS = [50_000, 200_000, 1_000_000, 2_000_000];
+const SIDE_GAP = 1.25;  // source drawn this many body widths to the left
+
+async function strands(jobId, layer, budget) {
+  return decodeDisplay(await get(`/v1/jobs/${jobId}/display?layer=${layer}&max_vertices=${budget}`, { as: "buffer" }));
+}
+
+async function body(jobId, layer) {
+  return decodeDisplay(await get(`/v1/jobs/${jobId}/body?layer=${layer}`, { as: "buffer" }));
+}
+
+export async function viewerPage(main, { params: [id], query, signal }) {
+  const schema = await openapi();
+  const status = h("p", { id: "viewer-status", class: "stats" }, "loading");
+  main.append(h("h1", {}, `Job ${short(id)} in 3D`), status);
+  let job = null;
+  await new Promise((resolve) => poll(async () => {
+    job = await get(`/v1/jobs/${id}`);
+    status.textContent = `job ${job.state} (${job.stage ?? ""} ${Math.round(100 * job.progress)} %)`;
+    if (ENDED.includes(job.state)) resolve();
+    return ENDED.includes(job.state);
+  }, 1000, signal));
+  if (job.state !== "succeeded") {
+    showMessage(`job ${id} ${job.state}${job.error ? `: ${job.error.message} (${job.error.code})` : ""}; nothing to draw`);
+    return;
+  }
+  const container = h("div", { class: "viewer", id: "viewer" });
+  const stats = h("p", { class: "stats", id: "viewer-stats" });
+  const method = component(schema, "RetargetOptionsIn").properties.method;
+  const baselines = method.examples.filter((name) => !["multiscale", "global"].includes(name));
+  const asked = query.get("budget") ?? String(BUDGETS[1]);  // ?budget=N: any budget the API takes
+  const budget = select("budget", [...new Set([...BUDGETS.map(String), asked])], asked);
+  const compare = h("select", { name: "compare", id: "compare" }, h("option", { value: "" }, "nothing"));
+  const baseline = select("baseline", baselines, "root-translate");
+  const toggles = Object.fromEntries(["body", "result", "source", "compare"].map((name) =>
+    [name, h("input", { type: "checkbox", name: `show-${name}`, checked: name !== "source" })]));
+  const toolbar = h("div", { class: "toolbar" },
+    ...Object.entries(toggles).map(([name, box]) => h("label", {}, box, ` ${name}`)),
+    h("label", {}, "compare with ", compare),
+    h("label", {}, "run baseline ", baseline, h("button", { type: "button", id: "run-baseline", onclick: () => guarded(runBaseline) }, "Run")),
+    h("label", {}, "display budget ", budget, " vertices"),
+    h("a", { href: `#/jobs/${id}` }, "job page"));
+  main.append(toolbar, container, stats);
+  const viewer = new Viewer(container);
+  window.hairportViewer = viewer;
+  signal.addEventListener("abort", () => {
+    viewer.dispose();
+    if (window.hairportViewer === viewer) window.hairportViewer = null;
+  });
+  const drawn = {};
+
+  async function load() {
+    const vertices = Number(budget.value);
+    const [targetBody, result] = await Promise.all([body(id, "target"), strands(id, "result", vertices)]);
+    viewer.set("body", bodyMesh(targetBody));
+    viewer.set("result", strandLines(result, LAYER_RGB.result));
+    drawn.result = result.header;
+    const width = viewer.box(["body"]).getSize(new THREE.Vector3()).x;
+    if (toggles.source.checked) {
+      const [sourceBody, source] = await Promise.all([body(id, "source"), strands(id, "source", vertices)]);
+      viewer.set("source-body", bodyMesh(sourceBody), -SIDE_GAP * width);
+      viewer.set("source", strandLines(source, LAYER_RGB.source), -SIDE_GAP * width);
+      drawn.source = source.header;
+    } else {
+      viewer.clear("source-body");
+      viewer.clear("source");
+      delete drawn.source;
+    }
+    await loadCompare();
+    viewer.visible("body", toggles.body.checked);
+    viewer.visible("result", toggles.result.checked);
+    viewer.frame(viewer.box(["result", "source"]).expandByScalar(0.05));
+    container.dataset.vertices = String(result.header.drawn_vertices);
+    container.dataset.loaded = "true";
+  }
+
+  async function loadCompare() {
+    if (!compare.value || !toggles.compare.checked) {
+      viewer.clear("compare");
+      delete drawn.compare;
+    } else {
+      const other = await strands(compare.value, "result", Number(budget.value));
+      viewer.set("compare", strandLines(other, LAYER_RGB.compare));
+      drawn.compare = other.header;
+    }
+    stats.textContent = Object.entries(drawn).map(([layer, header]) =>
+      `${layer}: ${formatNumber(header.drawn_strands)} of ${formatNumber(header.strands)} strands, ` +
+      `${formatNumber(header.drawn_vertices)} vertices (stride ${header.stride})` +
+      (header.inside === null || header.inside === undefined ? "" : `, ${formatNumber(header.inside)} drawn inside the body`)).join("; ");
+    stats.dataset.inside = drawn.compare?.inside ?? "";
+  }
+
+  async function listComparisons(chosen = null) {
+    const page = await get("/v1/jobs?state=succeeded&limit=200");
+    const others = page.jobs.filter((other) => other.id !== id && other.hairstyle_id === job.hairstyle_id
+                                     && other.target_character_id === job.target_character_id);
+    fill(compare, h("option", { value: "" }, "nothing"), ...others.map((other) =>
+      h("option", { value: other.id, selected: other.id === chosen }, `${short(other.id)} ${other.options.method}`)));
+  }
+
+  async function runBaseline() {
+    const created = await post("/v1/retargets", { json: { hairstyle_id: job.hairstyle_id,
+      target_character_ids: [job.target_character_id], options: { method: baseline.value } } });
+    const baselineId = created.jobs[0].id;
+    showMessage(`baseline ${baseline.value} started as job ${baselineId}`, "info");
+    await new Promise((resolve, reject) => poll(async () => {
+      const other = await get(`/v1/jobs/${baselineId}`);
+      if (other.state === "succeeded") resolve();
+      else if (ENDED.includes(other.state)) reject(new Error(`baseline job ${other.state}: ${other.error?.message ?? ""}`));
+      return ENDED.includes(other.state);
+    }, 1000, signal));
+    await listComparisons(baselineId);
+    toggles.compare.checked = true;
+    await loadCompare();
+    showMessage(`comparing with baseline ${baseline.value} (job ${short(baselineId)}, green; inside the body: red)`, "info");
+  }
+
+  for (const [name, box] of Object.entries(toggles)) {
+    box.addEventListener("change", () => guarded(async () => {
+      if (name === "source") await load();
+      else if (name === "compare") await loadCompare();
+      else viewer.visible(name, box.checked);
+    }));
+  }
+  compare.addEventListener("change", () => guarded(loadCompare));
+  budget.addEventListener("change", () => guarded(load));
+  await listComparisons(query.get("compare"));
+  await guarded(load);
+}

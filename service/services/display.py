@@ -1,0 +1,109 @@
+"""What the dashboard draws: a job's strands (result or source) decimated, its bodies, its hairlines, and a
+character's mesh, in the display wire format (:mod:`hairport.solver.display`)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from hairport import solver
+from hairport.records import BlobRef, CharacterRecord, JobRecord
+from hairport.repository import Repository
+from hairport.settings import Settings
+
+from ..errors import Problem
+from ..uploads import input_problem
+from .jobs import outputs_of
+
+#: scenes kept loaded per API process (a 10^6-particle scene is ~13 MB): the viewer asks several times
+SCENES_KEPT = 4
+
+
+@lru_cache(maxsize=SCENES_KEPT)
+def _scene(path: str, names: tuple[str, ...] | None) -> dict[str, np.ndarray]:
+    return solver.load_scene(path, names)
+
+
+@lru_cache(maxsize=SCENES_KEPT)
+def _source_scene(path: str) -> dict[str, np.ndarray]:
+    return solver.source_scene(path)
+
+
+def _blob(repository: Repository, ref: BlobRef) -> Path:
+    blob = repository.storage.blob(ref.sha256, ref.suffix)
+    if blob is None:
+        raise Problem(410, "gone", "this output was removed by the retention policy")
+    return blob.path
+
+
+def scene_path(repository: Repository, job: JobRecord) -> Path:
+    """The job's saved scene (409 before it succeeded, or for a job run before scenes were saved)."""
+    outputs = outputs_of(job)
+    if "scene" not in outputs:
+        raise Problem(409, "no_scene", f"job {job.id} ran before hairport saved what the dashboard draws; "
+                                       "run the retarget again")
+    return _blob(repository, outputs["scene"])
+
+
+def artifact_path(repository: Repository, job: JobRecord) -> Path:
+    artifact = repository.artifact(job.artifact_key)
+    if artifact is None:
+        raise Problem(410, "gone", "the preprocessed hairstyle of this job was removed by the retention policy")
+    return _blob(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))
+
+
+def _layer_arrays(repository: Repository, job: JobRecord, layer: str, names: tuple[str, ...]) -> dict:
+    try:
+        if layer == "result":
+            return _scene(str(scene_path(repository, job)), names)
+        return _source_scene(str(artifact_path(repository, job)))
+    except solver.InputError as error:
+        raise input_problem(error, "layer") from None
+
+
+def strands(repository: Repository, job: JobRecord, layer: str, strand_count: int | None, stride: int | None,
+            max_vertices: int) -> bytes:
+    """The job's ``layer`` strands, decimated (422 for a plan over the display limits)."""
+    arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "color"))
+    try:
+        strand_ids, stride = solver.plan_display(arrays["offsets"], max_vertices, strand_count, stride)
+    except solver.InputError as error:
+        raise input_problem(error, "strands") from None
+    return solver.strands_payload(arrays, strand_ids, stride, layer)
+
+
+def body(repository: Repository, job: JobRecord, layer: str) -> bytes:
+    """The job's target body (as solved, hairport's frame) or its source body."""
+    if layer == "target":
+        arrays = _layer_arrays(repository, job, "result", ("body_vertices", "body_faces"))
+    else:
+        arrays = _layer_arrays(repository, job, "source", ())
+    return solver.body_payload(arrays["body_vertices"], arrays["body_faces"], layer, up=[0.0, 1.0, 0.0])
+
+
+def hairline(repository: Repository, job: JobRecord) -> dict:
+    """The target's current front hairline, each preset's edit of it, and the rotation to the groom's axes."""
+    names = ("hairline_points", "hairline_turning", "groom_rotation", "meta",
+             *(solver.scene_preset_array(name) for name in solver.HAIRLINE_PRESETS))
+    scene = _scene(str(scene_path(repository, job)), names)
+    meta = solver.scene_meta(scene)
+    if meta.get("hairline_error"):
+        raise Problem(409, "no_hairline", f"the groom of job {job.id} has no front hairline to edit: "
+                                          f"{meta['hairline_error']}")
+    return {**solver.hairline_json(scene), "groom_units": meta.get("groom_units", "m")}
+
+
+def character_mesh(repository: Repository, settings: Settings, character: CharacterRecord) -> bytes:
+    """A character's mesh as uploaded (its own units and axes), with the up vector to draw it with."""
+    path = _blob(repository, character.mesh)
+    try:
+        loaded, units = solver.read_character(path, units=None if character.units in (None, solver.AUTO)
+                                              else character.units, max_vertices=settings.max_vertices,
+                                              max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
+    except solver.InputError as error:
+        raise input_problem(error, "mesh") from None
+    up, how = solver.display_up(loaded.vertices, character.up_axis)
+    return solver.body_payload(loaded.vertices, loaded.faces, "character", up=up, up_found=how, units=units)
+

@@ -1,0 +1,267 @@
+"""The dashboard end to end in a real browser (Debian's Chromium, software WebGL) against real processes: a
+``hairport serve``, a ``hairport worker`` and the tests' own Redis. Every step's screenshot is kept under
+``test-artifacts/dashboard/``."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from tests.conftest import free_port
+from tests.integration.browser import ARTIFACTS, chromium, count_drawn, count_near, count_red, pixels
+from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
+
+SHOTS = ARTIFACTS / "dashboard"
+#: seconds the server and its worker may take to be ready (the worker compiles or loads the solver's kernels)
+READY_SECONDS = 120
+#: seconds a small MakeHuman retarget, or a batch of two, may take here
+JOB_SECONDS = 300
+GROOM_STRANDS, GROOM_PARTICLES = 300, 20
+SOURCE, HEAVY = "average-female", "heavy-male"
+#: the viewer's colour of result strands (dashboard/src/scene.js LAYER_RGB.result)
+RESULT_RGB = (112, 74, 38)
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    """Two MakeHuman characters (OBJ + skeleton JSON) and a groom made on the first (npz)."""
+    from hairport.solver.io.character.export import write_character
+    from hairport.solver.io.hair import write_hair
+    from hairport.solver.synthetic.groom import generate_groom
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+    folder = tmp_path_factory.mktemp("dashboard-inputs")
+    characters = {name: build_character(PRESETS[name]) for name in (SOURCE, HEAVY)}
+    for name, character in characters.items():
+        write_character(character, folder / f"{name}.obj", folder / f"{name}.json")
+    write_hair(folder / "groom.npz", generate_groom(characters[SOURCE], "long", GROOM_STRANDS, GROOM_PARTICLES, seed=3))
+    (folder / "notes.txt").write_text("not a mesh\n")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def deployment(tmp_path_factory, redis_url):
+    """A real server on a free port and one worker, sharing a storage folder and the tests' Redis."""
+    storage = tmp_path_factory.mktemp("dashboard-storage")
+    env = service_env(storage, redis_url)
+    port = free_port()
+    server = spawn_server(env, port, storage)
+    worker = spawn_worker("dashboard", env, storage)
+    base = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + READY_SECONDS
+    try:
+        while True:
+            try:
+                if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            assert server.poll() is None, (storage / "serve.log").read_text()[-2000:]
+            assert worker.poll() is None, (storage / "dashboard.log").read_text()[-2000:]
+            assert time.monotonic() < deadline, "the server and its worker were not ready"
+            time.sleep(0.5)
+        yield {"base": base, "api": httpx.Client(base_url=base, headers={"X-API-Key": KEY}, timeout=30)}
+    finally:
+        stop(worker)
+        stop(server)
+
+
+def shot(page, name: str, selector: str | None = None) -> bytes:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    target = page.locator(selector) if selector else page
+    return target.screenshot(path=str(SHOTS / f"{name}.png"))
+
+
+def enter_key(page, base: str, key: str) -> None:
+    page.goto(f"{base}/")
+    page.fill("#api-key", key)
+    page.click("#key-form button")
+
+
+def wait_job(api: httpx.Client, job_id: str) -> dict:
+    deadline = time.monotonic() + JOB_SECONDS
+    while True:
+        job = api.get(f"/v1/jobs/{job_id}").json()
+        if job["state"] in ("succeeded", "failed", "cancelled"):
+            return job
+        assert time.monotonic() < deadline, f"job {job_id} still {job['state']}"
+        time.sleep(0.5)
+
+
+def viewer_pixels(page, name: str) -> np.ndarray:
+    page.wait_for_timeout(400)  # the viewer draws on the next animation frame
+    return pixels(shot(page, name, "#viewer"))
+
+
+def set_checkbox(page, name: str, checked: bool) -> None:
+    page.set_checked(f"input[name=show-{name}]", checked)
+
+
+def test_dashboard_end_to_end(deployment, inputs):
+    base, api = deployment["base"], deployment["api"]
+    with chromium() as page:
+        enter_key(page, base, KEY)
+        page.wait_for_selector("#key-state:text('key accepted')")
+        assert page.url.endswith("/ui/#/") or page.url.endswith("/ui/")
+        shot(page, "01-key")
+
+        # two characters through the upload form, each listed with a drawn thumbnail
+        page.goto(f"{base}/ui/#/characters")
+        character_ids = {}
+        for name in (SOURCE, HEAVY):
+            page.wait_for_selector("#character-form")
+            page.set_input_files("input[name=mesh]", str(inputs / f"{name}.obj"))
+            page.set_input_files("input[name=skeleton]", str(inputs / f"{name}.json"))
+            page.click("#character-form button[type=submit]")
+            message = page.wait_for_selector("#message.info:has-text('stored')")
+            character_ids[name] = re.search(r"character ([0-9a-f]+) stored", message.inner_text()).group(1)
+            page.evaluate("() => { document.querySelector('#message').className = 'stale'; }")
+        rows = page.locator("#characters tbody tr")
+        assert rows.count() == 2
+        page.wait_for_selector("#characters img[src^='data:image/png']")
+        page.wait_for_timeout(500)
+        assert page.locator("#characters img[src^='data:image/png']").count() == 2
+        thumbnail = pixels(shot(page, "02-characters", f"#characters tr[data-id='{character_ids[HEAVY]}'] img"))
+        assert count_drawn(thumbnail, background=(242, 244, 247)) > 0.05 * thumbnail.shape[0] * thumbnail.shape[1]
+
+        # the groom, preprocessed
+        page.goto(f"{base}/ui/#/hairstyles")
+        page.wait_for_selector("#hairstyle-form")
+        page.set_input_files("input[name=hair]", str(inputs / "groom.npz"))
+        page.select_option("select[name=source_character_id]", character_ids[SOURCE])
+        page.click("#hairstyle-form button[type=submit]")
+        hairstyle_id = re.search(r"hairstyle ([0-9a-f]+):", page.wait_for_selector(
+            "#message.info:has-text('hairstyle')").inner_text()).group(1)
+        page.wait_for_selector(f"#hairstyles tr[data-id='{hairstyle_id}'] [data-state=ready]", timeout=JOB_SECONDS * 1000)
+        shot(page, "03-hairstyles")
+
+        # a 1 x 2 batch with a hairline preset, watched to 100 %
+        page.goto(f"{base}/ui/#/new")
+        page.wait_for_selector("#retarget-form")
+        page.check(f"input[name=hairstyle][value='{hairstyle_id}']")
+        for character_id in character_ids.values():
+            page.check(f"input[name=target][value='{character_id}']")
+        page.select_option("select[name=hairline_preset]", "widows-peak")
+        page.fill("input[name=hairline_amount]", "0.5")
+        shot(page, "04-new-batch")
+        page.click("#retarget-form button[type=submit]")
+        page.wait_for_url(re.compile(r".*#/batches/[0-9a-f]+$"))
+        batch_id = page.url.rsplit("/", 1)[1]
+        page.wait_for_selector("#batch-percent:text('100 %')", timeout=JOB_SECONDS * 1000)
+        shot(page, "05-batch-done")
+        batch = api.get(f"/v1/batches/{batch_id}").json()
+        assert batch["state"] == "done" and batch["counts"]["succeeded"] == 2, batch
+        heavy_job = next(job["id"] for job in batch["jobs"] if job["target_character_id"] == character_ids[HEAVY])
+        heavy = api.get(f"/v1/jobs/{heavy_job}").json()
+        assert (heavy["hairline"]["preset"], heavy["hairline"]["amount"]) == ("widows-peak", 0.5)
+        assert heavy["metrics"]["hairline"]["roots_moved"] > 0
+        assert heavy["metrics"]["penetrating_particles"] == 0
+
+        # the result in the viewer: body and strands drawn, nothing red (0 particles inside)
+        page.goto(f"{base}/ui/#/view/{heavy_job}")
+        page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
+        stats = page.inner_text("#viewer-stats")
+        assert f"{GROOM_STRANDS} of {GROOM_STRANDS} strands" in stats and "0 drawn inside" in stats
+        both = viewer_pixels(page, "06-viewer")
+        area = both.shape[0] * both.shape[1]
+        set_checkbox(page, "result", False)
+        body_only = viewer_pixels(page, "06-viewer-body")
+        set_checkbox(page, "result", True)
+        set_checkbox(page, "body", False)
+        strands_only = viewer_pixels(page, "06-viewer-strands")
+        assert count_drawn(body_only) > 0.03 * area
+        assert count_near(strands_only, RESULT_RGB, 12) > 300
+        assert count_drawn(strands_only) < count_drawn(both)
+        assert count_red(strands_only) == 0
+
+        # a deliberately penetrating baseline overlaid: its particles inside the heavy body are red
+        page.select_option("select[name=baseline]", "root-translate")
+        page.click("#run-baseline")
+        page.wait_for_selector("#viewer-stats[data-inside]:not([data-inside=''])", state="attached",
+                               timeout=JOB_SECONDS * 1000)
+        inside = int(page.get_attribute("#viewer-stats", "data-inside"))
+        set_checkbox(page, "result", False)
+        baseline = viewer_pixels(page, "07-viewer-baseline")
+        assert inside > 20
+        assert count_red(baseline) > 50
+
+        # a hairline drawn by clicking five points on the head, sent, opened in the viewer
+        page.goto(f"{base}/ui/#/hairline/{heavy_job}")
+        page.wait_for_selector("#hairline-viewer canvas")
+        page.wait_for_timeout(500)
+        for x, y in page.evaluate("() => window.hairportHairline.screenPoints(5, 0.012)"):
+            page.mouse.click(x, y)
+        assert page.get_attribute("#hairline-state", "data-points") == "5"
+        shot(page, "08-hairline-drawn")
+        page.click("#submit-hairline")
+        page.wait_for_url(re.compile(r".*#/view/[0-9a-f]+$"))
+        drawn_job = page.url.rsplit("/", 1)[1]
+        page.wait_for_selector("#viewer[data-loaded=true]", timeout=JOB_SECONDS * 1000)
+        shot(page, "09-hairline-result")
+        drawn = api.get(f"/v1/jobs/{drawn_job}").json()
+        assert drawn["state"] == "succeeded"
+        assert len(drawn["hairline"]["curve"]["points"]) == 64
+        assert drawn["metrics"]["hairline"]["roots_moved"] > 0
+        assert drawn["metrics"]["penetrating_particles"] == 0
+
+        # a result downloaded from the job page, byte for byte the API's
+        page.goto(f"{base}/ui/#/jobs/{drawn_job}")
+        with page.expect_download() as download:
+            page.click("#downloads button[data-format=obj]")
+        path = SHOTS / f"{drawn_job}.obj"
+        download.value.save_as(path)
+        shot(page, "10-downloaded")
+        assert download.value.suggested_filename == f"{drawn_job}.obj"
+        assert path.read_bytes() == api.get(f"/v1/jobs/{drawn_job}/result", params={"format": "obj"}).content
+        assert path.read_text().count("\nv ") >= GROOM_STRANDS * 2
+        assert page.errors == []
+
+
+def test_bad_input_through_the_page_shows_the_api_message(deployment, inputs):
+    base = deployment["base"]
+    with chromium() as page:
+        enter_key(page, base, "expired-key")
+        page.wait_for_selector("#key-state:text('key refused')")
+        assert "unknown API key" in page.inner_text("#message")
+        assert "unauthorized" in page.inner_text("#message")
+        shot(page, "11-key-refused")
+
+        enter_key(page, base, KEY)
+        page.wait_for_selector("#key-state:text('key accepted')")
+        page.goto(f"{base}/ui/#/characters")
+        page.wait_for_selector("#characters table", state="attached")
+        before = page.locator("#characters tbody tr").count()
+        page.set_input_files("input[name=mesh]", str(inputs / "notes.txt"))
+        page.click("#character-form button[type=submit]")
+        message = page.wait_for_selector("#message:not(.info)").inner_text()
+        assert "HTTP 415" in message and ".txt" in message
+        shot(page, "12-wrong-file")
+        page.reload()
+        page.wait_for_selector("#characters table", state="attached")
+        assert page.locator("#characters tbody tr").count() == before
+
+        api = deployment["api"]
+        with open(inputs / f"{SOURCE}.obj", "rb") as mesh:
+            character = api.post("/v1/characters", files={"mesh": mesh}).json()["id"]
+        with open(inputs / "groom.npz", "rb") as hair:
+            hairstyle = api.post("/v1/hairstyles", files={"hair": hair},
+                                 data={"source_character_id": character}).json()["id"]
+        jobs_before = api.get("/v1/jobs").json()["total"]
+        page.goto(f"{base}/ui/#/new")
+        page.wait_for_selector("#retarget-form")
+        page.check(f"input[name=hairstyle][value='{hairstyle}']")
+        page.check(f"input[name=target][value='{character}']")
+        page.fill("input[name=alpha]", "-5")
+        page.click("#retarget-form button[type=submit]")
+        message = page.wait_for_selector("#message:not(.info)").inner_text()
+        assert "options.alpha" in message and "greater than or equal to 0" in message and "HTTP 422" in message
+        assert api.get("/v1/jobs").json()["total"] == jobs_before
+        shot(page, "13-absurd-option")
+        assert page.url.endswith("#/new")  # nothing was created: the page stays
+        page.click("nav a[href='#/jobs']")
+        page.wait_for_selector("#jobs table")
+        assert page.errors == []
