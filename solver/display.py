@@ -30,9 +30,10 @@ from hairport.solver.model.frame import AXIS_VECTORS, parse_axis
 
 MAGIC = b"HPD1"
 MEDIA_TYPE = "application/vnd.hairport.display"
-#: vertices a decimated groom aims at unless the request sets strands or stride (bench/dashboard.py:
-#: software WebGL draws this many at interactive rates, and it is under 3 MB on the wire)
-DEFAULT_DISPLAY_VERTICES = 200_000
+#: vertices a decimated groom aims at unless the request sets strands or stride (bench/dashboard.py, 2026-11-25:
+#: the most that Chromium's software WebGL on 2 cores still draws in under 200 ms a frame, 5 frames a second while
+#: orbiting (200,000 took 330 ms); 1.3 MB on the wire. A GPU draws 10^6 smoothly: the page offers more)
+DEFAULT_DISPLAY_VERTICES = 100_000
 #: most vertices one display request may ask for (12 B each, plus 1 B of inside flag and 3 B of colour)
 MAX_DISPLAY_VERTICES = 2_000_000
 #: fewest strands the automatic plan keeps before it starts dropping particles instead (a few

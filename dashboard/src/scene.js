@@ -51,11 +51,26 @@ export function strandLines({ arrays }, rgb, showInside = true) {
   return new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true }));
 }
 
+let software = null;
+/** Whether WebGL here is a software renderer (SwiftShader, llvmpipe: no GPU). There antialiasing doubles the frame
+ * time (bench/dashboard.py), so the viewer draws without it. */
+export function softwareWebGL() {
+  if (software === null) {
+    const gl = document.createElement("canvas").getContext("webgl2");
+    const info = gl?.getExtension("WEBGL_debug_renderer_info");
+    const renderer = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : "";
+    software = /swiftshader|llvmpipe|software/i.test(renderer);
+    gl?.getExtension("WEBGL_lose_context")?.loseContext();
+  }
+  return software;
+}
+
 /** One canvas: the scene, a camera with orbit controls, lights; redrawn when something changes. */
 export class Viewer {
   constructor(container) {
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.software = softwareWebGL();
+    this.renderer = new THREE.WebGLRenderer({ antialias: !this.software, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.setClearColor(0xffffff);
     container.append(this.renderer.domElement);

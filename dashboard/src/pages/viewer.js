@@ -6,8 +6,8 @@ import { LAYER_RGB, THREE, Viewer, bodyMesh, strandLines } from "../scene.js";
 import { ENDED } from "./jobs.js";
 import { component, select } from "./forms.js";
 
-/** Display budgets offered (vertices); the API's default is the first choice. */
-const BUDGETS = [50_000, 200_000, 1_000_000, 2_000_000];
+/** Display budgets offered (vertices), with the API's default (bench/dashboard.py chose it). */
+const BUDGETS = [10_000, 50_000, 200_000, 1_000_000, 2_000_000];
 const SIDE_GAP = 1.25;  // source drawn this many body widths to the left
 
 async function strands(jobId, layer, budget) {
@@ -37,8 +37,11 @@ export async function viewerPage(main, { params: [id], query, signal }) {
   const stats = h("p", { class: "stats", id: "viewer-stats" });
   const method = component(schema, "RetargetOptionsIn").properties.method;
   const baselines = method.examples.filter((name) => !["multiscale", "global"].includes(name));
-  const asked = query.get("budget") ?? String(BUDGETS[1]);  // ?budget=N: any budget the API takes
-  const budget = select("budget", [...new Set([...BUDGETS.map(String), asked])], asked);
+  const fallback = schema.paths["/v1/jobs/{job_id}/display"].get.parameters
+    .find((parameter) => parameter.name === "max_vertices").schema.default;
+  const asked = query.get("budget") ?? String(fallback);  // ?budget=N: any budget the API takes
+  const budget = select("budget", [...new Set([...BUDGETS, fallback].sort((a, b) => a - b).map(String).concat(asked))],
+                        asked);
   const compare = h("select", { name: "compare", id: "compare" }, h("option", { value: "" }, "nothing"));
   const baseline = select("baseline", baselines, "root-translate");
   const toggles = Object.fromEntries(["body", "result", "source", "compare"].map((name) =>
@@ -92,7 +95,8 @@ export async function viewerPage(main, { params: [id], query, signal }) {
       viewer.set("compare", strandLines(other, LAYER_RGB.compare));
       drawn.compare = other.header;
     }
-    stats.textContent = Object.entries(drawn).map(([layer, header]) =>
+    stats.textContent = (viewer.software ? "software WebGL (no GPU): drawn without antialiasing. " : "") +
+      Object.entries(drawn).map(([layer, header]) =>
       `${layer}: ${formatNumber(header.drawn_strands)} of ${formatNumber(header.strands)} strands, ` +
       `${formatNumber(header.drawn_vertices)} vertices (stride ${header.stride})` +
       (header.inside === null || header.inside === undefined ? "" : `, ${formatNumber(header.inside)} drawn inside the body`)).join("; ");
