@@ -66,13 +66,15 @@ def build_dashboard() -> None:
         return
     installed = SOURCES / "node_modules" / ".package-lock.json"
     lock = SOURCES / "package-lock.json"
-    environment = {**os.environ, "npm_config_update_notifier": "false", "npm_config_fund": "false",
-                   "npm_config_audit": "false"}
+    node = node_command("node")[0]
+    # the Node.js used first on PATH (npm's own child processes call `node`); no install scripts: esbuild
+    # finds its binary in its platform package without its postinstall, and nothing else needs one
+    environment = {**os.environ, "PATH": os.pathsep.join([str(Path(node).parent), os.environ.get("PATH", "")]),
+                   "npm_config_update_notifier": "false", "npm_config_fund": "false", "npm_config_audit": "false"}
     if not installed.exists() or installed.stat().st_mtime < lock.stat().st_mtime:
-        subprocess.run([*node_command("npm"), "ci", "--no-audit", "--no-fund"], cwd=SOURCES, check=True,
-                       env=environment, stdout=sys.stderr)
-    subprocess.run([*node_command("node"), "build.mjs", str(OUTPUT)], cwd=SOURCES, check=True, env=environment,
-                   stdout=sys.stderr)
+        subprocess.run([*node_command("npm"), "ci", "--no-audit", "--no-fund", "--ignore-scripts"], cwd=SOURCES,
+                       check=True, env=environment, stdout=sys.stderr)
+    subprocess.run([node, "build.mjs", str(OUTPUT)], cwd=SOURCES, check=True, env=environment, stdout=sys.stderr)
 
 
 class BuildPy(_build_py):

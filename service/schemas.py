@@ -197,6 +197,11 @@ DISPLAY_DESCRIPTION = (
     "Bodies: `vertices` (V, 3) float32, `faces` (F, 3) uint32, and the header's `up` vector.")
 
 
+#: the OpenAPI ``responses`` entry of a display payload
+DISPLAY_RESPONSE = {200: {"description": DISPLAY_DESCRIPTION, "content": {
+    solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}}}
+
+
 class HairlineOut(BaseModel):
     """A job target's front hairline: draw a new one from it and send it as ``hairline.curve`` (in the groom's
     axes: ``groom_rotation`` R maps them to hairport's, so a point p drawn here is sent as R^T p)."""

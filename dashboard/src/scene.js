@@ -21,34 +21,55 @@ export function bodyMesh({ arrays }, color = BODY_COLOR) {
   return new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color, roughness: 0.8, side: THREE.DoubleSide }));
 }
 
-/** Strands' line segments from a display payload: file colours when present, else the layer's; inside in red. */
+/** Strands' line segments from a display payload: file colours when present, else the layer's; inside in red.
+ * Segments with a particle inside the body are drawn on top of everything (no depth test): the body would hide
+ * them otherwise, and they are what the viewer is asked to show. */
 export function strandLines({ arrays }, rgb, showInside = true) {
   const positions = arrays.positions;
   const starts = arrays.starts;
   const vertices = positions.length / 3;
   const strands = starts.length - 1;
-  const index = new Uint32Array(2 * (vertices - strands));
-  let write = 0;
+  const inside = showInside ? arrays.inside : null;
+  const outerIndex = new Uint32Array(2 * (vertices - strands));
+  const insideIndex = new Uint32Array(inside ? 2 * (vertices - strands) : 0);
+  let outer = 0;
+  let within = 0;
   for (let strand = 0; strand < strands; strand++) {
     for (let vertex = starts[strand]; vertex < starts[strand + 1] - 1; vertex++) {
-      index[write++] = vertex;
-      index[write++] = vertex + 1;
+      if (inside && (inside[vertex] || inside[vertex + 1])) {
+        insideIndex[within++] = vertex;
+        insideIndex[within++] = vertex + 1;
+      } else {
+        outerIndex[outer++] = vertex;
+        outerIndex[outer++] = vertex + 1;
+      }
     }
   }
   // colours are sRGB (files, the layer colours); the renderer works in linear light
-  const rgbOf = (vertex) => (showInside && arrays.inside?.[vertex] ? INSIDE_RGB
+  const rgbOf = (vertex) => (inside?.[vertex] ? INSIDE_RGB
     : arrays.color ? arrays.color.subarray(3 * vertex, 3 * vertex + 3) : rgb);
   const colors = new Float32Array(vertices * 3);
   for (let vertex = 0; vertex < vertices; vertex++) {
     const source = rgbOf(vertex);
     for (let channel = 0; channel < 3; channel++) colors[3 * vertex + channel] = SRGB_TO_LINEAR[source[channel]];
   }
-  const geometry = new THREE.BufferGeometry();
-  geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
-  geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3));
-  geometry.setIndex(new THREE.BufferAttribute(index, 1));
-  geometry.computeBoundingSphere();
-  return new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true }));
+  const positionAttribute = new THREE.BufferAttribute(positions, 3);
+  const colorAttribute = new THREE.BufferAttribute(colors, 3);
+  const lines = (index, onTop) => {
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", positionAttribute);
+    geometry.setAttribute("color", colorAttribute);
+    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    geometry.computeBoundingSphere();
+    const segments = new THREE.LineSegments(geometry,
+      new THREE.LineBasicMaterial({ vertexColors: true, depthTest: !onTop }));
+    if (onTop) segments.renderOrder = 1;
+    return segments;
+  };
+  const group = new THREE.Group();
+  group.add(lines(outerIndex.subarray(0, outer), false));
+  if (within) group.add(lines(insideIndex.subarray(0, within), true));
+  return group;
 }
 
 let software = null;

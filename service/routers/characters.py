@@ -12,7 +12,7 @@ from hairport.records import CharacterRecord
 from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedCharacter, PageLimit, PageOffset, RepositoryDep, SettingsDep
 from ..errors import problem_responses
-from ..schemas import AXIS_ENUM, DISPLAY_DESCRIPTION, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut, CharacterPage
+from ..schemas import AXIS_ENUM, DISPLAY_RESPONSE, MESH_FILE_DESCRIPTION, UNITS_ENUM, CharacterOut, CharacterPage
 from ..services import characters, display
 from ..uploads import FilePart, as_upload
 
@@ -50,9 +50,7 @@ def list_characters(owner: Owner, repository: RepositoryDep, limit: PageLimit = 
 
 
 @router.get("/{character_id}/mesh", summary="The character's mesh for drawing (its own units and axes)",
-            response_class=Response, responses={200: {"description": DISPLAY_DESCRIPTION, "content": {
-                solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
-                **problem_responses(401, 404, 410, 422)})
+            response_class=Response, responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 410, 422)})
 def get_mesh(repository: RepositoryDep, settings: SettingsDep, character: OwnedCharacter):
     return Response(display.character_mesh(repository, settings, character), media_type=solver.DISPLAY_MEDIA_TYPE)
 

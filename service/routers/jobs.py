@@ -13,7 +13,7 @@ from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedJob, PageLimit, PageOffset, QueueDep, RepositoryDep
 from ..errors import problem_responses
 from ..schemas import (
-    DISPLAY_DESCRIPTION,
+    DISPLAY_RESPONSE,
     RESULT_DESCRIPTION,
     BodyLayer,
     HairFormat,
@@ -71,12 +71,8 @@ def get_report(repository: RepositoryDep, job: OwnedJob):
     return jobs.blob_response(repository, jobs.outputs_of(job)["report"], "application/json", f"{job.id}.json")
 
 
-DISPLAY_CONTENT = {200: {"description": DISPLAY_DESCRIPTION, "content": {
-    solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}}}
-
-
 @router.get("/{job_id}/display", summary="The result or source strands, decimated for drawing",
-            response_class=Response, responses={**DISPLAY_CONTENT, **problem_responses(401, 404, 409, 410, 422)})
+            response_class=Response, responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
 def get_display(
     repository: RepositoryDep,
     job: OwnedJob,
@@ -95,7 +91,7 @@ def get_display(
 
 
 @router.get("/{job_id}/body", summary="The target (as solved) or source body, for drawing", response_class=Response,
-            responses={**DISPLAY_CONTENT, **problem_responses(401, 404, 409, 410, 422)})
+            responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
 def get_body(repository: RepositoryDep, job: OwnedJob, layer: BodyLayer = "target"):
     return Response(display.body(repository, job, layer), media_type=solver.DISPLAY_MEDIA_TYPE)
 

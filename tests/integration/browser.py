@@ -60,6 +60,13 @@ def count_near(image: np.ndarray, rgb, tolerance: int) -> int:
     return int(np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance, axis=2).sum())
 
 
+def mean_column_near(image: np.ndarray, rgb, tolerance: int) -> float:
+    """Mean x (as a fraction of the width) of the pixels within ``tolerance`` of ``rgb``; NaN if none."""
+    columns = np.nonzero(np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance,
+                                axis=2))[1]
+    return float(columns.mean() / image.shape[1]) if columns.size else float("nan")
+
+
 def count_red(image: np.ndarray) -> int:
     """Strongly red pixels (the viewer's particles inside the body)."""
     red, green, blue = (image[..., channel].astype(np.int16) for channel in range(3))

@@ -12,7 +12,15 @@ import numpy as np
 import pytest
 
 from tests.conftest import free_port
-from tests.integration.browser import ARTIFACTS, chromium, count_drawn, count_near, count_red, pixels
+from tests.integration.browser import (
+    ARTIFACTS,
+    chromium,
+    count_drawn,
+    count_near,
+    count_red,
+    mean_column_near,
+    pixels,
+)
 from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
 
 SHOTS = ARTIFACTS / "dashboard"
@@ -22,8 +30,9 @@ READY_SECONDS = 120
 JOB_SECONDS = 300
 GROOM_STRANDS, GROOM_PARTICLES = 300, 20
 SOURCE, HEAVY = "average-female", "heavy-male"
-#: the viewer's colour of result strands (dashboard/src/scene.js LAYER_RGB.result)
+#: the viewer's colours of result and source strands (dashboard/src/scene.js LAYER_RGB)
 RESULT_RGB = (112, 74, 38)
+SOURCE_RGB = (70, 110, 170)
 
 
 @pytest.fixture(scope="module")
@@ -178,6 +187,22 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert count_drawn(strands_only) < count_drawn(both)
         assert count_red(strands_only) == 0
 
+        # the source groom beside the result, on its own body, then over the result
+        set_checkbox(page, "body", True)
+        set_checkbox(page, "source", True)
+        page.wait_for_selector("#viewer-stats:has-text('source: 300 of 300 strands')")
+        beside = viewer_pixels(page, "06-viewer-source-beside")
+        assert count_near(beside, SOURCE_RGB, 12) > 300 and count_near(beside, RESULT_RGB, 12) > 300
+        # the source stands on its own body to the left: its strands' mean x well left of the result's
+        assert mean_column_near(beside, RESULT_RGB, 12) - mean_column_near(beside, SOURCE_RGB, 12) > 0.2
+        page.set_checked("input[name=side-by-side]", False)
+        page.wait_for_timeout(1500)
+        over = viewer_pixels(page, "06-viewer-source-over")
+        assert count_near(over, SOURCE_RGB, 12) > 300
+        # over the result: both grooms about the same vertical line
+        assert abs(mean_column_near(over, RESULT_RGB, 12) - mean_column_near(over, SOURCE_RGB, 12)) < 0.05
+        set_checkbox(page, "source", False)
+
         # a deliberately penetrating baseline overlaid: its particles inside the heavy body are red
         page.select_option("select[name=baseline]", "root-translate")
         page.click("#run-baseline")
@@ -196,6 +221,18 @@ def test_dashboard_end_to_end(deployment, inputs):
         for x, y in page.evaluate("() => window.hairportHairline.screenPoints(5, 0.012)"):
             page.mouse.click(x, y)
         assert page.get_attribute("#hairline-state", "data-points") == "5"
+        # a point dragged 15 px up the head moves, and stays one of five
+        before = page.evaluate("() => window.hairportHairline.controlScreenPoints()")
+        x, y = sorted(before)[2]
+        page.mouse.move(x, y)
+        page.mouse.down()
+        page.mouse.move(x, y - 8, steps=4)
+        page.mouse.move(x, y - 15, steps=4)
+        page.mouse.up()
+        after = page.evaluate("() => window.hairportHairline.controlScreenPoints()")
+        assert len(after) == 5 and page.get_attribute("#hairline-state", "data-points") == "5"
+        moved = max(after, key=lambda point: abs(point[1] - y) if abs(point[0] - x) < 8 else -1)
+        assert abs(moved[0] - x) < 8 and 10 < y - moved[1] < 20
         shot(page, "08-hairline-drawn")
         page.click("#submit-hairline")
         page.wait_for_url(re.compile(r".*#/view/[0-9a-f]+$"))

@@ -12,6 +12,7 @@ export async function charactersPage(main) {
     h("label", {}, "Skeleton JSON (optional)", h("input", { type: "file", name: "skeleton" })),
     h("label", {}, "Units", select("units", enumOf(schema, "Body_create_character_v1_characters_post", "units"), "auto")),
     h("label", {}, "Up axis", select("up_axis", enumOf(schema, "Body_create_character_v1_characters_post", "up_axis"), "auto")),
+    h("label", {}, "Front axis", select("front_axis", enumOf(schema, "Body_create_character_v1_characters_post", "front_axis"), "auto")),
     h("button", { type: "submit" }, "Upload"));
   const list = h("section", { id: "characters" });
   main.append(h("h1", {}, "Characters"), form, list);

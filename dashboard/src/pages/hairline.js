@@ -175,19 +175,23 @@ export async function hairlinePage(main, { params: [id] }) {
 
   // where the current hairline's points (raised by `lift` metres toward the crown) are on the screen: for
   // scripted use of the page (the browser tests click there)
+  const onScreen = (point) => {
+    const rect = canvas.getBoundingClientRect();
+    const projected = point.clone().project(viewer.camera);
+    return [rect.left + ((projected.x + 1) / 2) * rect.width, rect.top + ((1 - projected.y) / 2) * rect.height];
+  };
   window.hairportHairline = {
     viewer,
     screenPoints(count, lift) {
-      const rect = canvas.getBoundingClientRect();
       const picks = [];
       for (let k = 1; k <= count; k++) {
         const point = current[Math.round((k * (current.length - 1)) / (count + 1))].clone();
         point.y += lift;
-        point.project(viewer.camera);
-        picks.push([rect.left + ((point.x + 1) / 2) * rect.width, rect.top + ((1 - point.y) / 2) * rect.height]);
+        picks.push(onScreen(point));
       }
       return picks;
     },
+    controlScreenPoints: () => controls.map(onScreen),
   };
   redraw();
 }

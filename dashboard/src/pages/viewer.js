@@ -46,8 +46,11 @@ export async function viewerPage(main, { params: [id], query, signal }) {
   const baseline = select("baseline", baselines, "root-translate");
   const toggles = Object.fromEntries(["body", "result", "source", "compare"].map((name) =>
     [name, h("input", { type: "checkbox", name: `show-${name}`, checked: name !== "source" })]));
+  const sideBySide = h("input", { type: "checkbox", name: "side-by-side", checked: true });
   const toolbar = h("div", { class: "toolbar" },
     ...Object.entries(toggles).map(([name, box]) => h("label", {}, box, ` ${name}`)),
+    h("label", { title: "the source on its own body to the left, or its strands over the result" }, sideBySide,
+      " source beside"),
     h("label", {}, "compare with ", compare),
     h("label", {}, "run baseline ", baseline, h("button", { type: "button", id: "run-baseline", onclick: () => guarded(runBaseline) }, "Run")),
     h("label", {}, "display budget ", budget, " vertices"),
@@ -70,8 +73,9 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     const width = viewer.box(["body"]).getSize(new THREE.Vector3()).x;
     if (toggles.source.checked) {
       const [sourceBody, source] = await Promise.all([body(id, "source"), strands(id, "source", vertices)]);
-      viewer.set("source-body", bodyMesh(sourceBody), -SIDE_GAP * width);
-      viewer.set("source", strandLines(source, LAYER_RGB.source), -SIDE_GAP * width);
+      const offset = sideBySide.checked ? -SIDE_GAP * width : 0;
+      viewer.set("source-body", sideBySide.checked ? bodyMesh(sourceBody) : null, offset);
+      viewer.set("source", strandLines(source, LAYER_RGB.source), offset);
       drawn.source = source.header;
     } else {
       viewer.clear("source-body");
@@ -136,6 +140,7 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     }));
   }
   compare.addEventListener("change", () => guarded(loadCompare));
+  sideBySide.addEventListener("change", () => guarded(load));
   budget.addEventListener("change", () => guarded(load));
   await listComparisons(query.get("compare"));
   await guarded(load);
