@@ -12,15 +12,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import free_port
-from tests.integration.browser import (
-    ARTIFACTS,
-    chromium,
-    count_drawn,
-    count_near,
-    count_red,
-    mean_column_near,
-    pixels,
-)
+from tests.integration.browser import ARTIFACTS, chromium, count_drawn, count_near, count_red, mean_column_near, pixels
 from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
 
 SHOTS = ARTIFACTS / "dashboard"
