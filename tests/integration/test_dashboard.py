@@ -250,6 +250,60 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert page.errors == []
 
 
+def upload_source(api: httpx.Client, inputs) -> tuple[str, str]:
+    """The source character (with its rig) and the groom on it, through the API: their ids."""
+    with open(inputs / f"{SOURCE}.obj", "rb") as mesh, open(inputs / f"{SOURCE}.json", "rb") as skeleton:
+        character = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+    with open(inputs / "groom.npz", "rb") as hair:
+        hairstyle = api.post("/v1/hairstyles", files={"hair": hair}, data={"source_character_id": character}).json()["id"]
+    return character, hairstyle
+
+
+def job_state(api: httpx.Client, job_id: str) -> str:
+    return api.get(f"/v1/jobs/{job_id}").json()["state"]
+
+
+#: a retarget that runs for tens of seconds here (every iteration of 1000, no early stop): long enough to cancel
+LONG_OPTIONS = {"max_iterations": 1000, "energy_tolerance": 0.0, "step_tolerance": 0.0}
+
+
+def test_a_running_job_is_cancelled_and_retried_from_its_page(deployment, inputs):
+    base, api = deployment["base"], deployment["api"]
+    _, hairstyle = upload_source(api, inputs)
+    with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
+        target = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+    created = api.post("/v1/retargets", json={"hairstyle_id": hairstyle, "target_character_ids": [target],
+                                               "options": LONG_OPTIONS, "output_format": "ply"})
+    assert created.status_code == 202, created.text
+    running = created.json()["jobs"][0]["id"]
+    with chromium() as page:
+        enter_key(page, base, KEY)
+        page.wait_for_selector("#key-state:text('key accepted')")
+        page.goto(f"{base}/ui/#/jobs/{running}")
+        page.wait_for_selector("#job [data-state=running]", timeout=JOB_SECONDS * 1000)
+        shot(page, "14-running")
+        page.click("#cancel")
+        page.wait_for_selector("#job [data-state=cancelled]", timeout=60_000)
+        assert job_state(api, running) == "cancelled"
+        assert page.locator("#cancel").count() == 0 and page.locator("#downloads button").count() == 0
+        stopped_at = api.get(f"/v1/jobs/{running}").json()["progress"]
+        assert 0 < stopped_at < 1 and f"{round(100 * stopped_at)} %" in page.inner_text("#job")
+        shot(page, "15-cancelled")
+
+        # retried: a new job of the same pair, options and format, which opens in the page
+        page.click("#retry")
+        page.wait_for_url(re.compile(r".*#/jobs/(?!" + running + r")[0-9a-f]+$"))
+        again = page.url.rsplit("/", 1)[1]
+        first, second = api.get(f"/v1/jobs/{running}").json(), api.get(f"/v1/jobs/{again}").json()
+        for field in ("hairstyle_id", "target_character_id", "options", "hairline", "output_format"):
+            assert second[field] == first[field], field
+        assert second["state"] in ("queued", "running")
+        page.click("#cancel")  # and the worker is free again for the other tests
+        page.wait_for_selector("#job [data-state=cancelled]", timeout=60_000)
+        assert job_state(api, again) == "cancelled"
+        assert page.errors == []
+
+
 def test_bad_input_through_the_page_shows_the_api_message(deployment, inputs):
     base = deployment["base"]
     with chromium() as page:
@@ -274,11 +328,7 @@ def test_bad_input_through_the_page_shows_the_api_message(deployment, inputs):
         assert page.locator("#characters tbody tr").count() == before
 
         api = deployment["api"]
-        with open(inputs / f"{SOURCE}.obj", "rb") as mesh:
-            character = api.post("/v1/characters", files={"mesh": mesh}).json()["id"]
-        with open(inputs / "groom.npz", "rb") as hair:
-            hairstyle = api.post("/v1/hairstyles", files={"hair": hair},
-                                 data={"source_character_id": character}).json()["id"]
+        character, hairstyle = upload_source(api, inputs)
         jobs_before = api.get("/v1/jobs").json()["total"]
         page.goto(f"{base}/ui/#/new")
         page.wait_for_selector("#retarget-form")

@@ -6,9 +6,10 @@ import { property } from "./forms.js";
 
 export const ENDED = ["succeeded", "failed", "cancelled"];
 
+/** A job's progress: where a failed or cancelled job stopped, not 100 %. */
 export function progressCell(job) {
-  return h("td", {}, h("progress", { max: 1, value: ENDED.includes(job.state) ? 1 : job.progress }),
-           ` ${Math.round(100 * (ENDED.includes(job.state) ? 1 : job.progress))} %`);
+  const progress = job.state === "succeeded" ? 1 : job.progress;
+  return h("td", {}, h("progress", { max: 1, value: progress }), ` ${Math.round(100 * progress)} %`);
 }
 
 export async function jobsPage(main, { signal }) {
@@ -64,7 +65,7 @@ export async function jobPage(main, { params: [id], signal }) {
 
   function render(job) {
     fill(actions, 
-      ENDED.includes(job.state) ? null : h("button", { onclick: () => guarded(async () => { await remove(`/v1/jobs/${id}`); }) }, "Cancel"),
+      ENDED.includes(job.state) ? null : h("button", { id: "cancel", onclick: () => guarded(async () => { await remove(`/v1/jobs/${id}`); }) }, "Cancel"),
       ENDED.includes(job.state) ? h("button", { id: "retry", onclick: () => guarded(async () => {
         const again = await retry(job);
         location.hash = `#/jobs/${again.id}`;
