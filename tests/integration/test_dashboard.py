@@ -11,9 +11,11 @@ import httpx
 import numpy as np
 import pytest
 
+from hairport.solver.model.frame import InputFrame
 from tests.conftest import free_port
 from tests.integration.browser import ARTIFACTS, chromium, count_drawn, count_near, count_red, mean_column_near, pixels
 from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
+from tests.solver.frames import character_in, faces_only, hair_in, head_faces
 
 SHOTS = ARTIFACTS / "dashboard"
 #: seconds the server and its worker may take to be ready (the worker compiles or loads the solver's kernels)
@@ -25,12 +27,16 @@ SOURCE, HEAVY = "average-female", "heavy-male"
 #: the viewer's colours of result and source strands (dashboard/src/scene.js LAYER_RGB)
 RESULT_RGB = (112, 74, 38)
 SOURCE_RGB = (70, 110, 170)
+#: the foreign heads' frame and cut (m below the head joint)
+FOREIGN_FRAME = InputFrame("mm", "z", "-y")
+HEAD_CUT_M = 0.10
 
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
     """Two MakeHuman characters (OBJ + skeleton JSON) and a groom made on the first (npz)."""
     from hairport.solver.io.character.export import write_character
+    from hairport.solver.io.character.obj import write_obj
     from hairport.solver.io.hair import write_hair
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
@@ -41,6 +47,16 @@ def inputs(tmp_path_factory):
         write_character(character, folder / f"{name}.obj", folder / f"{name}.json")
     write_hair(folder / "groom.npz", generate_groom(characters[SOURCE], "long", GROOM_STRANDS, GROOM_PARTICLES, seed=3))
     (folder / "notes.txt").write_text("not a mesh\n")
+    # the same heads as a DCC tool might export them: millimetres, Z up, no rig, cut open at the neck,
+    # and a fringe in a format that records no units
+    keep = head_faces(characters[SOURCE], HEAD_CUT_M)
+    for name, character in characters.items():
+        head = character_in(FOREIGN_FRAME, faces_only(character, keep, name))
+        write_obj(folder / f"{name}-head-mm.obj", head.vertices, head.faces, "a head in mm, Z up, no rig")
+    head = faces_only(characters[HEAVY], keep, HEAVY)
+    write_obj(folder / f"{HEAVY}-head.obj", head.vertices, head.faces, "the same head in hairport's frame")
+    fringe = generate_groom(characters[SOURCE], "fringe", GROOM_STRANDS, GROOM_PARTICLES, seed=4)
+    write_hair(folder / "fringe-mm.data", hair_in(FOREIGN_FRAME, fringe))
     return folder
 
 
@@ -301,6 +317,90 @@ def test_a_running_job_is_cancelled_and_retried_from_its_page(deployment, inputs
         page.click("#cancel")  # and the worker is free again for the other tests
         page.wait_for_selector("#job [data-state=cancelled]", timeout=60_000)
         assert job_state(api, again) == "cancelled"
+        assert page.errors == []
+
+
+def rows_with(image: np.ndarray, rgb, tolerance: int) -> np.ndarray:
+    """Image rows holding pixels within ``tolerance`` of ``rgb``."""
+    near = np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance, axis=2)
+    return np.flatnonzero(near.any(axis=1))
+
+
+def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, inputs):
+    """Open heads and a groom as a DCC tool writes them: units and axes inferred on upload, the groom
+    anchored by the surface, the result drawn upright with the hair on top of the head, a hairline
+    drawn on it and retargeted."""
+    base, api = deployment["base"], deployment["api"]
+    with chromium() as page:
+        enter_key(page, base, KEY)
+        page.wait_for_selector("#key-state:text('key accepted')")
+        page.goto(f"{base}/ui/#/characters")
+        heads = {}
+        # the two heads, the heavy one again in hairport's own frame (metres, Y up), and again in
+        # millimetres Z up but declared Y up (a wrong declaration, drawn lying down)
+        uploads = {SOURCE: (f"{SOURCE}-head-mm.obj", "auto"), HEAVY: (f"{HEAVY}-head-mm.obj", "auto"),
+                   "reference": (f"{HEAVY}-head.obj", "auto"), "declared-y": (f"{HEAVY}-head-mm.obj", "+y")}
+        for name, (file, up_axis) in uploads.items():
+            page.wait_for_selector("#character-form")
+            page.set_input_files("input[name=mesh]", str(inputs / file))
+            page.select_option("#character-form select[name=up_axis]", up_axis)
+            page.click("#character-form button[type=submit]")
+            message = page.wait_for_selector("#message.info:has-text('stored')")
+            heads[name] = re.search(r"character ([0-9a-f]+) stored", message.inner_text()).group(1)
+            page.evaluate("() => { document.querySelector('#message').className = 'stale'; }")
+        for name in (SOURCE, HEAVY):
+            record = api.get(f"/v1/characters/{heads[name]}").json()
+            assert (record["units"], record["up_axis"], record["has_skeleton"]) == ("auto", "auto", False), record
+
+        def thumbnail(name: str) -> np.ndarray:
+            selector = f"#characters tr[data-id='{heads[name]}'] img[src^='data:image/png']"
+            page.wait_for_selector(selector)
+            return pixels(shot(page, f"16-head-{name}", selector)).astype(np.int16)
+
+        page.wait_for_timeout(500)
+        reference = thumbnail("reference")
+        # the millimetre Z-up head is drawn as the same head in metres Y up; declared Y up, it is not
+        upright = np.abs(thumbnail(HEAVY) - reference).mean()
+        lying = np.abs(thumbnail("declared-y") - reference).mean()
+        assert upright < 0.3 * lying, (upright, lying)
+
+        page.goto(f"{base}/ui/#/hairstyles")
+        page.wait_for_selector("#hairstyle-form")
+        page.set_input_files("input[name=hair]", str(inputs / "fringe-mm.data"))
+        page.select_option("select[name=source_character_id]", heads[SOURCE])
+        page.click("#hairstyle-form button[type=submit]")
+        hairstyle = re.search(r"hairstyle ([0-9a-f]+):", page.wait_for_selector(
+            "#message.info:has-text('hairstyle')").inner_text()).group(1)
+        page.wait_for_selector(f"#hairstyles tr[data-id='{hairstyle}'] [data-state=ready]", timeout=JOB_SECONDS * 1000)
+
+        page.goto(f"{base}/ui/#/new")
+        page.wait_for_selector("#retarget-form")
+        page.check(f"input[name=hairstyle][value='{hairstyle}']")
+        page.check(f"input[name=target][value='{heads[HEAVY]}']")
+        page.click("#retarget-form button[type=submit]")
+        page.wait_for_url(re.compile(r".*#/jobs/[0-9a-f]+$"))
+        job_id = page.url.rsplit("/", 1)[1]
+        page.wait_for_selector("#job [data-state=succeeded]", timeout=JOB_SECONDS * 1000)
+        metrics = api.get(f"/v1/jobs/{job_id}").json()["metrics"]
+        assert metrics["anchoring"] == "surface" and metrics["penetrating_particles"] == 0
+        assert (metrics["input"]["units"]["hair"], metrics["input"]["axes"]["up"]) == ("mm", "+z")
+
+        page.goto(f"{base}/ui/#/view/{job_id}")
+        page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
+        assert f"{GROOM_STRANDS} of {GROOM_STRANDS} strands" in page.inner_text("#viewer-stats")
+        view = viewer_pixels(page, "17-viewer-head-mm")
+        hair_rows = rows_with(view, RESULT_RGB, 12)
+        skin_rows = rows_with(view, (217, 199, 184), 40)
+        assert len(hair_rows) > 20 and len(skin_rows) > 20
+        # upright: the fringe covers the top of the head, above the middle of the face
+        assert hair_rows.min() < skin_rows.min() + 0.1 * np.ptp(skin_rows)
+        assert np.median(hair_rows) < np.median(skin_rows)
+
+        # no rig, no head bone: the drawing page says why it cannot draw
+        page.goto(f"{base}/ui/#/hairline/{job_id}")
+        message = page.wait_for_selector("#message:not(.info)").inner_text()
+        assert "no_hairline" in message and "has no skeleton" in message and "head's frame" in message, message
+        shot(page, "18-hairline-head-mm")
         assert page.errors == []
 
 
