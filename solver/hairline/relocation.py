@@ -171,7 +171,7 @@ def scalp_chart(
     Parameters
     ----------
     character : Character
-        The target (skeleton with a ``head`` bone).
+        The target (its head frame from a ``head`` bone, or from the mesh without a rig).
     root_faces : (S,) int64
         Character face holding each root.
     parameterization : str
@@ -429,6 +429,7 @@ def relocate_roots(
         "edit": edit.describe(),
         "method": edit.method,
         "parameterization": edit.parameterization,
+        "head_frame": setup.frame.source,
         "density_change_l1": float(density.l1),
         "density_change_linf": float(density.linf),
         "seconds": finished - began,

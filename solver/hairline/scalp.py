@@ -37,7 +37,7 @@ Hairline
 --------
 The boundary loop of the scalp, oriented by the triangles (the scalp on the left, seen from
 outside): counter-clockwise seen from above the head. It is split at the ears, found from
-the head bone (:func:`~hairport.solver.body.head_frame.head_frame`), not from vertex ids: the ears are where the loop
+the head frame (:func:`~hairport.solver.body.head_frame.head_frame`), not from vertex ids: the ears are where the loop
 crosses the coronal plane ``(p - origin) . forward = EAR_PLANE_FORWARD_M`` farthest to the
 left and to the right. The part between them in front is :attr:`Scalp.front`, the rest
 :attr:`Scalp.back`; the loop starts with the front part, which runs from the character's
@@ -306,7 +306,8 @@ def extract_scalp(character: Character, root_faces: np.ndarray, frame: HeadFrame
     Parameters
     ----------
     character : Character
-        Needs a skeleton with a ``head`` bone (for the ears; see :func:`~hairport.solver.body.head_frame.head_frame`).
+        Its head frame finds the ears (:func:`~hairport.solver.body.head_frame.head_frame`: from a ``head``
+        bone, or from the mesh without a rig).
     root_faces : (S,) int64
         The face holding each root (duplicates count as more roots; e.g.
         ``adaptable.anchors.face[adaptable.hair.roots]``).

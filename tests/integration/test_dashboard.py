@@ -114,6 +114,51 @@ def viewer_pixels(page, name: str) -> np.ndarray:
     return pixels(shot(page, name, "#viewer"))
 
 
+def upload_character(page, mesh, skeleton=None, up_axis: str = "auto") -> str:
+    """A character through the open characters page's form: its id, from the page's message."""
+    page.wait_for_selector("#character-form")
+    page.set_input_files("input[name=mesh]", str(mesh))
+    if skeleton is not None:
+        page.set_input_files("input[name=skeleton]", str(skeleton))
+    page.select_option("#character-form select[name=up_axis]", up_axis)
+    page.click("#character-form button[type=submit]")
+    message = page.wait_for_selector("#message.info:has-text('stored')")
+    page.evaluate("() => { document.querySelector('#message').className = 'stale'; }")  # the next one waits anew
+    return re.search(r"character ([0-9a-f]+) stored", message.inner_text()).group(1)
+
+
+def upload_hairstyle(page, base: str, hair, source_id: str) -> str:
+    """A groom through the hairstyles page, waited for until preprocessed: its id."""
+    page.goto(f"{base}/ui/#/hairstyles")
+    page.wait_for_selector("#hairstyle-form")
+    page.set_input_files("input[name=hair]", str(hair))
+    page.select_option("select[name=source_character_id]", source_id)
+    page.click("#hairstyle-form button[type=submit]")
+    hairstyle_id = re.search(r"hairstyle ([0-9a-f]+):", page.wait_for_selector(
+        "#message.info:has-text('hairstyle')").inner_text()).group(1)
+    page.wait_for_selector(f"#hairstyles tr[data-id='{hairstyle_id}'] [data-state=ready]", timeout=JOB_SECONDS * 1000)
+    return hairstyle_id
+
+
+def click_hairline_points(page, base: str, job_id: str, count: int = 5) -> None:
+    """Open the drawing page of a job and click ``count`` points on its head, 12 mm above the current hairline."""
+    page.goto(f"{base}/ui/#/hairline/{job_id}")
+    page.wait_for_selector("#hairline-viewer canvas")
+    page.wait_for_timeout(500)
+    for x, y in page.evaluate(f"() => window.hairportHairline.screenPoints({count}, 0.012)"):
+        page.mouse.click(x, y)
+    assert page.get_attribute("#hairline-state", "data-points") == str(count)
+
+
+def submit_hairline(page, api: httpx.Client) -> dict:
+    """Send the drawn hairline; the new job opens in the viewer: its record once drawn."""
+    page.click("#submit-hairline")
+    page.wait_for_url(re.compile(r".*#/view/[0-9a-f]+$"))
+    drawn_job = page.url.rsplit("/", 1)[1]
+    page.wait_for_selector("#viewer[data-loaded=true]", timeout=JOB_SECONDS * 1000)
+    return api.get(f"/v1/jobs/{drawn_job}").json()
+
+
 def set_checkbox(page, name: str, checked: bool) -> None:
     page.set_checked(f"input[name=show-{name}]", checked)
 
@@ -128,15 +173,8 @@ def test_dashboard_end_to_end(deployment, inputs):
 
         # two characters through the upload form, each listed with a drawn thumbnail
         page.goto(f"{base}/ui/#/characters")
-        character_ids = {}
-        for name in (SOURCE, HEAVY):
-            page.wait_for_selector("#character-form")
-            page.set_input_files("input[name=mesh]", str(inputs / f"{name}.obj"))
-            page.set_input_files("input[name=skeleton]", str(inputs / f"{name}.json"))
-            page.click("#character-form button[type=submit]")
-            message = page.wait_for_selector("#message.info:has-text('stored')")
-            character_ids[name] = re.search(r"character ([0-9a-f]+) stored", message.inner_text()).group(1)
-            page.evaluate("() => { document.querySelector('#message').className = 'stale'; }")
+        character_ids = {name: upload_character(page, inputs / f"{name}.obj", inputs / f"{name}.json")
+                         for name in (SOURCE, HEAVY)}
         rows = page.locator("#characters tbody tr")
         assert rows.count() == 2
         page.wait_for_selector("#characters img[src^='data:image/png']")
@@ -146,14 +184,7 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert count_drawn(thumbnail, background=(242, 244, 247)) > 0.05 * thumbnail.shape[0] * thumbnail.shape[1]
 
         # the groom, preprocessed
-        page.goto(f"{base}/ui/#/hairstyles")
-        page.wait_for_selector("#hairstyle-form")
-        page.set_input_files("input[name=hair]", str(inputs / "groom.npz"))
-        page.select_option("select[name=source_character_id]", character_ids[SOURCE])
-        page.click("#hairstyle-form button[type=submit]")
-        hairstyle_id = re.search(r"hairstyle ([0-9a-f]+):", page.wait_for_selector(
-            "#message.info:has-text('hairstyle')").inner_text()).group(1)
-        page.wait_for_selector(f"#hairstyles tr[data-id='{hairstyle_id}'] [data-state=ready]", timeout=JOB_SECONDS * 1000)
+        hairstyle_id = upload_hairstyle(page, base, inputs / "groom.npz", character_ids[SOURCE])
         shot(page, "03-hairstyles")
 
         # a 1 x 2 batch with a hairline preset, watched to 100 %
@@ -223,12 +254,7 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert count_red(baseline) > 50
 
         # a hairline drawn by clicking five points on the head, sent, opened in the viewer
-        page.goto(f"{base}/ui/#/hairline/{heavy_job}")
-        page.wait_for_selector("#hairline-viewer canvas")
-        page.wait_for_timeout(500)
-        for x, y in page.evaluate("() => window.hairportHairline.screenPoints(5, 0.012)"):
-            page.mouse.click(x, y)
-        assert page.get_attribute("#hairline-state", "data-points") == "5"
+        click_hairline_points(page, base, heavy_job)
         # a point dragged 15 px up the head moves, and stays one of five
         before = page.evaluate("() => window.hairportHairline.controlScreenPoints()")
         x, y = sorted(before)[2]
@@ -242,12 +268,9 @@ def test_dashboard_end_to_end(deployment, inputs):
         moved = max(after, key=lambda point: abs(point[1] - y) if abs(point[0] - x) < 8 else -1)
         assert abs(moved[0] - x) < 8 and 10 < y - moved[1] < 20
         shot(page, "08-hairline-drawn")
-        page.click("#submit-hairline")
-        page.wait_for_url(re.compile(r".*#/view/[0-9a-f]+$"))
-        drawn_job = page.url.rsplit("/", 1)[1]
-        page.wait_for_selector("#viewer[data-loaded=true]", timeout=JOB_SECONDS * 1000)
+        drawn = submit_hairline(page, api)
+        drawn_job = drawn["id"]
         shot(page, "09-hairline-result")
-        drawn = api.get(f"/v1/jobs/{drawn_job}").json()
         assert drawn["state"] == "succeeded"
         assert len(drawn["hairline"]["curve"]["points"]) == 64
         assert drawn["metrics"]["hairline"]["roots_moved"] > 0
@@ -329,7 +352,7 @@ def rows_with(image: np.ndarray, rgb, tolerance: int) -> np.ndarray:
 def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, inputs):
     """Open heads and a groom as a DCC tool writes them: units and axes inferred on upload, the groom
     anchored by the surface, the result drawn upright with the hair on top of the head, a hairline
-    drawn on it and retargeted."""
+    drawn on it (the head's frame from the mesh) and retargeted."""
     base, api = deployment["base"], deployment["api"]
     with chromium() as page:
         enter_key(page, base, KEY)
@@ -341,13 +364,7 @@ def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, in
         uploads = {SOURCE: (f"{SOURCE}-head-mm.obj", "auto"), HEAVY: (f"{HEAVY}-head-mm.obj", "auto"),
                    "reference": (f"{HEAVY}-head.obj", "auto"), "declared-y": (f"{HEAVY}-head-mm.obj", "+y")}
         for name, (file, up_axis) in uploads.items():
-            page.wait_for_selector("#character-form")
-            page.set_input_files("input[name=mesh]", str(inputs / file))
-            page.select_option("#character-form select[name=up_axis]", up_axis)
-            page.click("#character-form button[type=submit]")
-            message = page.wait_for_selector("#message.info:has-text('stored')")
-            heads[name] = re.search(r"character ([0-9a-f]+) stored", message.inner_text()).group(1)
-            page.evaluate("() => { document.querySelector('#message').className = 'stale'; }")
+            heads[name] = upload_character(page, inputs / file, up_axis=up_axis)
         for name in (SOURCE, HEAVY):
             record = api.get(f"/v1/characters/{heads[name]}").json()
             assert (record["units"], record["up_axis"], record["has_skeleton"]) == ("auto", "auto", False), record
@@ -364,14 +381,7 @@ def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, in
         lying = np.abs(thumbnail("declared-y") - reference).mean()
         assert upright < 0.3 * lying, (upright, lying)
 
-        page.goto(f"{base}/ui/#/hairstyles")
-        page.wait_for_selector("#hairstyle-form")
-        page.set_input_files("input[name=hair]", str(inputs / "fringe-mm.data"))
-        page.select_option("select[name=source_character_id]", heads[SOURCE])
-        page.click("#hairstyle-form button[type=submit]")
-        hairstyle = re.search(r"hairstyle ([0-9a-f]+):", page.wait_for_selector(
-            "#message.info:has-text('hairstyle')").inner_text()).group(1)
-        page.wait_for_selector(f"#hairstyles tr[data-id='{hairstyle}'] [data-state=ready]", timeout=JOB_SECONDS * 1000)
+        hairstyle = upload_hairstyle(page, base, inputs / "fringe-mm.data", heads[SOURCE])
 
         page.goto(f"{base}/ui/#/new")
         page.wait_for_selector("#retarget-form")
@@ -396,11 +406,14 @@ def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, in
         assert hair_rows.min() < skin_rows.min() + 0.1 * np.ptp(skin_rows)
         assert np.median(hair_rows) < np.median(skin_rows)
 
-        # no rig, no head bone: the drawing page says why it cannot draw
-        page.goto(f"{base}/ui/#/hairline/{job_id}")
-        message = page.wait_for_selector("#message:not(.info)").inner_text()
-        assert "no_hairline" in message and "has no skeleton" in message and "head's frame" in message, message
+        # no rig: the head's frame comes from the mesh; five points clicked on the head
+        click_hairline_points(page, base, job_id)
         shot(page, "18-hairline-head-mm")
+        drawn = submit_hairline(page, api)
+        assert drawn["state"] == "succeeded", drawn.get("error")
+        assert drawn["metrics"]["hairline"]["head_frame"] == "mesh"
+        assert drawn["metrics"]["hairline"]["roots_moved"] > 0 and drawn["metrics"]["penetrating_particles"] == 0
+        shot(page, "19-hairline-head-mm-result")
         assert page.errors == []
 
 

@@ -61,10 +61,23 @@ def test_a_source_without_a_rig_is_anchored_by_its_surface_and_reflexive_retarge
     with pytest.raises(InputError, match="anchor by the surface") as error:
         pipeline.preprocess(bare, fringe, pipeline.PreprocessOptions(anchoring="bones"))
     assert error.value.code == "no_skeleton"
-    edit = pipeline.RetargetOptions(hairline=pipeline.HairlineEdit(preset="straight", amount=0.5))
-    with pytest.raises(InputError, match="hairline edits and presets take the head's frame") as error:
-        pipeline.retarget(adaptable, bare, edit)
-    assert error.value.code == "no_skeleton"
+
+
+def test_a_hairline_edit_without_rigs_takes_the_head_frame_from_the_mesh_and_lands_near_the_rigged_edit(female, fringe):
+    """Source and target without rigs: the preset moves the roots as with the rigs, to within a
+    millimetre (the head frames' joints lie 0.3-0.7 cm apart on these bodies)."""
+    male = build_character(PRESETS["heavy-male"])
+    edit = pipeline.RetargetOptions(hairline=pipeline.HairlineEdit(preset="receding", amount=0.5))
+    rigged = pipeline.retarget(pipeline.preprocess(female, fringe), male, edit)
+    bare = pipeline.retarget(pipeline.preprocess(Character(female.vertices, female.faces, name="bare"), fringe),
+                             Character(male.vertices, male.faces, name="bare-male"), edit)
+    assert (rigged.metrics["hairline"]["head_frame"], bare.metrics["hairline"]["head_frame"]) == ("head bone", "mesh")
+    assert bare.metrics["anchoring"] == "surface" and bare.metrics["penetrating_particles"] == 0
+    assert bare.metrics["hairline"]["roots_moved"] == rigged.metrics["hairline"]["roots_moved"] > 0
+    apart = np.linalg.norm(bare.hair.points[fringe.roots] - rigged.hair.points[fringe.roots], axis=1)
+    assert apart.mean() < 1e-3 and apart.max() < 3e-3
+    travel = rigged.metrics["hairline"]["mean_travel_m"]
+    assert abs(bare.metrics["hairline"]["mean_travel_m"] - travel) < 0.1 * travel
 
 
 def test_wrong_topology_is_refused_by_name(female, fringe):

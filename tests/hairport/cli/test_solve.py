@@ -380,6 +380,12 @@ def test_heads_without_a_rig_in_millimetres_and_z_up_retarget_by_their_surface(c
     assert np.abs(roots).max() < 1e-3  # mm: float32 coordinates near 1,700 mm
     code, _, err = run(capsys, args + ["--anchoring", "bones"])
     assert_input_error(code, err, "anchoring by bones needs", "skeleton")
+    # a hairline edit takes the head's frame from the mesh (no head bone)
+    code, _, err = run(capsys, args + ["--workers", "1", "--hairline", "receding:0.5"])
+    assert code == 0, err
+    hairline = json.loads((out / "report.json").read_text())["metrics"]["hairline"]
+    assert hairline["head_frame"] == "mesh" and hairline["roots_moved"] > 0
+    assert 0.5e-3 < hairline["mean_travel_m"] < 1e-2
 
 
 def test_preprocess_then_retarget_from_the_artifact_equals_the_one_shot_run(capsys, world, out):

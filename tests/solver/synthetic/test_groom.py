@@ -49,16 +49,25 @@ def test_scalp_faces(preset):
     assert local[:, 1].min() < frame.back + 0.02
 
 
-def test_groom_needs_head_bone(toy_a):
+def test_groom_needs_a_head_bone_in_a_rig_and_a_known_style(toy_a):
     sk = toy_a.skeleton
     names = tuple("skull" if n == "head" else n for n in sk.names)
     no_head = Character(toy_a.vertices, toy_a.faces, Skeleton(names, sk.parents, sk.heads, sk.tails), toy_a.weights)
     with pytest.raises(InputError, match="head"):
         generate_groom(no_head, "short", 10, 8)
-    with pytest.raises(InputError, match="skeleton"):
-        generate_groom(Character(toy_a.vertices, toy_a.faces), "short", 10, 8)
     with pytest.raises(InputError, match="style"):
         generate_groom(toy_a, "mohawk", 10, 8)
+
+
+def test_a_head_without_a_rig_grows_a_groom_on_its_scalp(toy_a):
+    """The head frame from the mesh: roots on the surface in the rigged scalp's region, strands outside."""
+    bare = Character(toy_a.vertices, toy_a.faces)
+    hair = generate_groom(bare, "short", 40, 8, seed=0)
+    distance = MeshQuery(bare.vertices, bare.faces).signed_distance(hair.points).distance
+    assert np.abs(distance[hair.is_root]).max() < 1e-9 and distance[~hair.is_root].min() > 0
+    rigged_scalp = scalp_faces(toy_a)
+    shared = np.intersect1d(rigged_scalp, scalp_faces(bare))
+    assert len(shared) >= 0.9 * len(rigged_scalp)
 
 
 @pytest.mark.parametrize("style", STYLES)
