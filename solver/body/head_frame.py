@@ -30,8 +30,8 @@ SKULL_REFERENCE_HEIGHT = 0.35
 #: over the MakeHuman presets' rigs (module docstring)
 CROWN_PER_SKULL_DEPTH = 0.76
 JOINT_FORWARD_SHARE = 0.46
-#: rounds of the rigless estimate (crown height -> skull slice -> depth -> crown height); the
-#: MakeHuman heads settle in three
+#: rounds of the rigless estimate (crown height -> skull slice -> depth -> crown height): the
+#: MakeHuman heads settle in one, the same heads scaled by 0.5, 2 and 3 in two, three and four
 MESH_FRAME_ROUNDS = 6
 #: a rigless head's vertices reach this many crown heights below the estimated joint (the face
 #: and jaw: the MakeHuman rigs' head-dominant vertices reach 0.26-0.32 at their 5th percentile)
@@ -180,8 +180,9 @@ def mesh_head_frame(character: Character) -> HeadFrame:
     crown) fix each other: starting from :data:`REFERENCE_CROWN_M`, the crown height becomes
     :data:`CROWN_PER_SKULL_DEPTH` depths, for :data:`MESH_FRAME_ROUNDS` rounds. The joint sits
     midway across the skull, :data:`JOINT_FORWARD_SHARE` of its depth in front of its back.
-    On the MakeHuman presets with their rigs removed the joint lands 0.4-2.0 cm from the rig's
-    and the crown height within 12 % (``tests/solver/body/test_head_frame.py``).
+    On the MakeHuman presets with their rigs removed the joint lands 0.25-1.8 cm from the rig's
+    and the crown height within 11 % (``tests/solver/body/test_head_frame.py`` holds them to
+    2 cm and 12 %).
 
     Parameters
     ----------
