@@ -169,6 +169,10 @@ def test_a_head_without_a_rig_gets_its_frame_from_the_mesh_near_the_rigs(preset)
     assert cut.crown == mesh.crown
     moved = mesh_head_frame(Character(head.vertices + [0.3, -1.0, 2.0], head.faces))
     np.testing.assert_allclose(moved.origin, mesh.origin + [0.3, -1.0, 2.0], atol=1e-12)
+    # a stylised head three times the size (far from the reference crown height) scales with it
+    big = mesh_head_frame(Character(3.0 * head.vertices, head.faces))
+    np.testing.assert_allclose(big.origin, 3.0 * mesh.origin, atol=1e-9)
+    assert big.crown == pytest.approx(3.0 * mesh.crown, rel=1e-9)
 
 
 def test_a_rigless_mesh_that_is_no_head_is_refused_by_name():
