@@ -198,14 +198,12 @@ def mesh_head_frame(character: Character) -> HeadFrame:
     Raises
     ------
     InputError
-        ``not_a_head`` when the mesh has no extent across or along the head (a flat or empty mesh).
+        ``not_a_head`` when the top of the mesh has no depth (a flat mesh).
     """
     vertices = character.vertices
     piece = vertex_components(character.faces, character.n_vertices)
     used = np.zeros(character.n_vertices, dtype=bool)
-    used[character.faces.ravel()] = True
-    if not used.any():
-        raise InputError("the mesh has no faces to find a head on", character.name, "not_a_head")
+    used[character.faces.ravel()] = True  # a Character has faces: it refuses a mesh without any
     main = used & (piece == np.argmax(np.bincount(piece[used])))
     up = np.array([0.0, 1.0, 0.0])
     forward = np.array([0.0, 0.0, 1.0])
