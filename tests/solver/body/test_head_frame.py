@@ -181,3 +181,8 @@ def test_a_rigless_mesh_that_is_no_head_is_refused_by_name():
     with pytest.raises(InputError, match="no depth from the face to the back of the head") as error:
         head_frame(flat)
     assert error.value.code == "not_a_head" and error.value.source == "flat"
+    sideways = Character(np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 0.0]]), np.array([[0, 1, 2]]),
+                         name="edge-on")
+    with pytest.raises(InputError, match="no width") as error:
+        head_frame(sideways)
+    assert error.value.code == "not_a_head"
