@@ -55,16 +55,25 @@ def pixels(png: bytes) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
 
+def near(image: np.ndarray, rgb, tolerance: int) -> np.ndarray:
+    """(H, W) bool: pixels within ``tolerance`` of ``rgb`` in every channel."""
+    return np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance, axis=2)
+
+
 def count_near(image: np.ndarray, rgb, tolerance: int) -> int:
     """Pixels within ``tolerance`` of ``rgb`` in every channel."""
-    return int(np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance, axis=2).sum())
+    return int(near(image, rgb, tolerance).sum())
 
 
 def mean_column_near(image: np.ndarray, rgb, tolerance: int) -> float:
     """Mean x (as a fraction of the width) of the pixels within ``tolerance`` of ``rgb``; NaN if none."""
-    columns = np.nonzero(np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance,
-                                axis=2))[1]
+    columns = np.nonzero(near(image, rgb, tolerance))[1]
     return float(columns.mean() / image.shape[1]) if columns.size else float("nan")
+
+
+def rows_near(image: np.ndarray, rgb, tolerance: int) -> np.ndarray:
+    """Image rows holding pixels within ``tolerance`` of ``rgb``."""
+    return np.flatnonzero(near(image, rgb, tolerance).any(axis=1))
 
 
 def count_red(image: np.ndarray) -> int:

@@ -13,7 +13,16 @@ import pytest
 
 from hairport.solver.model.frame import InputFrame
 from tests.conftest import free_port
-from tests.integration.browser import ARTIFACTS, chromium, count_drawn, count_near, count_red, mean_column_near, pixels
+from tests.integration.browser import (
+    ARTIFACTS,
+    chromium,
+    count_drawn,
+    count_near,
+    count_red,
+    mean_column_near,
+    pixels,
+    rows_near,
+)
 from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
 from tests.solver.frames import character_in, faces_only, hair_in, head_faces
 
@@ -343,12 +352,6 @@ def test_a_running_job_is_cancelled_and_retried_from_its_page(deployment, inputs
         assert page.errors == []
 
 
-def rows_with(image: np.ndarray, rgb, tolerance: int) -> np.ndarray:
-    """Image rows holding pixels within ``tolerance`` of ``rgb``."""
-    near = np.all(np.abs(image.astype(np.int16) - np.asarray(rgb, dtype=np.int16)) <= tolerance, axis=2)
-    return np.flatnonzero(near.any(axis=1))
-
-
 def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, inputs):
     """Open heads and a groom as a DCC tool writes them: units and axes inferred on upload, the groom
     anchored by the surface, the result drawn upright with the hair on top of the head, a hairline
@@ -399,8 +402,8 @@ def test_heads_in_millimetres_z_up_without_a_rig_through_the_page(deployment, in
         page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
         assert f"{GROOM_STRANDS} of {GROOM_STRANDS} strands" in page.inner_text("#viewer-stats")
         view = viewer_pixels(page, "17-viewer-head-mm")
-        hair_rows = rows_with(view, RESULT_RGB, 12)
-        skin_rows = rows_with(view, (217, 199, 184), 40)
+        hair_rows = rows_near(view, RESULT_RGB, 12)
+        skin_rows = rows_near(view, (217, 199, 184), 40)
         assert len(hair_rows) > 20 and len(skin_rows) > 20
         # upright: the fringe covers the top of the head, above the middle of the face
         assert hair_rows.min() < skin_rows.min() + 0.1 * np.ptp(skin_rows)
