@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from hairport.records import JOB_STATES
-from hairport.storage.job_index import IndexRow, JobIndex
+from hairport.storage.index import JobRow, SqliteIndex
 
 OWNER = "kowner"
 PAGE = 50
@@ -45,10 +45,10 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=2000)
     args = parser.parse_args()
     rng = random.Random(0)
-    rows = [IndexRow(f"{n:032x}", OWNER, rng.choice(JOB_STATES), 1000.0 + n, 1000.0 + n) for n in range(args.jobs)]
+    rows = [JobRow(f"{n:032x}", OWNER, rng.choice(JOB_STATES), 1000.0 + n, 1000.0 + n) for n in range(args.jobs)]
     with tempfile.TemporaryDirectory() as folder:
-        index = JobIndex(Path(folder), lambda: rows, durable=False)
-        index.counts()  # created and filled from the rows
+        index = SqliteIndex(Path(folder), lambda: rows, durable=False)
+        index.job_counts()  # created and filled from the rows
         with socket.socket() as probe:
             probe.bind(("127.0.0.1", 0))
             port = probe.getsockname()[1]
@@ -76,11 +76,12 @@ def main() -> None:
                 return pipe.execute()
 
             results = {
-                "page of 50 + total": (timed(lambda: index.page(OWNER, None, PAGE, 0), args.repeat),
+                "page of 50 + total": (timed(lambda: index.job_page(OWNER, None, PAGE, 0), args.repeat),
                                        timed(lambda: redis_page(f"jobs:{OWNER}"), args.repeat)),
-                "page of 50 in a state + total": (timed(lambda: index.page(OWNER, "succeeded", PAGE, 0), args.repeat),
+                "page of 50 in a state + total": (timed(lambda: index.job_page(OWNER, "succeeded", PAGE, 0),
+                                                        args.repeat),
                                                   timed(lambda: redis_page(f"jobs:{OWNER}:succeeded"), args.repeat)),
-                "counts by state": (timed(index.counts, args.repeat), timed(lambda: client.hgetall("counts"),
+                "counts by state": (timed(index.job_counts, args.repeat), timed(lambda: client.hgetall("counts"),
                                                                             args.repeat)),
             }
         finally:

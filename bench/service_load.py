@@ -14,7 +14,13 @@ are queued or running) while it measures:
   independent clients polling a job do);
 * ``GET /v1/jobs?limit=50``, ``GET /v1/jobs?state=succeeded&limit=50`` and ``GET /metrics`` with
   the records kept: ``--list-clients`` closed-loop clients each; the page of 50 also with one client
-  and with ``--list-clients`` paced at ``--list-think`` seconds (dashboards refreshing).
+  and with ``--list-clients`` paced at ``--list-think`` seconds (dashboards refreshing);
+* uploads (after the windows above): the paced polls while two hair files of 10^6 two-point strands
+  (28 MB ``.data`` each, as a load probe sent) are uploaded at once and validated, from their first
+  byte sent to the last answer; and the peak resident memory of the API process, alone and with its
+  child processes (the validation pool's), sampled every :data:`SAMPLE_SECONDS` while
+  :data:`MEMORY_UPLOADS` hair files of 5 MB are uploaded at once. Every upload is new content (the
+  same groom with one coordinate moved by a few ulps), so that each one is validated.
 
 Every window runs ``--seconds`` seconds; each figure is the median over ``--runs`` runs. With
 ``--baseline-ref REV`` the same measurements run first against the code of that git revision (its
@@ -29,8 +35,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import contextlib
 import datetime
+import json
 import os
 import platform
 import random
@@ -56,6 +64,18 @@ GROOM = (400, 16)
 THINK_JITTER = 0.5
 #: seconds between the feeder's checks
 FEED_SECONDS = 0.5
+#: strands (of two points each) of the upload windows' grooms: a 28 MB and a 5 MB ``.data`` file
+LARGE_UPLOAD_STRANDS = 1_000_000
+SMALL_UPLOAD_STRANDS = 180_000
+#: large uploads validated while the pollers poll
+LARGE_UPLOADS = 2
+#: uploads at once in the memory window
+MEMORY_UPLOADS = 50
+#: seconds between samples of the API's resident memory
+SAMPLE_SECONDS = 0.02
+#: seconds an upload may take (the code before the validation pool validated fifty 5 MB files in one
+#: process, one after the other in effect)
+UPLOAD_TIMEOUT_SECONDS = 900
 
 
 def free_port() -> int:
@@ -140,7 +160,7 @@ class Service:
         import httpx
 
         hairport = [sys.executable, "-m", "hairport.cli"]
-        self._spawn("serve", hairport + ["serve", "--port", str(self.port), *self.serve_args])
+        self.serve = self._spawn("serve", hairport + ["serve", "--port", str(self.port), *self.serve_args])
         self._spawn("worker", hairport + ["worker", "--concurrency", "1", "--loglevel", "WARNING"])
         wait_until(lambda: httpx.get(f"{self.url}/readyz", timeout=5).status_code == 200, "the API and the worker")
 
@@ -151,10 +171,11 @@ class Service:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
-    def _spawn(self, name: str, command: list[str]) -> None:
+    def _spawn(self, name: str, command: list[str]) -> subprocess.Popen:
         log = open(self.folder / f"{name}.log", "wb")
         self.processes.append(subprocess.Popen(command, env=self.env, stdout=log, stderr=subprocess.STDOUT,
                                                cwd=self.folder, start_new_session=True))
+        return self.processes[-1]
 
     def stop(self) -> None:
         for process in reversed(self.processes):
@@ -252,9 +273,10 @@ class RawConnection:
 
 
 async def load(client, paths: list[str], clients: int, seconds: float, think: float,
-               raw_url: str | None = None) -> tuple[list[float], int]:
-    """``clients`` loops sending GETs of ``paths`` (round robin) for ``seconds``; latencies (ms), errors.
-    With ``raw_url`` each loop has its own :class:`RawConnection`, else they share the httpx ``client``."""
+               raw_url: str | None = None, until: asyncio.Event | None = None) -> tuple[list[float], int]:
+    """``clients`` loops sending GETs of ``paths`` (round robin) for ``seconds`` (or until ``until`` is set);
+    latencies (ms), errors. With ``raw_url`` each loop has its own :class:`RawConnection`, else they share
+    the httpx ``client``."""
     latencies: list[float] = []
     errors = 0
     end = time.monotonic() + seconds
@@ -269,7 +291,7 @@ async def load(client, paths: list[str], clients: int, seconds: float, think: fl
         try:
             if think:
                 await asyncio.sleep(pace.uniform(0.0, think))
-            while time.monotonic() < end:
+            while time.monotonic() < end and not (until is not None and until.is_set()):
                 began = time.perf_counter()
                 if connection is not None:
                     status = await connection.get(paths[turn % len(paths)])
@@ -278,7 +300,11 @@ async def load(client, paths: list[str], clients: int, seconds: float, think: fl
                 latencies.append((time.perf_counter() - began) * 1000.0)
                 errors += status != 200
                 turn += 1
-                if think:
+                if think and until is not None:
+                    with contextlib.suppress(asyncio.TimeoutError):
+                        await asyncio.wait_for(until.wait(), think * pace.uniform(1.0 - THINK_JITTER,
+                                                                                  1.0 + THINK_JITTER))
+                elif think:
                     await asyncio.sleep(think * pace.uniform(1.0 - THINK_JITTER, 1.0 + THINK_JITTER))
         finally:
             if connection is not None:
@@ -288,19 +314,138 @@ async def load(client, paths: list[str], clients: int, seconds: float, think: fl
     return latencies, errors
 
 
+# ---------------------------------------------------------------------- uploads
+
+
+def upload_grooms(folder: Path) -> dict[str, bytes]:
+    """The ``.data`` files of the upload windows (grooms of two-point strands on the source toy), as bytes."""
+    from hairport.solver.io.hair import write_hair
+    from hairport.solver.synthetic import toy
+    from hairport.solver.synthetic.groom import generate_groom
+
+    source = toy.toy_character(name="source")
+    grooms = {}
+    for name, strands in (("large", LARGE_UPLOAD_STRANDS), ("small", SMALL_UPLOAD_STRANDS)):
+        write_hair(folder / f"{name}.data", generate_groom(source, "short", strands, 2, seed=1))
+        grooms[name] = (folder / f"{name}.data").read_bytes()
+    return grooms
+
+
+def variant(data: bytes, number: int) -> bytes:
+    """``data`` (a ``.data`` file) with its last coordinate moved by ``number`` ulps: new content, the same groom."""
+    last = int.from_bytes(data[-4:], "little", signed=True)
+    return data[:-4] + (last + number).to_bytes(4, "little", signed=True)
+
+
+def resident_bytes(pid: int) -> tuple[int, int]:
+    """Resident memory of process ``pid``, and of it with every process it started (its validation children)."""
+    parents, rss = {}, {}
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            with open(f"/proc/{entry.name}/stat") as stat:
+                fields = stat.read().rpartition(")")[2].split()
+            parents[int(entry.name)] = int(fields[1])
+            rss[int(entry.name)] = int(fields[21]) * os.sysconf("SC_PAGE_SIZE")
+    tree, frontier = {pid}, [pid]
+    while frontier:
+        frontier = [child for child, parent in parents.items() if parent in frontier and child not in tree]
+        tree.update(frontier)
+    return rss.get(pid, 0), sum(rss.get(member, 0) for member in tree)
+
+
+def upload_main(url: str, source_id: str, paths: list[str]) -> int:
+    """``service_load.py upload URL SOURCE_ID PATH...``: POST every hair file at once as a hairstyle of the
+    source, one connection and thread each; prints ``sending``, then the statuses (JSON). A process of its
+    own, so that sending them takes nothing from the pollers' process."""
+    import concurrent.futures
+
+    import httpx
+
+    def upload(path: str) -> int:
+        with httpx.Client(base_url=url, headers=AUTH, timeout=UPLOAD_TIMEOUT_SECONDS) as client:
+            return client.post("/v1/hairstyles", data={"source_character_id": source_id},
+                               files={"hair": (Path(path).name, Path(path).read_bytes())}).status_code
+
+    print("sending", flush=True)
+    with concurrent.futures.ThreadPoolExecutor(len(paths)) as threads:
+        print(json.dumps(list(threads.map(upload, paths))), flush=True)
+    return 0
+
+
+class Uploads:
+    """Variants of a groom (files in ``folder``) uploaded at once by an uploader process (:func:`upload_main`).
+
+    ``await Uploads(...).start()`` returns once the uploads are being sent; :attr:`done` is set, and
+    :attr:`statuses` filled, when the last one is answered."""
+
+    def __init__(self, url: str, source_id: str, folder: Path, groom: bytes, first: int, count: int):
+        self.url, self.source_id, self.done = url, source_id, asyncio.Event()
+        self.paths = [folder / f"upload-{first + number}.data" for number in range(count)]
+        for number, path in enumerate(self.paths):
+            path.write_bytes(variant(groom, first + number))
+        self.statuses: list[int] = []
+
+    async def start(self) -> Uploads:
+        self.process = await asyncio.create_subprocess_exec(
+            sys.executable, str(Path(__file__).resolve()), "upload", self.url, self.source_id, *map(str, self.paths),
+            stdout=asyncio.subprocess.PIPE)
+        if (await self.process.stdout.readline()).strip() != b"sending":
+            raise SystemExit("bench: the uploader did not start")
+        self.finished = asyncio.create_task(self._finish())
+        return self
+
+    async def _finish(self) -> None:
+        output, _ = await self.process.communicate()
+        self.statuses = json.loads(output)
+        self.done.set()
+        for path in self.paths:
+            path.unlink()
+
+
+async def poll_while_uploading(client, url: str, ids: dict, paths: list[str], uploads: Uploads,
+                               args) -> tuple[list[float], int]:
+    """Paced pollers of ``paths`` from the start of ``uploads`` to their last answer; latencies (ms), errors."""
+    await uploads.start()
+    latencies, errors = await load(client, paths, args.pollers, UPLOAD_TIMEOUT_SECONDS, args.think,
+                                   url if args.client == "raw" else None, until=uploads.done)
+    await uploads.finished
+    return latencies, errors
+
+
+async def memory_under_uploads(api_pid: int, uploads: Uploads) -> tuple[int, int, int]:
+    """Resident bytes of the API process before ``uploads``, its peak while they run, and the peak of it with
+    its children."""
+    before, _ = resident_bytes(api_pid)
+    peak = [before, 0]
+    await uploads.start()
+    while not uploads.done.is_set():
+        api, tree = await asyncio.to_thread(resident_bytes, api_pid)
+        peak = [max(peak[0], api), max(peak[1], tree)]
+        with contextlib.suppress(asyncio.TimeoutError):
+            await asyncio.wait_for(uploads.done.wait(), SAMPLE_SECONDS)
+    await uploads.finished
+    return before, peak[0], peak[1]
+
+
 def percentile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(round(q / 100.0 * (len(ordered) - 1))))] if ordered else float("nan")
 
 
-async def measure(url: str, ids: dict, args) -> dict:
-    """Every window, ``args.runs`` times: ``{name: [(p50, p99, requests per second, errors), ...]}``."""
+async def measure(url: str, ids: dict, args, api_pid: int, grooms: dict[str, bytes],
+                  folder: Path) -> tuple[dict, list]:
+    """Every window, ``args.runs`` times: ``{name: [(p50, p99, requests per second, errors), ...]}``; the
+    memory under uploads, once a run."""
     import httpx
 
     limits = httpx.Limits(max_connections=args.pollers + args.list_clients + 4,
                           max_keepalive_connections=args.pollers + args.list_clients + 4)
     results: dict[str, list] = {}
-    async with httpx.AsyncClient(base_url=url, headers=AUTH, timeout=60, limits=limits) as client:
+    # the feeder waits as long as an upload may: the code before the validation pool answered nothing while
+    # it validated fifty uploads
+    async with httpx.AsyncClient(base_url=url, headers=AUTH, timeout=UPLOAD_TIMEOUT_SECONDS, limits=limits) as client:
         jobs: list[str] = []
         busy: list[float] = []
         stop = asyncio.Event()
@@ -331,12 +476,25 @@ async def measure(url: str, ids: dict, args) -> dict:
                 ran = any(began <= moment for moment in busy[-3:])
                 results.setdefault(name, []).append((percentile(latencies, 50), percentile(latencies, 99),
                                                      len(latencies) / args.seconds, errors, ran))
+        memory = []
+        uploading = f"poll, {args.think:g} s think, while {LARGE_UPLOADS} uploads of 28 MB validate"
+        for number in range(args.runs):
+            paths = [f"/v1/jobs/{job_id}" for job_id in jobs[-BUSY_JOBS:]]
+            large = Uploads(url, ids["source"], folder, grooms["large"], 1 + number * LARGE_UPLOADS, LARGE_UPLOADS)
+            began = time.monotonic()
+            latencies, errors = await poll_while_uploading(client, url, ids, paths, large, args)
+            seconds = time.monotonic() - began
+            results.setdefault(uploading, []).append((percentile(latencies, 50), percentile(latencies, 99),
+                                                      len(latencies) / seconds, errors,
+                                                      any(began <= moment for moment in busy[-3:])))
+            small = Uploads(url, ids["source"], folder, grooms["small"], 1 + number * MEMORY_UPLOADS, MEMORY_UPLOADS)
+            memory.append((*await memory_under_uploads(api_pid, small), small.statuses, large.statuses, seconds))
         stop.set()
         await feed
-    return results
+    return results, memory
 
 
-def run(ref: str | None, args) -> dict:
+def run(ref: str | None, args, grooms: dict[str, bytes]) -> tuple[dict, list]:
     with tempfile.TemporaryDirectory(prefix="hairport-bench-") as temp:
         folder = Path(temp)
         service = Service(folder, source_tree(ref, folder), [] if ref else args.serve_args)
@@ -350,12 +508,12 @@ def run(ref: str | None, args) -> dict:
             print(f"  {args.records} job records stored in {time.perf_counter() - began:.1f} s", flush=True)
             service.start_api_and_worker()
             ids = upload_inputs(service.url, folder)
-            return asyncio.run(measure(service.url, ids, args))
+            return asyncio.run(measure(service.url, ids, args, service.serve.pid, grooms, folder))
         finally:
             service.stop()
 
 
-def table(results: dict[str, dict], args) -> str:
+def table(results: dict[str, dict], memory: dict[str, list], args) -> str:
     lines = [f"hairport service load - {datetime.date.today()} - {platform.node()} ({os.cpu_count()} cores, "
              f"{platform.processor() or platform.machine()}, Python {platform.python_version()})",
              f"load: {args.pollers} pollers on the jobs being run (closed loop, and paced: {args.think:g} s think time "
@@ -372,6 +530,19 @@ def table(results: dict[str, dict], args) -> str:
             rate = statistics.median(r[2] for r in runs)
             lines.append(f"| {code} | {name} | {p50:.1f} | {p99:.1f} | {rate:.0f} | {sum(r[3] for r in runs)} | "
                          f"{'yes' if all(r[4] for r in runs) else 'not always'} |")
+    lines += ["", f"memory: {MEMORY_UPLOADS} uploads of a 5 MB hair file ({SMALL_UPLOAD_STRANDS:,} strands) at once, "
+                  f"resident memory sampled every {SAMPLE_SECONDS * 1000:g} ms (median of {args.runs} runs; the API "
+                  "and its children: the processes it started, the validation pool's)", "",
+              "| code | API before MB | API peak MB | API + children peak MB | 5 MB uploads answered | "
+              f"{LARGE_UPLOADS} x 28 MB uploads answered (s) |", "|---|---:|---:|---:|---|---|"]
+    for code, runs in memory.items():
+        before, api, tree = (statistics.median(r[index] for r in runs) / 2**20 for index in range(3))
+        small = ", ".join(f"{count} x {status}" for status, count in sorted(collections.Counter(
+            status for r in runs for status in r[3]).items()))
+        large = ", ".join(f"{count} x {status}" for status, count in sorted(collections.Counter(
+            status for r in runs for status in r[4]).items()))
+        lines.append(f"| {code} | {before:.0f} | {api:.0f} | {tree:.0f} | {small} | {large} "
+                     f"({statistics.median(r[5] for r in runs):.1f}) |")
     return "\n".join(lines)
 
 
@@ -380,6 +551,8 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["populate"]:
         populate(argv[1], int(argv[2]), argv[3])
         return 0
+    if argv[:1] == ["upload"]:
+        return upload_main(argv[1], argv[2], argv[3:])
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--records", type=int, default=10_000, help="job records kept")
     parser.add_argument("--pollers", type=int, default=100, help="concurrent pollers of GET /v1/jobs/{id}")
@@ -395,12 +568,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--serve-args", default="", help="extra arguments of `hairport serve` (this tree only)")
     args = parser.parse_args(argv)
     args.serve_args = args.serve_args.split()
-    results = {}
+    results, memory = {}, {}
+    with tempfile.TemporaryDirectory(prefix="hairport-bench-grooms-") as folder:
+        grooms = upload_grooms(Path(folder))
     for ref in ([args.baseline_ref] if args.baseline_ref else []) + [None]:
         code = ref or f"this tree {' '.join(args.serve_args)}".strip()
         print(f"measuring {code} ...", flush=True)
-        results[code] = run(ref, args)
-    print(table(results, args))
+        results[code], memory[code] = run(ref, args, grooms)
+    print(table(results, memory, args))
     return 0
 
 

@@ -48,6 +48,10 @@ BatchState = Literal["queued", "running", "done"]
 BATCH_STATES: tuple[str, ...] = get_args(BatchState)
 BATCH_QUEUED, BATCH_RUNNING, BATCH_DONE = BATCH_STATES
 
+#: a job's progress counts in integer millionths in a batch's progress: sums of integers are exact, so a batch's
+#: progress is the same summed from its jobs or kept as a running total (jobs write theirs rounded to 1e-4)
+PROGRESS_UNITS = 1_000_000
+
 ChunkState = Literal["queued", "running", "done", "failed"]
 CHUNK_STATES: tuple[str, ...] = get_args(ChunkState)
 CHUNK_QUEUED, CHUNK_RUNNING, CHUNK_DONE, CHUNK_FAILED = CHUNK_STATES
@@ -275,6 +279,50 @@ class BatchRecord(Record):
     job_ids: list[str]
 
 
+class BatchTotals(BaseModel):
+    """A batch's jobs summed: the one rule for its state, progress and end, whether the sums come from its job
+    records (:meth:`of_jobs`) or from the record index."""
+
+    counts: dict[str, int] = Field(description="jobs by state (every state)")
+    progress_units: int = Field(0, description="progress of the jobs that have not ended, in PROGRESS_UNITS")
+    finished_at: float | None = Field(None, description="the latest end of its jobs")
+
+    @classmethod
+    def of_jobs(cls, jobs: list[JobRecord]) -> BatchTotals:
+        counts = dict.fromkeys(JOB_STATES, 0)
+        for job in jobs:
+            counts[job.state] += 1
+        ends = [job.finished_at for job in jobs if job.finished_at is not None]
+        return cls(counts=counts, progress_units=sum(progress_units(job.progress) for job in jobs
+                                                     if job.state not in TERMINAL_STATES),
+                   finished_at=max(ends, default=None))
+
+    @property
+    def state(self) -> str:
+        """queued: no job started; done: every job ended (a batch whose jobs were all purged too); else running."""
+        total = sum(self.counts.values())
+        if sum(self.counts.get(state, 0) for state in TERMINAL_STATES) == total:
+            return BATCH_DONE
+        return BATCH_QUEUED if self.counts.get(QUEUED, 0) == total else BATCH_RUNNING
+
+    @property
+    def progress(self) -> float:
+        """Mean progress of the jobs, an ended job counting 1 (rounded to 1e-4)."""
+        ended = sum(self.counts.get(state, 0) for state in TERMINAL_STATES)
+        total = max(1, sum(self.counts.values()))
+        return round((ended * PROGRESS_UNITS + self.progress_units) / (total * PROGRESS_UNITS), 4)
+
+    @property
+    def ended_at(self) -> float | None:
+        """When the batch was done (its last job's end), None before."""
+        return self.finished_at if self.state == BATCH_DONE else None
+
+
+def progress_units(progress: float) -> int:
+    """A job's progress as an integer count of :data:`PROGRESS_UNITS`."""
+    return round(progress * PROGRESS_UNITS)
+
+
 class PurgeClock(Record):
     """When the retention purge last ran (shared by all workers)."""
 
@@ -284,6 +332,13 @@ class PurgeClock(Record):
 
 class SweepClock(Record):
     """When the last sweep for stale jobs and lost messages ran (shared by workers and API)."""
+
+    KIND: ClassVar[str] = "maintenance"
+    last_sweep: float = 0.0
+
+
+class OrphanSweepClock(Record):
+    """When the last sweep for orphan blobs ran (shared by workers and API)."""
 
     KIND: ClassVar[str] = "maintenance"
     last_sweep: float = 0.0

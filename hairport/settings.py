@@ -40,6 +40,11 @@ class Settings(BaseSettings):
     insecure_dev: bool = Field(False, description="Accept requests without a key (owner 'dev'); never in production.")
     max_upload_bytes: int = Field(512 * 1024**2, description="Largest accepted upload (bytes); larger gets 413.")
     retention_days: float = Field(30.0, description="Results, uploads and records older than this are purged.")
+    orphan_grace_seconds: float = Field(3600.0, ge=60, description=(
+        "A stored file no record refers to (an upload whose API process died before its record was written, the "
+        "outputs of a run that lost its job) is removed once it was not saved or read for this long (s). It "
+        "must be longer than an upload's validation, which happens between its file and its record (files of "
+        "running jobs are kept whatever their age); the sweep runs hourly."))
     cors_origins: str = Field("", description="Comma-separated origins allowed by CORS ('*' for any).")
     task_time_limit: int = Field(3600, description="Hard time limit of one job (s); the worker child is killed.")
     task_soft_time_limit: int = Field(3300, description="Soft time limit of one job (s): the job fails cleanly.")
@@ -68,6 +73,18 @@ class Settings(BaseSettings):
         "A job queued this long (s) whose message is in no queue of the broker is sent again."))
     enqueue_timeout_seconds: float = Field(3.0, gt=0, description=(
         "Longest wait for the broker when a request sends a task (s); past it the request is 503."))
+    max_concurrent_validations: int = Field(2, ge=1, description=(
+        "Uploads the API validates at once, each in a process of its own (started with the API, one core "
+        "each while busy); more wait their turn."))
+    validation_memory_bytes: int = Field(1024**3, ge=16 * 1024**2, description=(
+        "Memory one upload's validation may allocate (bytes), beyond its process's own ~0.25 GB: the heap "
+        "limit of that process; an upload needing more is refused (413 over_memory_budget)."))
+    validation_wait_seconds: float = Field(30.0, ge=0, description=(
+        "Longest wait of an upload for a free validation process (s); past it the request is 503 "
+        "validation_busy with Retry-After."))
+    validation_timeout_seconds: float = Field(120.0, gt=0, description=(
+        "Longest validation of one upload (s); past it its process is stopped and the upload refused "
+        "(413 too_large)."))
 
     @field_validator("storage_dir")
     @classmethod

@@ -14,7 +14,7 @@ from hairport.settings import Settings, get_settings
 from hairport.storage import LocalStorage, deployment_id
 from hairport.worker.queue import TaskQueue, connect
 
-from . import contract, dashboard_ui, docs, errors
+from . import contract, dashboard_ui, docs, errors, headers, validation
 from .auth import check_configuration
 from .routers import batches, characters, hairstyles, health, jobs, retargets
 
@@ -84,7 +84,8 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     ``queue_depths`` default to checks against that Redis."""
     settings = settings or get_settings()
     check_configuration(settings)
-    app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION, docs_url=None, redoc_url=None)
+    app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION, docs_url=None, redoc_url=None,
+                  lifespan=validation.lifespan)
     app.state.settings = settings
     app.state.storage = LocalStorage(settings.storage_dir)
     app.state.repository = Repository(app.state.storage)
@@ -102,7 +103,9 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     app.add_middleware(ContentLengthLimit, limit=settings.max_upload_bytes)
     if settings.cors_origin_list:
         app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origin_list, allow_methods=["*"],
-                           allow_headers=["*"], expose_headers=["Location"])
+                           allow_headers=["*"], expose_headers=["Location", headers.REQUEST_ID_HEADER])
+    # added last, so outermost: its headers are on every response, the 413 above and CORS preflights included
+    app.add_middleware(headers.ResponseHeaders)
     for router in (characters.router, hairstyles.router, retargets.router, batches.router, jobs.router, health.router):
         app.include_router(router)
     contract.install(app)

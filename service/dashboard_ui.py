@@ -11,12 +11,13 @@ from fastapi.responses import FileResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from .errors import Problem
+from .headers import SELF_ONLY_POLICY
 
 URL = "/ui"
 BUNDLE_DIR = Path(__file__).parent / "dashboard"
-#: the page may load only what hairport serves (and draw into blobs: thumbnails, downloads)
-CONTENT_SECURITY_POLICY = ("default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
-                           "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'")
+#: the page may load only what hairport serves (and draw into blobs: thumbnails, downloads); its files under
+#: /ui/static/ (index.html too) get the same policy from service/headers.py, as every page without its own does
+CONTENT_SECURITY_POLICY = SELF_ONLY_POLICY
 
 
 def install(app: FastAPI, bundle_dir: Path = BUNDLE_DIR) -> None:

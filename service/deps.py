@@ -51,7 +51,12 @@ QueueDep = Annotated[TaskQueue, Depends(get_queue)]
 MAX_PAGE = 200
 DEFAULT_PAGE = 50
 PageLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="most items in the page")]
-PageOffset = Annotated[int, Query(ge=0, description="items skipped, newest first")]
+#: largest offset a listing takes: far beyond the records any deployment keeps (retention purges them; 10^9 jobs
+#: would be terabytes of records), and small enough that an offset plus a page (10^9 + 200) is a signed 32-bit
+#: integer, the size most generated clients give an OpenAPI integer: every accepted offset and every
+#: ``next_offset`` fits them, and no storage (SQLite's 64-bit OFFSET) ever sees an overflowing one
+MAX_OFFSET = 1_000_000_000
+PageOffset = Annotated[int, Query(ge=0, le=MAX_OFFSET, description="items skipped, newest first")]
 
 #: longest Idempotency-Key accepted (characters)
 MAX_IDEMPOTENCY_KEY = 200

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import re
 
 from fastapi import FastAPI, Request
@@ -11,6 +12,10 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from hairport import solver
 from hairport.messages import safe_detail
+
+from . import headers as response_headers
+
+log = logging.getLogger(__name__)
 
 PROBLEM_TYPE_BASE = "https://hairport.dev/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
@@ -26,10 +31,13 @@ class Problem(Exception):
         self.headers = headers
 
 
-def problem_response(status: int, code: str, detail: str, title: str | None = None, headers: dict | None = None):
+def problem_response(status: int, code: str, detail: str, title: str | None = None, headers: dict | None = None,
+                     request_id: str | None = None):
     # every detail is bounded and sanitised here (ids and file text are echoed; blob names hidden)
     body = {"type": PROBLEM_TYPE_BASE + code, "title": title or code.replace("_", " "), "status": status,
             "detail": safe_detail(detail), "code": code}
+    if request_id is not None:
+        body["request_id"] = request_id
     return JSONResponse(body, status_code=status, media_type=PROBLEM_MEDIA_TYPE, headers=headers)
 
 
@@ -39,7 +47,21 @@ _HTTP_CODES = {400: "bad_request", 401: "unauthorized", 404: "not_found", 405: "
 
 
 def install(app: FastAPI) -> None:
-    """Route every error through :func:`problem_response`."""
+    """Route every error through :func:`problem_response`; anything unexpected is an ``internal`` 500 whose
+    request id is in its body, in its ``X-Request-ID`` header and in the server's log with the traceback."""
+
+    @app.exception_handler(Exception)
+    async def _internal(request: Request, error: Exception):
+        # Starlette runs this handler in its ServerErrorMiddleware, outside every middleware: the headers that
+        # service/headers.py sets on every other response are set here. The error then goes on to the server,
+        # which logs it too and closes the connection: the response says so, or a client reusing the connection
+        # would meet a reset
+        request_id = response_headers.request_id(request.scope)
+        log.error("internal error, request id %s: %s %r", request_id, request.method, request.url.path,
+                  exc_info=error)
+        headers = {**response_headers.response_headers(request_id, PROBLEM_MEDIA_TYPE), "Connection": "close"}
+        return problem_response(500, "internal", "an unexpected error; the server logged it under this problem's "
+                                                 "request_id", request_id=request_id, headers=headers)
 
     @app.exception_handler(Problem)
     async def _problem(request: Request, error: Problem):
@@ -98,24 +120,33 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
           "its check", ("invalid_request", "bad_units", "bad_axis", "bad_option", "no_skeleton", "too_many_targets",
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
                         "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
-                        "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair")),
-    503: ("the task queue is unavailable: nothing was started; retry after `Retry-After` seconds (or, at `/ui`, "
-          "the dashboard was not built)", ("queue_unavailable", "dashboard_not_built")),
+                        "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair",
+                        "external_reference", "stray_strands")),
+    500: ("an unexpected error (a defect, not the request's fault): the body's `request_id`, also in the "
+          "`X-Request-ID` header, names the server's log entry and its traceback", ("internal",)),
+    503: ("the task queue is unavailable, or every upload validation process stayed busy: nothing was started "
+          "or kept; retry after `Retry-After` seconds (or, at `/ui`, the dashboard was not built)",
+          ("queue_unavailable", "validation_busy", "dashboard_not_built")),
 }
 #: the Problem schema in the OpenAPI document (service/contract.py puts it there)
 PROBLEM_SCHEMA_REF = "#/components/schemas/Problem"
 #: headers a problem of a status carries
 PROBLEM_HEADERS: dict[int, dict[str, dict]] = {
     401: {"WWW-Authenticate": {"description": "the scheme to authenticate with", "schema": {"type": "string"}}},
+    500: {response_headers.REQUEST_ID_HEADER: {"description": "the request id the server logged the error under",
+                                               "schema": {"type": "string"}}},
     503: {"Retry-After": {"description": "seconds to wait before trying again", "schema": {"type": "integer"}}},
 }
+#: every operation can answer this (the catch-all of :func:`install`)
+INTERNAL_STATUS = 500
 
 
 def problem_responses(*statuses: int) -> dict[int, dict]:
-    """The ``responses=`` of a route answering ``statuses`` with problems: the Problem schema under
-    ``application/problem+json``, the meaning and known codes of each status, and its headers."""
+    """The ``responses=`` of a route answering ``statuses`` (and, as every route may, 500) with problems: the
+    Problem schema under ``application/problem+json``, the meaning and known codes of each status, and its
+    headers."""
     responses = {}
-    for status in statuses:
+    for status in dict.fromkeys((*statuses, INTERNAL_STATUS)):
         meaning, codes = PROBLEM_STATUSES[status]
         response = {"content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": PROBLEM_SCHEMA_REF}}},
                     "description": f"{meaning}. Codes: {', '.join(f'`{code}`' for code in codes)}."}

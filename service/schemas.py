@@ -242,6 +242,8 @@ class JobOut(BaseModel):
     options: dict
     hairline: dict | None = Field(None, description="the hairline edit asked for (a preset or a drawn curve)")
     flag_guides: bool = False
+    cancel_requested: bool = Field(False, description="the job was asked to cancel (DELETE): a queued one is cancelled "
+                                                      "at once, a running one stops at its solver's next iteration")
     attempts: int = Field(0, description="starts so far: a job whose worker died runs again, up to "
                                          "HAIRPORT_MAX_ATTEMPTS starts (then it fails with worker_lost)")
     worker: str | None = Field(None, description="the worker running (or last running) the job")
@@ -321,23 +323,32 @@ class BatchJobOut(BaseModel):
     links: dict[str, str]
 
 
-class BatchOut(BaseModel):
+class BatchSummary(BaseModel):
+    """A batch without its jobs (a listing's item; ``GET /v1/batches/{id}`` adds them)."""
+
     id: str
     state: BatchState = Field(description=(
         "queued: no job started; running: some job has not ended; done: every job ended (see counts)"))
     counts: dict[str, int] = Field(description="jobs in each state")
     progress: float = Field(description="mean progress of the jobs (an ended job counts 1)")
     created_at: float
-    finished_at: float | None = None
+    finished_at: float | None = Field(None, description="when its last job ended, once every job has")
     hairstyle_ids: list[str]
     target_character_ids: list[str]
     output_format: HairFormat
-    jobs: list[BatchJobOut] = Field(description="one per pair, hairstyle by hairstyle, targets in order")
     links: dict[str, str]
 
 
+class BatchOut(BatchSummary):
+    """A batch and its jobs."""
+
+    jobs: list[BatchJobOut] = Field(description="one per pair, hairstyle by hairstyle, targets in order")
+
+
 class BatchPage(BaseModel):
-    batches: list[BatchOut]
+    batches: list[BatchSummary] = Field(description=(
+        "newest first, without their jobs (a batch's own page lists them): a page costs the same whatever the "
+        "batches' sizes"))
     total: int
     limit: int
     offset: int
@@ -353,6 +364,8 @@ class Problem(BaseModel):
     detail: str = Field(description="what went wrong in this request, for people")
     code: str = Field(description="stable machine-readable code; each response's description lists the known "
                                   "codes of its status")
+    request_id: str | None = Field(None, description="`internal` (500) only: the id the server logged the error "
+                                                     "and its traceback under (also the `X-Request-ID` header)")
 
 
 #: media type of a result file per hair format: the result route answers with it and the contract lists it

@@ -1,4 +1,5 @@
-"""Streaming uploads into the storage, and validation of what they hold through the solver's readers."""
+"""Streaming uploads into the storage, and validation of what they hold through the solver's readers
+(in the validation pool's processes, :mod:`.validation`)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,6 @@ import io
 from pathlib import PurePosixPath
 
 from fastapi import UploadFile
-from starlette.concurrency import run_in_threadpool
 
 from hairport import solver
 from hairport.settings import Settings
@@ -15,6 +15,7 @@ from hairport.storage import LocalStorage, UploadTooLarge, iter_upload
 from .errors import Problem
 from .formats import SNIFF_BYTES, sniffed_suffix
 from .schemas import AXIS_FORM_CHOICES, UNITS_CHOICES
+from .validation import BUSY_RETRY_SECONDS, ChildDied, ValidationBusy, ValidationTimeout, shared_pool
 
 #: what a file field takes: a file part, or a part without a file name (``curl -F 'mesh=<body.obj'``),
 #: which the form parser hands over as text; both are the file's content (the contract shows a file)
@@ -73,12 +74,42 @@ def input_problem(error: solver.InputError, field: str) -> Problem:
     return Problem(status, error.code or "bad_input", f"{field}: {error.problem}")
 
 
-async def validated(call, field: str, *args, **kwargs):
-    """Run a loader in a thread; bad input becomes a problem response."""
+async def validated(settings: Settings, check: str, field: str, **arguments) -> dict:
+    """Run a validation (``hair`` or ``character``: :mod:`.validation_child`) in the validation pool; its
+    result. Refused input becomes a problem naming its field, and so do a validation over the memory budget
+    (413 ``over_memory_budget``, also when the kernel killed its process), over the time limit (413
+    ``too_large``) or crashing its process (422 ``bad_file``); a pool busy for longer than
+    ``validation_wait_seconds`` is 503 ``validation_busy``."""
     try:
-        return await run_in_threadpool(call, *args, **kwargs)
-    except solver.InputError as error:
-        raise input_problem(error, field) from None
+        answer = await shared_pool(settings).run(check, field, arguments, settings.validation_wait_seconds,
+                                                 settings.validation_timeout_seconds)
+    except ValidationBusy:
+        raise Problem(503, "validation_busy", f"every upload validation process stayed busy for "
+                                              f"{settings.validation_wait_seconds:g} s; nothing was kept, try "
+                                              f"again in {BUSY_RETRY_SECONDS} s",
+                      headers={"Retry-After": str(BUSY_RETRY_SECONDS)}) from None
+    except ValidationTimeout as error:
+        raise input_problem(solver.InputError(
+            f"validating the file took more than {error.seconds:g} s, this deployment's limit "
+            "(HAIRPORT_VALIDATION_TIMEOUT_SECONDS)", None, "too_large"), field) from None
+    except ChildDied as error:
+        raise input_problem(died(error), field) from None
+    if "crash" in answer:  # a defect, not the input's fault: 500 and the child's traceback in the log
+        raise RuntimeError(f"the validation of {field} failed:\n{answer['crash']}")
+    if "error" in answer:
+        refused = answer["error"]
+        raise input_problem(solver.InputError(refused["problem"], None, refused["code"]), refused["field"] or field)
+    return answer["result"]
+
+
+def died(error: ChildDied) -> solver.InputError:
+    """The refusal of a file whose validating process died: killed (on a host short of memory, by the
+    kernel's OOM killer) is over the memory budget, any other death a file its reader cannot take."""
+    if error.killed:
+        return solver.InputError("the process validating the file was killed, out of memory", None,
+                                 solver.OVER_MEMORY_BUDGET)
+    return solver.InputError(f"the file stopped the process validating it (exit status {error.returncode})",
+                             None, "bad_file")
 
 
 def check_units(units: str | None) -> None:

@@ -21,7 +21,10 @@ groom (which share them), and for a target by fitting it to the source (same top
 
 :func:`canonical_source` also measures the input section of the report: the groom against
 its own body (particles inside it, roots off its surface), the units and axes and how they
-were found, the bounding boxes in the files' own coordinates, and warnings.
+were found, the bounding boxes in the files' own coordinates, the groom's degenerate pieces
+(:mod:`~hairport.solver.model.degenerate`: collapsed and duplicate strands, zero-length
+segments, each carried through), and warnings. It refuses stray strands first, before they
+spoil the inference of the units.
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, check_same_topology
+from hairport.solver.model.degenerate import degenerate_report, require_no_stray_strands
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import AUTO, InputFrame, character_axes_in, hair_axes_in, hair_axes_out, parse_axis
 from hairport.solver.model.hair import Hair
@@ -134,12 +138,18 @@ def canonical_source(
     ------
     InputError
         ``units_mismatch`` (the groom sits on the body in other units than these),
-        ``hair_off_body`` (in no units), ``bad_axis``, ``unknown_units``.
+        ``hair_off_body`` (in no units), ``bad_axis``, ``unknown_units``, ``stray_strands``
+        (strands far from the rest of the groom, :mod:`~hairport.solver.model.degenerate`).
     """
+    # unit-free, so in the file's own units: a stray root would decide the units inferred from sizes
+    require_no_stray_strands(hair.points, hair.offsets, "hair")
     source_units, hair_units = auto_or(source_units), auto_or(hair_units)
     up = None if auto_or(up) is None else parse_axis(up, "up axis")
     front = None if auto_or(front) is None else parse_axis(front, "front axis")
-    roots = hair.points[hair.roots]
+    # the units and axes are inferred from the strands with a shape: a collapsed strand has no direction,
+    # and a damaged file's zeros (all at the origin) spoiled the units inferred from the roots' extent
+    shaped = _shaped_strands(hair)
+    roots = shaped.points[shaped.roots]
     query = MeshQuery(source.vertices, source.faces)
     body_units, chosen_hair_units, units_how = _choose_units(source, roots, query, source_units, hair_units)
     body_scale = 1.0 if source_units else METERS_PER_UNIT[body_units]  # meters per loaded body unit
@@ -155,8 +165,8 @@ def canonical_source(
         # a sidecar without weights next to a mesh of unstated units: derived now, in meters
         weights = derive_skin_weights(in_meters.vertices, in_meters.faces, in_meters.skeleton)
         in_meters = Character(in_meters.vertices, in_meters.faces, in_meters.skeleton, weights, in_meters.name)
-    hair_m = hair.with_points(hair.points * hair_scale) if hair_scale != 1.0 else hair
-    guess = infer_axes(in_meters, hair_m, up, front)
+    shaped_m = shaped.with_points(shaped.points * hair_scale) if hair_scale != 1.0 else shaped
+    guess = infer_axes(in_meters, shaped_m, up, front)
     frame = InputFrame(hair_units, guess.up, guess.front)
     canonical = character_axes_in(frame, in_meters)
     canonical_hair = hair_axes_in(frame, hair, hair_scale)
@@ -175,8 +185,19 @@ def canonical_source(
         measured, measured_notes = measure_groom(canonical, canonical_hair)
         report.update(measured)
         notes += measured_notes
+        report["degenerate"], degenerate_notes = degenerate_report(canonical_hair)
+        notes += degenerate_notes
     report["warnings"] = notes
     return SourceInputs(canonical, canonical_hair, frame, report, tuple(notes))
+
+
+def _shaped_strands(hair: Hair) -> Hair:
+    """``hair`` without its collapsed strands (:attr:`~hairport.solver.model.hair.Hair.collapsed`, here in the
+    file's units), or all of it when every strand is collapsed (preprocessing refuses it: ``empty_hair``)."""
+    collapsed = hair.collapsed
+    if not collapsed.any() or collapsed.all():
+        return hair
+    return hair.without_attributes().subset(np.flatnonzero(~collapsed))
 
 
 def _choose_units(source: Character, roots: np.ndarray, query: MeshQuery, source_units: str | None,
@@ -291,7 +312,7 @@ def measure_groom(source: Character, hair: Hair, query: MeshQuery | None = None)
     -------
     measured : dict
         ``source_penetration`` (non-root particles inside the body: ``particles``,
-        ``deepest_m``) and ``root_distance_m`` (roots to the body surface: ``mean``, ``max``,
+        ``deepest_m``; those at a root, :attr:`~hairport.solver.model.hair.Hair.at_root`, are the root) and ``root_distance_m`` (roots to the body surface: ``mean``, ``max``,
         ``off_surface``: roots farther than :data:`ROOT_OFF_SURFACE_MM`, ``inside``: those of
         them inside the body).
     warnings : list of str
@@ -299,7 +320,7 @@ def measure_groom(source: Character, hair: Hair, query: MeshQuery | None = None)
     query = query or collision_query(source.vertices, source.faces, source.name)
     distance = query.signed_distance(hair.points).distance
     is_root = hair.is_root
-    inside = (distance < 0.0) & ~is_root
+    inside = (distance < 0.0) & ~hair.at_root
     root_distance = distance[is_root]
     off = np.abs(root_distance) > ROOT_OFF_SURFACE_MM * 1e-3
     deepest = float(-distance[inside].min()) if inside.any() else 0.0

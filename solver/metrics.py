@@ -10,13 +10,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, unit_rows
+from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, shape_values, source_directions
 from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
 from hairport.solver.adaptation.spacing import spacing_residuals
 from hairport.solver.jit import parallel_kernel, prange, warms
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.model.hair import Hair
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M, Hair
 
 #: a particle counts as closer than eps_c only when it is short by more than this (m): the
 #: solver meets the clearance to its QP tolerance, and 1 um is far below anything visible
@@ -178,6 +178,9 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
     """Segment angles (as :func:`segment_angles`) and Eq. 7's value (as
     :func:`~.adaptation.energies.energy_terms`) of every segment, a block of particles at a time.
 
+    A degenerate source segment (:data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M`) has no
+    direction, so no angle to measure: it counts in Eq. 7's value (its weld) but not in the angles.
+
     Parameters
     ----------
     points, source_points : (N, 3) float64
@@ -195,13 +198,13 @@ def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.n
         starts = ~is_tip[start:stop]
         a = np.diff(points[start : stop + 1], axis=0)[starts]
         b = np.diff(source_points[start : stop + 1], axis=0)[starts]
-        angles = vector_angles(a, b)
-        _, unit = unit_rows(a)
-        _, source_unit = unit_rows(b)
+        directions = source_directions(b)
+        shaped = directions.any(axis=1)
+        angles = vector_angles(a[shaped], b[shaped])
         count += len(angles)
         angle_sum += float(angles.sum())
         angle_max = max(angle_max, float(angles.max(initial=0.0)))
-        shape += float(np.sum((unit - source_unit) ** 2))
+        shape += float(np.sum(shape_values(a, directions)))
     return SegmentFigures(count, angle_sum, angle_max, shape)
 
 
@@ -211,11 +214,16 @@ def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarr
     particles ``(N, 3)`` (CSR ``offsets``) of ``|turn - source turn|`` (rad), the turn being the angle
     between a particle's two segments. Unlike the segment angles it does not see a strand turned as a
     whole, and it does see a kink that a collapsed segment hides from them (a segment of almost no
-    length may point anywhere)."""
+    length may point anywhere). A joint next to a degenerate source segment
+    (:data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M`) has no source turn and is left out."""
     offsets = np.asarray(offsets, dtype=np.int64)
     interior = np.ones(len(points), dtype=bool)
     interior[offsets[:-1]] = False
     interior[np.maximum(offsets[1:] - 1, 0)] = False
+    if len(points) > 2:
+        step = np.diff(source_points, axis=0)
+        short = np.einsum("ij,ij->i", step, step) <= DEGENERATE_SEGMENT_M**2  # segment (i, i + 1)
+        interior[1:-1] &= ~short[:-1] & ~short[1:]
     joints = np.flatnonzero(interior)
     total, largest = 0.0, 0.0
 
@@ -234,7 +242,7 @@ def spacing_energy(points: np.ndarray, source: Hair, initial: np.ndarray, band: 
     """The spacing term's value (unweighted) at ``points (N, 3)``, its rest lengths from ``initial``
     (:mod:`.adaptation.spacing`)."""
     rest = rest_lengths(source.points, initial, source.offsets)
-    starts = np.flatnonzero(rest > 0)
+    starts = np.flatnonzero((rest > 0) & ~source.short_segments)  # a weld has no spacing term
     length = np.linalg.norm(points[starts + 1] - points[starts], axis=1)
     return float(np.sum(spacing_residuals(length, rest[starts], band) ** 2))
 
@@ -248,7 +256,8 @@ def length_ratios(points: np.ndarray, source_points: np.ndarray, offsets: np.nda
     """How segments and strands changed length: percentiles (:data:`LENGTH_PERCENTILES`) of each segment's
     length over its source length (``segment_length_ratio``), of that over its strand's whole-length ratio
     (``segment_length_ratio_in_strand``: 1 everywhere when a strand grew or shrank evenly) and of each strand's
-    length over its source's (``strand_length_ratio``). Segments of zero source length are left out.
+    length over its source's (``strand_length_ratio``). Degenerate segments and collapsed strands (no longer
+    than :data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M`) are left out.
 
     Parameters
     ----------
@@ -268,13 +277,13 @@ def length_ratios(points: np.ndarray, source_points: np.ndarray, offsets: np.nda
         starts = segment_start[rows]
         now = np.linalg.norm(points[starts + 1] - points[starts], axis=1)
         before = np.linalg.norm(source_points[starts + 1] - source_points[starts], axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio[rows] = np.where(before > 0, now / before, np.nan)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a degenerate segment has no ratio
+            ratio[rows] = np.where(before > DEGENERATE_SEGMENT_M, now / before, np.nan)
         length += np.bincount(segment_strand[rows], weights=now, minlength=strands)
         source_length += np.bincount(segment_strand[rows], weights=before, minlength=strands)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        strand_ratio = np.where(source_length > 0, length / source_length, np.nan)
-    in_strand = ratio / strand_ratio[segment_strand].astype(np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):  # nor has a collapsed strand
+        strand_ratio = np.where(source_length > DEGENERATE_SEGMENT_M, length / source_length, np.nan)
+        in_strand = ratio / strand_ratio[segment_strand].astype(np.float32)
 
     def percentiles(values: np.ndarray) -> dict[str, float]:
         values = values[np.isfinite(values)]
@@ -323,7 +332,7 @@ def hairstyle_metrics(
     """
     n = len(points)
     is_root = source.is_root
-    pen = penetration_stats or penetration(points, is_root, query if body is None else body, eps_c)
+    pen = penetration_stats or penetration(points, source.at_root, query if body is None else body, eps_c)
     segments = segment_figures(points, source.points, source.offsets)
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))

@@ -52,9 +52,10 @@ from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics, penetration
 from hairport.solver.model.character import Character
+from hairport.solver.model.degenerate import require_no_stray_strands
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
-from hairport.solver.model.hair import Hair, require_hair
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M, Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import OPTION_RANGES, SOLVER_METHODS, PreprocessOptions, RetargetOptions
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
@@ -120,7 +121,8 @@ def preprocess(
     """
     progress = progress or no_progress
     options.validate()
-    require_hair(hair.points, hair.offsets, "hair")  # never an artifact without hair
+    require_hair(hair.points, hair.offsets, "hair", DEGENERATE_SEGMENT_M)  # never an artifact without hair
+    require_no_stray_strands(hair.points, hair.offsets, "hair")  # (model.degenerate: the kinds and why)
     options = replace(options, anchoring=resolve_anchoring(options.anchoring, source))
     timings: dict[str, float] = {}
     with timed(timings, "anchors"):
@@ -151,7 +153,8 @@ def initial_transfer(
     carry: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 3, Eq. 4-6, then the shape carry over ``carry`` m (beyond the paper; 0: none,
-    :mod:`~hairport.solver.transfer.carry`).
+    :mod:`~hairport.solver.transfer.carry`); the particles welded to a root
+    (:attr:`~hairport.solver.model.hair.Hair.at_root`) end on it.
 
     Returns
     -------
@@ -163,7 +166,8 @@ def initial_transfer(
     hair = adaptable.hair
     anchored = place_anchors(adaptable.anchors, target, query)
     smoothed, unsmooth = smooth_strands(anchored, hair.points, hair.offsets, eps_s, laplacian=adaptable.strand_laplacian)
-    return carry_shapes(smoothed, hair.points, hair.offsets, hair.is_root, carry), unsmooth
+    # every array here is this call's own: the particles at a root are placed in place
+    return hair.place_at_roots(carry_shapes(smoothed, hair.points, hair.offsets, hair.at_root, carry)), unsmooth
 
 
 def retarget(
@@ -232,20 +236,22 @@ def retarget(
             base, claims_outside = parse_method(options.method)
             points = retarget_baseline(base, adaptable.source, target, hair, pushout=claims_outside,
                                        clearance=options.eps_c, target_query=body).points
+            # a collapsed strand stays on its root, as with the solvers (on a copy: a baseline may share arrays)
+            points = hair.place_at_roots(np.array(points, dtype=np.float64))
 
     resolved = None
     if claims_outside:
         with timed(timings, "penetration_check"):
             progress("penetration_check", 0.94, "checking that no particle is inside the body")
-            points, resolved = resolve_penetration(points, hair.is_root, body, options.eps_c, target.name)
+            points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, target.name)
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
-        body_distance = penetration(points, hair.is_root, body, options.eps_c)
+        body_distance = penetration(points, hair.at_root, body, options.eps_c)
         metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query, options.eps_c,
                                     weights, body=body, penetration_stats=body_distance)
         inside = np.zeros(hair.n_particles, dtype=bool)
-        inside[~hair.is_root] = body_distance["distance"] < 0.0
+        inside[~hair.at_root] = body_distance["distance"] < 0.0
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved
@@ -299,7 +305,7 @@ def adapt_shape(
     if options.method == "global":
         progress("solve", 0.1, "shape adaptation (global)")
         return solve_hairstyle(
-            adaptable.shape_model, hair.offsets, initial, hair.is_root, target_query, weights, solve_options,
+            adaptable.shape_model, hair.offsets, initial, hair.at_root, target_query, weights, solve_options,
             gamma=gamma, backend=options.qp_backend, start=start, progress=solver_progress, should_stop=should_stop,
         )
     progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
@@ -402,7 +408,7 @@ def relocate_hairline(
     shift = np.repeat(relocation.roots - roots, hair.counts, axis=0)
     start = initial + (1.0 - gamma)[:, None] * shift
     start[hair.roots] = relocation.roots
-    return relocation, start, gamma
+    return relocation, hair.place_at_roots(start), gamma
 
 
 def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: str | None = None,
@@ -450,9 +456,10 @@ def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target:
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:
     """(N,) bool: non-root particles inside the target body (by its collision surface's test,
-    :func:`~hairport.solver.mesh.collision.collision_query`, unless ``query`` is given)."""
+    :func:`~hairport.solver.mesh.collision.collision_query`, unless ``query`` is given); the particles
+    at a root (:attr:`~hairport.solver.model.hair.Hair.at_root`) are the root."""
     query = query or collision_query(target.vertices, target.faces, target.name)
     mask = np.zeros(hair.n_particles, dtype=bool)
-    free = ~hair.is_root
+    free = ~hair.at_root
     mask[free] = query.inside(hair.points[free])
     return mask

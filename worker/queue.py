@@ -9,17 +9,30 @@ task ids the broker holds (for the sweeper, :class:`Sweeper`, re-exported here f
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import redis
 from celery import Celery
 from kombu.exceptions import KombuError
 
-from .app import FINE_TASK, PREPROCESS_TASK, QUEUES, RETARGET_TASK, ROUTES, celery_for, queue_names
+from .app import (
+    FINE_TASK,
+    PREPROCESS_TASK,
+    PUBLISH_RETRIES,
+    PUBLISH_RETRY_PAUSE_SECONDS,
+    QUEUES,
+    RETARGET_TASK,
+    ROUTES,
+    celery_for,
+    queue_names,
+)
 from .runs import new_task_id
 from .sweeper import Sweeper
 
 __all__ = ["QUEUES", "QueueUnavailable", "Sweeper", "TaskQueue", "connect", "new_task_id"]
+
+log = logging.getLogger(__name__)
 
 #: the Redis transport keeps a queue's messages of priority p > 0 in ``<queue><SEP><p>`` (kombu's layout)
 PRIORITY_SEPARATOR = "\x06\x16"
@@ -63,9 +76,27 @@ class TaskQueue:
         """Solve chunk ``index`` of the fine level of the job's run ``run_token``; the task id."""
         return self._send(FINE_TASK, task_id, job_id, run_token, index)
 
-    def revoke(self, task_id: str) -> None:
-        """Ask workers not to start a queued task."""
-        self.celery.control.revoke(task_id)
+    def revoke(self, *task_ids: str) -> bool:
+        """Ask the workers not to start these queued tasks (one broadcast); whether the broker took it.
+
+        Revoking is only a saving, never what stops a task: every task reads its record before it runs and
+        does nothing for a job that is over or cancelled (a cancel is written to the record first), and a worker
+        that starts after the broadcast never hears of it. So a broker that is down or slow is logged, not
+        raised: the tasks' messages, when delivered, find their records cancelled."""
+        if not task_ids:
+            return True
+        try:
+            with self.celery.connection_for_write() as connection:
+                # as many tries as a send gets (Celery's broadcast alone would wait twice the connection timeout)
+                connection.ensure_connection(max_retries=PUBLISH_RETRIES, interval_start=PUBLISH_RETRY_PAUSE_SECONDS,
+                                             interval_step=PUBLISH_RETRY_PAUSE_SECONDS,
+                                             interval_max=PUBLISH_RETRY_PAUSE_SECONDS)
+                self.celery.control.revoke(list(task_ids), connection=connection)
+        except (KombuError, redis.RedisError, OSError) as error:
+            log.warning("tasks %s not revoked, the broker did not answer (%s: %s); their records say what to do",
+                        ", ".join(task_ids), type(error).__name__, error)
+            return False
+        return True
 
     def ping_workers(self, timeout: float) -> list:
         """The replies of the workers (of any deployment on this broker) that answer within ``timeout`` s."""

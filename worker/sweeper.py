@@ -13,6 +13,10 @@ sweep run per ``Settings.sweep_seconds``, whichever process gets there first. Ea
   non-persistent Redis restarted, a queue deleted; after ``max_attempts`` such losses the job
   fails with ``message_lost``.
 
+Once per :data:`ORPHAN_SWEEP_INTERVAL_SECONDS` for the deployment (a clock of its own), it also removes
+the stored files no record refers to that are older than ``Settings.orphan_grace_seconds``
+(:meth:`hairport.repository.Repository.sweep_orphans`).
+
 Every change is made under the record's lock and only if the record is still as the sweep
 saw it, so sweepers in several processes, and workers, never undo each other.
 """
@@ -44,6 +48,9 @@ log = logging.getLogger(__name__)
 #: a sweeper thread looks at the shared clock this many times per sweep period, so that sweeps keep
 #: their period when the process that swept last dies
 TICKS_PER_PERIOD = 3
+#: the orphan sweep runs at most this often in a deployment (s): it reads every record, as the hourly purge
+#: does, and an orphan then goes between the grace period and an hour after it
+ORPHAN_SWEEP_INTERVAL_SECONDS = 3600.0
 
 
 class Sweeper:
@@ -71,6 +78,10 @@ class Sweeper:
                     self.sweep()
             except Exception:  # noqa: BLE001 - a failed sweep (storage or broker trouble) is tried next period
                 log.exception("sweep failed")
+            try:
+                self.sweep_orphans()
+            except Exception:  # noqa: BLE001 - storage trouble: the orphans wait for the next sweep
+                log.exception("orphan sweep failed")
 
     # ---------------------------------------------------------------- one sweep
 
@@ -106,6 +117,14 @@ class Sweeper:
         if any(counts.values()):
             log.warning("sweep: %s", counts)
         return counts
+
+    def sweep_orphans(self) -> int | None:
+        """The orphan sweep, when it is due for the deployment; blobs removed, or None when it was not due."""
+        removed = self.repository.sweep_orphans_if_due(self.settings.orphan_grace_seconds,
+                                                       ORPHAN_SWEEP_INTERVAL_SECONDS)
+        if removed:
+            log.warning("orphan sweep: removed %d stored files no record refers to", removed)
+        return removed
 
     def _job_change(self, job_id: str):
         return lambda change: self.repository.change_job(job_id, change)

@@ -11,6 +11,9 @@ from hairport.solver import InputError
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
+#: the command line reads the user's own files: a USD stage composes the sublayers and references it
+#: names, a .gltf reads the buffer files beside it (the service and the worker, reading uploads, never do)
+LOCAL_FILES = {"allow_external_files": True}
 
 
 def print_warning(text: str) -> None:
@@ -102,7 +105,9 @@ def preprocess_options(args: argparse.Namespace) -> solver.PreprocessOptions:
 
 
 def mesh_limits(settings) -> dict:
-    return dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
+    """The keyword arguments of the command line's character reads: the configured limits, the user's files."""
+    return dict(max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes,
+                **LOCAL_FILES)
 
 
 def mesh_units(args: argparse.Namespace, mesh: str, skeleton: str | None) -> str | None:
@@ -143,7 +148,7 @@ def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceIn
 
     Prints what was inferred (a progress line) and the warnings about the inputs (one line each)."""
     limits = solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_file_bytes,
-                               memory_budget_bytes=settings.memory_budget_bytes)
+                               memory_budget_bytes=settings.memory_budget_bytes, **LOCAL_FILES)
     progress("load", 0.0, "reading the source")
     source, source_units = solver.read_character(args.source, skeleton_path=args.source_skeleton,
                                                  units=mesh_units(args, args.source, args.source_skeleton),

@@ -13,7 +13,7 @@ import argparse
 
 from hairport import solver
 
-from .common import print_warning
+from .common import LOCAL_FILES, print_warning
 
 
 def add_convert(sub) -> None:
@@ -33,7 +33,7 @@ def add_convert(sub) -> None:
 def cmd_convert(args: argparse.Namespace) -> int:
     out_format = solver.format_for_path(args.output)  # refuse an unknown output before reading
     units = args.units if args.units != solver.AUTO else (solver.recorded_hair_units(args.input) or "m")
-    report = solver.read_hair_report(args.input, units=units, prim=args.prim)
+    report = solver.read_hair_report(args.input, units=units, prim=args.prim, limits=solver.ReadLimits(**LOCAL_FILES))
     for text in report.warnings:
         print_warning(f"{args.input}: {text}")
     out_units = args.out_units or units

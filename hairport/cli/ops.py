@@ -148,7 +148,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 
 def add_purge(sub) -> None:
-    p = sub.add_parser("purge", help="delete stored files and records older than HAIRPORT_RETENTION_DAYS")
+    p = sub.add_parser("purge", help="delete stored files and records older than HAIRPORT_RETENTION_DAYS, and stored "
+                                     "files no record refers to older than HAIRPORT_ORPHAN_GRACE_SECONDS")
     p.set_defaults(run=cmd_purge)
 
 
@@ -157,23 +158,29 @@ def cmd_purge(args: argparse.Namespace) -> int:
     from hairport.storage import LocalStorage, retention_seconds
 
     settings = get_settings()
-    removed = Repository(LocalStorage(settings.storage_dir)).purge(retention_seconds(settings.retention_days))
-    print(f"removed {removed} files older than {settings.retention_days:g} days from {settings.storage_dir}")
+    repository = Repository(LocalStorage(settings.storage_dir))
+    removed = repository.purge(retention_seconds(settings.retention_days))
+    orphans = repository.sweep_orphans(settings.orphan_grace_seconds)
+    print(f"removed {removed} files older than {settings.retention_days:g} days and {orphans} stored files no record "
+          f"refers to, older than {settings.orphan_grace_seconds:g} s, from {settings.storage_dir}")
     return 0
 
 
 def add_reindex(sub) -> None:
-    p = sub.add_parser("reindex", help="rebuild the job index (listings, counts, /metrics) from the job records")
+    p = sub.add_parser("reindex", help="rebuild the record index (listings, batch and job counts, /metrics) from "
+                                       "the records")
     p.set_defaults(run=cmd_reindex)
 
 
 def cmd_reindex(args: argparse.Namespace) -> int:
-    from hairport.repository import Repository
+    from hairport.repository import OWNED_KINDS, Repository
     from hairport.storage import LocalStorage
+    from hairport.storage.index import JOBS
 
     settings = get_settings()
-    jobs = Repository(LocalStorage(settings.storage_dir)).rebuild_job_index()
-    print(f"indexed {jobs} jobs of {settings.storage_dir}")
+    rows = Repository(LocalStorage(settings.storage_dir)).rebuild_index()
+    kinds = ", ".join(f"{rows.get(kind, 0)} {kind}" for kind in (JOBS, *OWNED_KINDS))
+    print(f"indexed {kinds} of {settings.storage_dir}")
     return 0
 
 

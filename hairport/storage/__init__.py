@@ -7,7 +7,7 @@ Layout of a :class:`LocalStorage` under its ``root`` (``Settings.storage_dir``):
     root/records/<kind>/<id>.lock       empty file, ``flock``-ed around every write of that record
     root/tmp/                           uploads and copies being written (same file system as blobs/)
     root/work/<dir>/                    scratch directories of jobs (:meth:`LocalStorage.work_dir`)
-    root/index/jobs.sqlite3             the job index (:mod:`.job_index`): listings and counts without reading records
+    root/index/records.sqlite3          the record index (:mod:`.index`): listings and counts without reading records
     root/deployment.json                the deployment id (:mod:`.deployment`), written once
 
 Conventions: sizes in bytes, times in seconds since the epoch (file ``st_mtime``), digests
@@ -32,7 +32,10 @@ and a umask such as ``002``.
 Retention (:meth:`LocalStorage.purge`) works on mtimes: a record lives until ``retention``
 after its last write; a blob lives until ``retention`` after it was last saved (saving the
 same content again touches it) or read through :meth:`LocalStorage.blob` (which touches
-it), and in any case as long as a surviving record refers to it by a ``"sha256"`` field.
+it), and in any case as long as a surviving record refers to it by a ``"sha256"`` field. A blob no
+record refers to goes earlier, once it was not saved or read for a grace period
+(:meth:`LocalStorage.sweep_orphans`, ``Settings.orphan_grace_seconds``): the upload of a process
+killed before its record was written, the outputs of a run that lost its job.
 """
 
 from __future__ import annotations

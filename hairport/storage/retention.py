@@ -1,7 +1,10 @@
-"""Retention: what was not written, saved or read for a while is removed (see :meth:`purge`)."""
+"""Retention: what was not written, saved or read for a while is removed (see :meth:`purge`), and blobs no
+record refers to go after a grace period (see :meth:`sweep_orphans`)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
 import time
 from collections.abc import Callable
@@ -12,6 +15,7 @@ from .layout import (
     LOCK_SUFFIX,
     RECORD_SUFFIX,
     SHA256_HEX_CHARS,
+    TEMP_NAME_BYTES,
     TEMP_SUFFIX,
     _files,
     _is_old,
@@ -22,9 +26,12 @@ from .layout import (
     blob_references,
 )
 
+#: prefix of a blob moved aside by a sweep, in ``tmp/``, for the instant its mtime is checked again
+SWEPT_PREFIX = "swept-"
+
 
 class Retention:
-    """The purge of a :class:`hairport.storage.LocalStorage`."""
+    """The purge and the orphan sweep of a :class:`hairport.storage.LocalStorage`."""
 
     def purge(self, older_than_seconds: float, now: float | None = None,
               removed: Callable[[str, str], None] | None = None) -> int:
@@ -77,10 +84,7 @@ class Retention:
                         with self._locked(record) as lock:
                             if not record.exists():
                                 _unlink(lock)
-        for fan_dir in _subdirs(self.blobs_dir):
-            for entry in _files(fan_dir):
-                if entry.name[:SHA256_HEX_CHARS] not in referenced and _is_old(entry, cutoff):
-                    removed += _unlink(entry)
+        removed += self._remove_unreferenced(referenced, cutoff)
         for entry in _files(self.tmp_dir):
             if _is_old(entry, cutoff):
                 removed += _unlink(entry)
@@ -90,6 +94,75 @@ class Retention:
                 shutil.rmtree(folder, ignore_errors=True)
                 removed += files
         return removed
+
+    def sweep_orphans(self, older_than_seconds: float, now: float | None = None,
+                      kept_since: Callable[[str, dict], float | None] | None = None) -> int:
+        """Remove the blobs no record refers to (:func:`blob_references`) that were not saved or read for
+        ``older_than_seconds``: the content of an upload whose record was never written (a process killed
+        between the two), or the outputs of a run that lost its job.
+
+        Deployment assumption: whoever saves a blob for a record writes the record within
+        ``older_than_seconds`` of the save (an upload's validation, a preprocessing's artifact), or says
+        so in a record of its own while it works (``kept_since``: a running job, which records its outputs
+        when it ends). A blob saved after the sweep began is younger than the cutoff, so a record that
+        changes while the records are scanned loses nothing.
+
+        Parameters
+        ----------
+        older_than_seconds : float
+            The grace period (s), e.g. ``Settings.orphan_grace_seconds``.
+        now : float, optional
+            The current time (s since the epoch); ``time.time()`` by default.
+        kept_since : callable, optional
+            ``kept_since(kind, document)``: a time (s since the epoch) since which every blob is kept for
+            that record, old or not, or None.
+
+        Returns
+        -------
+        removed : int
+            Blobs removed.
+        """
+        cutoff = (time.time() if now is None else now) - older_than_seconds
+        referenced: set[str] = set()
+        for kind_dir in _subdirs(self.records_dir):
+            for entry in _files(kind_dir):
+                if entry.name.endswith(RECORD_SUFFIX) and not entry.name.startswith("."):
+                    document = _read_json(entry)
+                    if document is None:
+                        continue
+                    referenced |= blob_references(document)
+                    since = None if kept_since is None else kept_since(kind_dir.name, document)
+                    if since is not None:
+                        cutoff = min(cutoff, since)
+        return self._remove_unreferenced(referenced, cutoff)
+
+    def _remove_unreferenced(self, referenced: set[str], cutoff: float) -> int:
+        """Remove the blobs whose digest is not in ``referenced``, last saved or read before ``cutoff``."""
+        removed = 0
+        for fan_dir in _subdirs(self.blobs_dir):
+            for entry in _files(fan_dir):
+                if entry.name[:SHA256_HEX_CHARS] not in referenced and _is_old(entry, cutoff):
+                    removed += self._remove_old_blob(entry, cutoff)
+        return removed
+
+    def _remove_old_blob(self, path: Path, cutoff: float) -> bool:
+        """Remove a blob unless it is saved or read meanwhile; whether it was removed.
+
+        A save or a read touches the blob (its mtime) before a record refers to it. The blob is moved aside
+        first and its mtime checked there: a touch that came before the move shows (and the blob is put
+        back: a copy saved meanwhile holds the same bytes), one after it finds no file (a save then stores
+        the content again, a read finds it gone as it would a moment later)."""
+        aside = self.tmp_dir / f"{SWEPT_PREFIX}{os.urandom(TEMP_NAME_BYTES).hex()}{TEMP_SUFFIX}"
+        try:
+            os.rename(path, aside)
+        except FileNotFoundError:
+            return False
+        if _is_old(aside, cutoff):
+            return _unlink(aside)
+        with contextlib.suppress(FileExistsError):
+            os.link(aside, path)
+        _unlink(aside)
+        return False
 
     def _purge_record(self, path: Path, cutoff: float, removed: Callable[[str, str], None] | None) -> bool:
         """Remove an old record unless it was written meanwhile; whether it was removed."""

@@ -41,7 +41,7 @@ def create_batch(
     return batches.batch_out(repository, batch)
 
 
-@router.get("", response_model=BatchPage, summary="The caller's batches, newest first",
+@router.get("", response_model=BatchPage, summary="The caller's batches, newest first (without their jobs)",
             responses=problem_responses(401, 422))
 def list_batches(
     owner: Owner,
@@ -49,10 +49,7 @@ def list_batches(
     limit: PageLimit = DEFAULT_PAGE,
     offset: PageOffset = 0,
 ) -> BatchPage:
-    page, total = repository.list_owned(BatchRecord, owner, limit, offset)
-    following = offset + limit if offset + limit < total else None
-    return BatchPage(batches=[batches.batch_out(repository, batch) for batch in page], total=total, limit=limit,
-                     offset=offset, next_offset=following)
+    return batches.list_batches(repository, owner, limit, offset)
 
 
 @router.get("/{batch_id}", response_model=BatchOut, summary="A batch's state, counts by state, progress and jobs",

@@ -20,7 +20,7 @@ router = APIRouter(prefix="/v1/characters", tags=["characters"])
 
 
 @router.post("", status_code=201, response_model=CharacterOut, summary="Upload a character",
-             responses=problem_responses(400, 401, 413, 415, 422))
+             responses=problem_responses(400, 401, 413, 415, 422, 503))
 async def create_character(
     owner: Owner,
     settings: SettingsDep,

@@ -27,6 +27,9 @@ from ..schemas import (
 from ..services import display, jobs
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+#: most strands a display request may name: each strand drawn is at least its root and its tip, and a display
+#: holds at most MAX_DISPLAY_VERTICES vertices
+MAX_DISPLAY_STRANDS = solver.MAX_DISPLAY_VERTICES // 2
 
 
 @router.get("", response_model=JobPage, summary="The caller's jobs, newest first",
@@ -79,8 +82,8 @@ def get_display(
     layer: Annotated[StrandLayer, Query(description="result: the retargeted groom with the particles inside the "
                                                     "target flagged; source: the groom on its source character")
                      ] = "result",
-    strands: Annotated[int | None, Query(ge=1, description="strands drawn, spread over the groom (default: as "
-                                                           "many as the vertex budget allows)")] = None,
+    strands: Annotated[int | None, Query(ge=1, le=MAX_DISPLAY_STRANDS, description=(
+        "strands drawn, spread over the groom (default: as many as the vertex budget allows)"))] = None,
     stride: Annotated[int | None, Query(ge=1, le=solver.MAX_DISPLAY_STRIDE, description=(
         "every stride-th particle of a strand, and its tip (default: the smallest that fits the budget)"))] = None,
     max_vertices: Annotated[int, Query(ge=1, le=solver.MAX_DISPLAY_VERTICES, description=(

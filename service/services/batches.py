@@ -1,10 +1,12 @@
 """Batches: every hairstyle onto every target character in one request, one job per pair.
 
 A batch is a record listing its jobs (hairstyles x targets, row by row); its state, counts and
-progress are read from those jobs each time it is asked for, so nothing has to keep them in
-step. Per-pair options (and hairline edits) replace the batch's for that pair. Cancelling a
-batch cancels its jobs that have not ended; its results are one zip of every succeeded
-pair's result and report, with a manifest of every pair.
+progress are its jobs' (:class:`hairport.records.BatchTotals`): summed from the job records when one
+batch is asked for (with its jobs), and read from the record index for a listing, whose items carry
+no jobs, so that a page of batches reads the page's batch records only. Per-pair options (and
+hairline edits) replace the batch's for that pair. Cancelling a batch cancels its jobs that have
+not ended; its results are one zip of every succeeded pair's result and report, with a manifest
+of every pair.
 """
 
 from __future__ import annotations
@@ -19,13 +21,9 @@ from starlette.background import BackgroundTask
 
 from hairport.records import (
     BATCH_DONE,
-    BATCH_QUEUED,
-    BATCH_RUNNING,
-    JOB_STATES,
-    QUEUED,
     SUCCEEDED,
-    TERMINAL_STATES,
     BatchRecord,
+    BatchTotals,
     CharacterRecord,
     HairstyleRecord,
     IdempotencyRecord,
@@ -40,7 +38,7 @@ from hairport.worker.queue import TaskQueue
 
 from ..deps import owned
 from ..errors import Problem
-from ..schemas import BatchIn, BatchJobOut, BatchOut
+from ..schemas import BatchIn, BatchJobOut, BatchOut, BatchPage, BatchSummary
 from . import jobs as job_service
 from .retargets import idempotent_replay, plan_job, submit_jobs
 
@@ -91,7 +89,7 @@ def create_batch(repository: Repository, queue: TaskQueue, settings: Settings, o
     remember = None if replay_id is None else (replay_id, IdempotencyRecord(
         request=digest(body), jobs=batch.job_ids, batch_id=batch.id, created_at=now()))
     submit_jobs(repository, queue, settings, planned, remember,
-                undo=lambda: repository.storage.delete_record(BatchRecord.KIND, batch.id))
+                undo=lambda: repository.delete(BatchRecord, batch.id))
     return batch
 
 
@@ -101,40 +99,47 @@ def batch_jobs(repository: Repository, batch: BatchRecord) -> list[JobRecord]:
 
 
 def batch_out(repository: Repository, batch: BatchRecord) -> BatchOut:
-    """The batch as the API shows it: its state, counts by state and progress, from its jobs."""
+    """The batch as the API shows it: its state, counts by state and progress, and its jobs, from its jobs' records."""
     jobs = batch_jobs(repository, batch)
-    counts = {state: 0 for state in JOB_STATES}
-    counts.update(Counter(job.state for job in jobs))
-    state = batch_state(jobs)
-    progress = sum(1.0 if job.state in TERMINAL_STATES else job.progress for job in jobs) / max(1, len(jobs))
-    base = f"/v1/batches/{batch.id}"
-    links = {"self": base}
-    if state == BATCH_DONE:
-        links["results"] = f"{base}/results"
-    finished = [job.finished_at for job in jobs if job.finished_at is not None]
     return BatchOut(
-        id=batch.id, state=state, counts=counts, progress=round(progress, 4), created_at=batch.created_at,
-        finished_at=max(finished) if state == BATCH_DONE and finished else None,
-        hairstyle_ids=batch.hairstyle_ids, target_character_ids=batch.target_character_ids,
-        output_format=batch.output_format, links=links,
+        **summary_fields(batch, BatchTotals.of_jobs(jobs)),
         jobs=[BatchJobOut(id=job.id, hairstyle_id=job.hairstyle_id, target_character_id=job.target_character_id,
                           state=job.state, progress=job.progress, error=job.error,
                           links={"self": f"/v1/jobs/{job.id}"}) for job in jobs],
     )
 
 
+def list_batches(repository: Repository, owner: str, limit: int, offset: int) -> BatchPage:
+    """A page of the owner's batches, newest first, without their jobs: the page's batch records and the record
+    index are read, no job record."""
+    page, total = repository.list_owned(BatchRecord, owner, limit, offset)
+    totals = repository.batch_totals(batch.id for batch in page)
+    return BatchPage(batches=[BatchSummary(**summary_fields(batch, totals[batch.id])) for batch in page], total=total,
+                     limit=limit, offset=offset, next_offset=offset + limit if offset + limit < total else None)
+
+
+def summary_fields(batch: BatchRecord, totals: BatchTotals) -> dict:
+    """What a listing and a batch's own page both show of it."""
+    state = totals.state
+    base = f"/v1/batches/{batch.id}"
+    links = {"self": base} | ({"results": f"{base}/results"} if state == BATCH_DONE else {})
+    return dict(id=batch.id, state=state, counts=totals.counts, progress=totals.progress, created_at=batch.created_at,
+                finished_at=totals.ended_at, hairstyle_ids=batch.hairstyle_ids,
+                target_character_ids=batch.target_character_ids, output_format=batch.output_format, links=links)
+
+
 def batch_state(jobs: list[JobRecord]) -> str:
-    if all(job.state in TERMINAL_STATES for job in jobs):
-        return BATCH_DONE
-    if all(job.state == QUEUED for job in jobs):
-        return BATCH_QUEUED
-    return BATCH_RUNNING
+    return BatchTotals.of_jobs(jobs).state
 
 
 def cancel_batch(repository: Repository, queue: TaskQueue, batch: BatchRecord) -> BatchOut:
-    """Cancel every job of the batch that has not ended (a running one stops at its solver's next iteration)."""
+    """Cancel every job of the batch that has not ended (a running one stops at its solver's next iteration):
+    every cancel is written to its job's record first, then their messages are revoked in one broadcast,
+    which a broker that is down skips without undoing any cancel (see :func:`jobs.cancel_job`)."""
+    task_ids = []
     for job in batch_jobs(repository, batch):
-        job_service.cancel_job(repository, queue, job)
+        task_ids += job_service.request_cancel(repository, job)[1]
+    queue.revoke(*task_ids)
     return batch_out(repository, batch)
 
 

@@ -44,10 +44,10 @@ async def create_character(repository: Repository, settings: Settings, owner: st
     if existing is not None:
         return existing
     try:
-        character, stated = await validated(
-            solver.read_character, "mesh", mesh_blob.path, skeleton_path=skeleton_blob.path if skeleton_blob else None,
-            units=units, max_vertices=settings.max_vertices, max_faces=settings.max_faces,
-            max_bytes=settings.max_upload_bytes,
+        character = await validated(
+            settings, "character", "mesh", mesh=str(mesh_blob.path),
+            skeleton=str(skeleton_blob.path) if skeleton_blob else None, units=units,
+            max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_upload_bytes,
         )
     except Problem:
         storage.discard_new(mesh_blob, skeleton_blob)  # a refused upload keeps no file
@@ -56,9 +56,8 @@ async def create_character(repository: Repository, settings: Settings, owner: st
         id=character_id, owner=owner, created_at=now(),
         mesh=BlobRef(sha256=mesh_blob.sha256, suffix=suffix, size=mesh_blob.size),
         skeleton=BlobRef(sha256=skeleton_blob.sha256, suffix=SKELETON_SUFFIX) if skeleton_blob else None,
-        units=stated, up_axis=up_axis, front_axis=front_axis,
-        vertices=int(character.n_vertices), faces=int(character.n_faces),
-        bones=list(character.skeleton.names) if character.skeleton is not None else [],
+        units=character["units"], up_axis=up_axis, front_axis=front_axis,
+        vertices=character["vertices"], faces=character["faces"], bones=character["bones"],
     )
     repository.put(record, character_id)
     return record

@@ -69,46 +69,42 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
     hairstyle_id = owned_id(character.owner, key)
     record = repository.get(HairstyleRecord, hairstyle_id)
     if record is None:
-        stated = units if units != solver.AUTO else solver.recorded_hair_units(blob.path)
         try:
+            # read as the solver will, fitted to its source character, its guide flags checked (module
+            # notes of service/validation_child.py); in a process of the validation pool
             loaded = await validated(
-                solver.read_hair, "hair", blob.path, units=stated or "m", prim=prim,
-                limits=solver.ReadLimits(settings.max_strands, settings.max_particles, settings.max_upload_bytes,
-                                         memory_budget_bytes=settings.memory_budget_bytes),
+                settings, "hair", "hair", hair=str(blob.path), units=units, prim=prim,
+                limits={"max_strands": settings.max_strands, "max_particles": settings.max_particles,
+                        "max_bytes": settings.max_upload_bytes, "memory_budget_bytes": settings.memory_budget_bytes},
+                source=source_files(repository, settings, character), guides_from=guides_from,
+                max_guides=solver.OPTION_RANGES["guides"].maximum,
             )
-            await validated(check_fit, "hair", repository, settings, character, loaded, stated)
-            if guides_from is not None:
-                await validated(solver.flagged_guides, "guides_from", loaded, guides_from,
-                                solver.OPTION_RANGES["guides"].maximum)
         except Problem:
             repository.storage.discard_new(blob)  # a refused upload keeps no file
             raise
         record = HairstyleRecord(
             id=hairstyle_id, owner=character.owner, created_at=now(), source_character_id=character.id,
             hair=BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size), format=suffix[1:],
-            units=stated or solver.AUTO,
-            options=options, artifact_key=key, strands=int(loaded.n_strands), particles=int(loaded.n_particles),
-            prim=prim,
+            units=loaded["units"] or solver.AUTO,
+            options=options, artifact_key=key, strands=loaded["strands"], particles=loaded["particles"], prim=prim,
         )
         repository.put(record, hairstyle_id)
     start_preprocessing(repository, queue, settings, record)
     return record
 
 
-def check_fit(repository: Repository, settings: Settings, character: CharacterRecord, hair: solver.Hair,
-              units: str | None) -> None:
-    """Refuse (an ``InputError``: ``units_mismatch``, ``hair_off_body``) a hair that does not sit on its source
-    character in the units given or inferred, before any preprocessing is queued."""
+def source_files(repository: Repository, settings: Settings, character: CharacterRecord) -> dict | None:
+    """What a validation needs to refuse a hair that does not sit on its source character (``units_mismatch``,
+    ``hair_off_body``): the character's stored files, units, axes and read limits; None when its files were
+    purged (the preprocessing reports it)."""
     storage = repository.storage
     mesh = storage.blob(character.mesh.sha256, character.mesh.suffix)
     skeleton = storage.blob(character.skeleton.sha256, character.skeleton.suffix) if character.skeleton else None
     if mesh is None or (character.skeleton is not None and skeleton is None):
-        return  # purged: the preprocessing reports it
-    source, source_units = solver.read_character(
-        mesh.path, skeleton_path=skeleton.path if skeleton else None, units=character.units,
-        max_vertices=settings.max_vertices, max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
-    solver.canonical_source(source, hair, source_units=source_units, hair_units=units, up=character.up_axis,
-                            front=character.front_axis, measure=False)
+        return None
+    return {"mesh": str(mesh.path), "skeleton": str(skeleton.path) if skeleton else None, "units": character.units,
+            "up": character.up_axis, "front": character.front_axis, "max_vertices": settings.max_vertices,
+            "max_faces": settings.max_faces, "max_bytes": settings.max_file_bytes}
 
 
 def start_preprocessing(repository: Repository, queue: TaskQueue, settings: Settings, hairstyle: HairstyleRecord,

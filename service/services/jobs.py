@@ -32,23 +32,36 @@ UNLIMITED = solver.ReadLimits(2**62, 2**62, 2**62)
 
 
 def cancel_job(repository: Repository, queue: TaskQueue, job: JobRecord) -> JobRecord:
-    """Cancel a job: a queued (or stale) one at once, a running one at its solver's next iteration."""
-    if job.state in TERMINAL_STATES:
-        return job
+    """Cancel a job: a queued (or stale) one at once, a running one at its solver's next iteration.
 
-    def change(current: JobRecord) -> JobRecord:
+    The cancel is whole once written to the job's record, which every worker reads before it starts the job
+    or a chunk of it, and a running job reads while it runs; revoking the job's messages afterwards only
+    spares a worker the read, so it is tried once and a broker that is down changes nothing (see
+    :meth:`TaskQueue.revoke`)."""
+    job, task_ids = request_cancel(repository, job)
+    queue.revoke(*task_ids)
+    return job
+
+
+def request_cancel(repository: Repository, job: JobRecord) -> tuple[JobRecord, list[str]]:
+    """Write a job's cancel to its record: the record, and the ids of its messages no worker needs to start."""
+    if job.state in TERMINAL_STATES:
+        return job, []
+
+    def change(current: JobRecord) -> JobRecord | None:
+        if current.state in TERMINAL_STATES:
+            return None  # it ended meanwhile
         current.cancel_requested = True
         if current.state in WAITING_STATES:
             current.state, current.stage, current.finished_at = CANCELLED, "cancelled", now()
         return current
 
-    job = repository.change_job(job.id, change)
-    if job.state == CANCELLED and job.task_id:
-        queue.revoke(job.task_id)
-    for chunk in job.fine.chunks if job.fine is not None else ():
-        if chunk.state == CHUNK_QUEUED and chunk.task_id:
-            queue.revoke(chunk.task_id)  # the job's run stops the running ones at their next iteration
-    return job
+    job = repository.change_job(job.id, change) or job
+    task_ids = [job.task_id] if job.state == CANCELLED and job.task_id else []
+    # the job's run stops its running chunks at their next iteration
+    task_ids += [chunk.task_id for chunk in (job.fine.chunks if job.fine is not None else ())
+                 if chunk.state == CHUNK_QUEUED and chunk.task_id]
+    return job, task_ids
 
 
 def outputs_of(job: JobRecord) -> dict[str, BlobRef]:

@@ -22,6 +22,12 @@ the coordinates of a segment's two particles only.
 * Spacing, beyond the paper (:mod:`.spacing`): ``sum_s excess(l_s / t_s)^2``, how far each segment's
   length over its rest length ``t`` (from the source and the initial transfer) lies outside a free
   band; weight ``lambda_s`` (0: Eq. 1 exactly).
+* Welded segments, beyond the paper: a source segment no longer than
+  :data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M` has no direction (``d-bar = 0`` marks
+  it) and Eq. 7's term, whose Hessian is ``2 / l^2``, is singular there. Such a segment gets
+  ``|| e ||^2 / w^2`` instead (``w`` = :data:`WELD_LENGTH_M`): its two particles move as one, and
+  its Hessian ``2 / w^2`` stays within float64's reach of the rest (no spacing term either).
+  :mod:`hairport.solver.model.degenerate` lists the degenerate kinds.
 """
 
 from __future__ import annotations
@@ -38,11 +44,17 @@ from hairport.solver.adaptation.spacing import (
     spacing_residuals,
 )
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M
 
 #: Eq. 7's negative curvature is kept down to this share of beta (per segment); a particle
 #: belongs to at most two segments, each adding up to twice its block, so a share below 1/4
 #: leaves the Hessian positive definite through Eq. 11's term alone
 NEGATIVE_CURVATURE_SHARE = 0.2
+#: the length scale (m) of a welded segment's spring ``|| e ||^2 / w^2``: the degenerate length
+#: itself, so a weld costs Eq. 7's order (1) once it opens that far; its Hessian ``2 / w^2 = 2e12``
+#: per m^2 is 10^9 times Eq. 11's ``2 beta``, where banded Cholesky keeps 7 digits (Eq. 7's
+#: ``2 / l^2`` at the 1e-9 m floor the lengths had, 2e18, left none)
+WELD_LENGTH_M = DEGENERATE_SEGMENT_M
 
 
 def segment_operator(segments: np.ndarray, n: int) -> sp.csr_matrix:
@@ -64,9 +76,66 @@ def segment_operator(segments: np.ndarray, n: int) -> sp.csr_matrix:
 
 
 def unit_rows(vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Row norms (clamped at :data:`MIN_SEGMENT_LENGTH`) and unit rows of ``(M, 3)`` vectors."""
+    """Row norms (clamped at :data:`MIN_SEGMENT_LENGTH`) and unit rows of ``(M, 3)`` vectors.
+
+    The floor is far below :data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M` on purpose: Eq. 1
+    folds a strand's excess length into segments it collapses during a solve (:mod:`.spacing`), whose
+    directions still count; only a segment degenerate in the source is welded."""
     length = np.maximum(np.linalg.norm(vectors, axis=1), MIN_SEGMENT_LENGTH)
     return length, vectors / length[:, None]
+
+
+def source_directions(differences: np.ndarray) -> np.ndarray:
+    """Eq. 7's ``d-bar``: unit rows of the source segments ``(M, 3)``, and 0 for a degenerate one
+    (no longer than :data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M`: welded).
+
+    Returns
+    -------
+    directions : (M, 3) float64
+    """
+    length = np.linalg.norm(differences, axis=1)
+    long = length > DEGENERATE_SEGMENT_M
+    return np.divide(differences, length[:, None], out=np.zeros(differences.shape), where=long[:, None])
+
+
+def welded(directions: np.ndarray) -> np.ndarray:
+    """(M,) bool: the segments of ``directions (M, 3)`` (:func:`source_directions`) that are welded."""
+    return ~directions.any(axis=1)
+
+
+def shape_values(vectors: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Eq. 7's term of each segment ``(M, 3)``, the weld's where ``directions`` is 0: ``(M,)``."""
+    _, unit = unit_rows(vectors)
+    value = np.sum((unit - directions) ** 2, axis=1)
+    weld = welded(directions)
+    if weld.any():
+        value[weld] = np.einsum("ij,ij->i", vectors[weld], vectors[weld]) / WELD_LENGTH_M**2
+    return value
+
+
+def shape_residuals(vectors: np.ndarray, directions: np.ndarray, length: np.ndarray, unit: np.ndarray) -> np.ndarray:
+    """Half the gradient of :func:`shape_values` in each segment vector: ``(u (u . d) - d) / l``, and
+    ``e / w^2`` for a welded segment. ``length, unit`` are :func:`unit_rows` of ``vectors (M, 3)``.
+
+    Returns
+    -------
+    residual : (M, 3) float64
+    """
+    cosine = np.einsum("ij,ij->i", unit, directions)
+    residual = (unit * cosine[:, None] - directions) / length[:, None]
+    weld = welded(directions)
+    if weld.any():
+        residual[weld] = vectors[weld] / WELD_LENGTH_M**2
+    return residual
+
+
+def weld_blocks(blocks: np.ndarray, directions: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """``blocks (M, 3, 3)`` with the rows of welded segments replaced by ``scale I / w^2`` (in place):
+    half the weld's Hessian at ``scale`` 1, in the units of :func:`shape_blocks`."""
+    weld = welded(directions)
+    if weld.any():
+        blocks[weld] = (scale / WELD_LENGTH_M**2) * np.eye(3)
+    return blocks
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,12 +169,15 @@ class ShapeModel:
         """Assemble from source particles ``(N, 3)``, segments ``(M, 2)`` and ``K (N, N)``."""
         D = segment_operator(segments, len(source_points))
         differences = D @ source_points
-        _, directions = unit_rows(differences)
-        return cls(segments, D, directions, K.tocsr(), K @ source_points, np.linalg.norm(differences, axis=1))
+        return cls(segments, D, source_directions(differences), K.tocsr(), K @ source_points,
+                   np.linalg.norm(differences, axis=1))
 
     def rest_lengths(self, initial: np.ndarray) -> np.ndarray:
-        """The spacing term's rest length per segment ``(M,)`` for the initial transfer ``(N, 3)``."""
-        return segment_rest_lengths(self.segments, self.source_lengths, initial)
+        """The spacing term's rest length per segment ``(M,)`` for the initial transfer ``(N, 3)`` (0, no
+        term, for a welded segment)."""
+        rest = segment_rest_lengths(self.segments, self.source_lengths, initial)
+        rest[welded(self.source_directions)] = 0.0
+        return rest
 
 
 @dataclass(frozen=True)
@@ -142,6 +214,8 @@ def shape_blocks(
     frozen-length model's stiffness along ``u`` at ``mu = 1``), a Levenberg-Marquardt term
     that the solver raises when steps fail and lowers when they succeed.
 
+    A welded segment (no source direction) gets its spring's ``I / w^2`` (:func:`weld_blocks`).
+
     Returns
     -------
     blocks : (M, 3, 3) float64
@@ -150,7 +224,7 @@ def shape_blocks(
     floor = np.broadcast_to(np.asarray(curvature_floor, dtype=np.float64), length.shape) * length**2
     projected = clamped_direction_hessians(unit, model.source_directions, floor)
     damped = projected + np.asarray(radial_damping)[..., None, None] * unit[:, :, None] * unit[:, None, :]
-    return damped / length[:, None, None] ** 2
+    return weld_blocks(damped / length[:, None, None] ** 2, model.source_directions)
 
 
 #: below this sine of the angle between a segment and its source direction the two are
@@ -190,7 +264,9 @@ def clamped_direction_hessians(unit: np.ndarray, direction: np.ndarray, floor: n
     axis[np.arange(len(unit)), np.argmin(np.abs(unit), axis=1)] = 1.0
     fallback = np.cross(unit, axis)
     e = np.where(parallel[:, None], fallback, v)
-    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    # e is 0 only where u and d are both 0 (a welded segment at zero length, whose block is replaced)
+    e_norm = np.linalg.norm(e, axis=1, keepdims=True)
+    np.divide(e, e_norm, out=e, where=e_norm > 0)
     w = np.cross(unit, e)
     low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
     # eigenvector (s, low) in the (u, e) basis; where s = 0 it is e (c < 0) or u (c >= 0, low = 0)
@@ -228,6 +304,7 @@ def hessian(
     if weights.spacing:
         length, unit = unit_rows(model.D @ points)
         segment_blocks += 0.5 * spacing_blocks(unit, length, _rest(model, rest), weights.spacing, weights.spacing_band)
+        weld_blocks(segment_blocks, model.source_directions)  # the spacing term skips welds (rest 0) anyway
     blocks = sp.bsr_matrix((segment_blocks, np.arange(m), np.arange(m + 1)), shape=(3 * m, 3 * m))
     D3 = sp.kron(model.D, sp.identity(3), format="csr")
     shape = D3.T @ blocks.tocsr() @ D3
@@ -252,12 +329,12 @@ def gradient(
     """Exact gradient ``(N, 3)`` of Eq. 1 (with Eq. 21's weights) at ``points``, plus the spacing
     term's for rest lengths ``rest (M,)`` when ``weights.spacing`` is not 0.
 
-    Eq. 7's part is ``2 D^T [(u (u . d-bar) - d-bar) / l]`` per segment.
+    Eq. 7's part is ``2 D^T [(u (u . d-bar) - d-bar) / l]`` per segment (``e / w^2`` welded).
     """
-    length, unit = unit_rows(model.D @ points)
+    vectors = model.D @ points
+    length, unit = unit_rows(vectors)
     g = np.ones(len(points)) if gamma is None else gamma
-    cosine = np.einsum("ij,ij->i", unit, model.source_directions)
-    shape_residual = (unit * cosine[:, None] - model.source_directions) / length[:, None]
+    shape_residual = shape_residuals(vectors, model.source_directions, length, unit)
     if weights.spacing:
         shape_residual += 0.5 * spacing_gradients(unit, length, _rest(model, rest), weights.spacing, weights.spacing_band)
     inter_residual = model.K @ points - model.source_features
@@ -299,8 +376,9 @@ def energy_terms(model: ShapeModel, points: np.ndarray, initial: np.ndarray, gam
         The spacing term's free band (``EnergyWeights.spacing_band``).
     """
     g = np.ones(len(points)) if gamma is None else gamma
-    length, directions = unit_rows(model.D @ points)
-    shape = float(np.sum((directions - model.source_directions) ** 2))
+    vectors = model.D @ points
+    length, _ = unit_rows(vectors)
+    shape = float(np.sum(shape_values(vectors, model.source_directions)))
     inter = float(np.sum(g * np.sum((model.K @ points - model.source_features) ** 2, axis=1)))
     body = float(np.sum(g * np.sum((points - initial) ** 2, axis=1)))
     spacing = 0.0 if rest is None else float(np.sum(spacing_residuals(length, rest, band) ** 2))

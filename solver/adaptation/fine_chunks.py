@@ -131,7 +131,7 @@ def chunk_problem(hair: Hair, guides: np.ndarray, neighbours: Neighbours, fine: 
     initial = inputs.initial[particles]
     problem = StrandProblem(
         chunk_offsets, fine.source_directions[rows], initial, sp.diags(fine.pull_weight[rows], format="csr"),
-        pull_target, gamma, hair.is_root[particles],
+        pull_target, gamma, hair.at_root[particles],
         rest_lengths(hair.points[particles], initial, chunk_offsets) if spacing else None,
     )
     start = problem.initial if inputs.start is None else inputs.start[particles]

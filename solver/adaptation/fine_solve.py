@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 from hairport.solver.adaptation import line_search_kernels, strand_kernels
 from hairport.solver.adaptation.constraints import BodyDistance, push_out_short
-from hairport.solver.adaptation.energies import NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, EnergyWeights
+from hairport.solver.adaptation.energies import NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, WELD_LENGTH_M, EnergyWeights
 from hairport.solver.adaptation.options import (
     BACKTRACK_FACTOR,
     INITIAL_RADIAL_DAMPING,
@@ -171,7 +171,7 @@ def solve_uncoupled(
                     qp_strands, offsets, points, dist, normal, near, arrays["source_directions"], arrays["initial"],
                     pull_weight, arrays["features"], arrays["gamma"], arrays["rest_lengths"], fixed, alpha, beta, *spacing,
                     eps_c, damping, penalty,
-                    active, step, qp_rounds, qp_predicted, MIN_SEGMENT_LENGTH, NEGATIVE_CURVATURE_SHARE,
+                    active, step, qp_rounds, qp_predicted, MIN_SEGMENT_LENGTH, WELD_LENGTH_M, NEGATIVE_CURVATURE_SHARE,
                     PARALLEL_SINE, MERIT_PENALTY_FACTOR, MAX_ACTIVE_SET_ROUNDS,
                 )
                 if qp_strands is not open_strands:
@@ -193,7 +193,7 @@ def solve_uncoupled(
         finally:
             set_threads(all_threads)
         line_search_kernels.strand_merits(open_strands, offsets, offsets[open_strands], points, dist, *problem_arrays,
-                                          fixed, alpha, beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, merit_now)
+                                          fixed, alpha, beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, WELD_LENGTH_M, merit_now)
         if np.any(rounds < 0):
             raise np.linalg.LinAlgError("a strand's Newton system is not positive definite")
         report.active_set_rounds.append(int(rounds.max()))
@@ -225,7 +225,7 @@ def solve_uncoupled(
                 d[short], nrm[short], nr[short] = distance(moved[short])
             todo_merit = np.zeros(len(todo))
             line_search_kernels.strand_merits(strands, offsets, packed[:-1], moved, d, *problem_arrays, fixed, alpha,
-                                              beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, todo_merit)
+                                              beta, *spacing, penalty, eps_c, MIN_SEGMENT_LENGTH, WELD_LENGTH_M, todo_merit)
             merit_trial[todo] = todo_merit
             if attempt == 0:
                 damping[open_strands] = adapt_damping(damping[open_strands], merit_trial - merit_now, predicted)

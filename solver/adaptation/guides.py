@@ -135,6 +135,10 @@ def select_guides(
     6. Clusters can end empty (e.g. fewer distinct strands than G): fill up, one at a time,
        with the strand farthest from its nearest guide so far, until there are G guides.
 
+    Collapsed strands (:attr:`~hairport.solver.model.hair.Hair.collapsed`: all their points at
+    the root) are no candidates while another strand is: they have no shape to guide with, and as
+    outliers of the clustering k-means++ would seed them first.
+
     Cost: the assignment step is ``O(S G R)`` per iteration, so plain Lloyd would be
     ``O(S G R iterations)`` (a k-d tree would do less on low-dimensional data, but not in
     ``3 R = 48`` dimensions); with the subsample of step 2 the total is
@@ -172,6 +176,9 @@ def select_guides(
     if int(iterations) < 0:
         raise ValueError(f"iterations must be at least 0, got {iterations}")
     n_strands = hair.n_strands
+    shaped = np.flatnonzero(~hair.collapsed)
+    if 0 < len(shaped) < n_strands:
+        return shaped[select_guides(hair.without_attributes().subset(shaped), n_guides, seed, iterations)]
     if n_guides >= n_strands:
         return np.arange(n_strands, dtype=np.int64)
 

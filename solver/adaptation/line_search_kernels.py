@@ -28,7 +28,7 @@ from hairport.solver.jit import kernel, warms
 @kernel
 def strand_merit(first, count, points, distance, rows, source_directions, initial, pull_weight, features, gamma,
                  rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c,
-                 min_length) -> float:
+                 min_length, weld_length) -> float:
     """One strand's merit: Eq. 1 and the spacing term plus ``penalty`` times its clearance short of ``eps_c``
     (:func:`.strand_problem.group_energies`).
 
@@ -45,7 +45,10 @@ def strand_merit(first, count, points, distance, rows, source_directions, initia
     source_directions, initial, features : (N, 3) float64
     pull_weight, gamma, rest_lengths : (N,) float64
     fixed : (N,) bool
-    alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c, min_length : float
+    alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c : float
+    min_length, weld_length : float
+        :data:`.polyline.MIN_SEGMENT_LENGTH`, :data:`.energies.WELD_LENGTH_M` (the spring of a welded
+        segment: one whose source direction is 0).
     """
     total = 0.0
     for j in range(count):
@@ -56,12 +59,15 @@ def strand_merit(first, count, points, distance, rows, source_directions, initia
             e0 = points[r + 1, 0] - points[r, 0]
             e1 = points[r + 1, 1] - points[r, 1]
             e2 = points[r + 1, 2] - points[r, 2]
-            length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
             d = source_directions[i]
-            value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
-            rest = rest_lengths[i] if spacing != 0.0 else 0.0  # unread without the term (may be a stub)
-            if rest > 0.0:
-                value += spacing * band_excess(length / rest, spacing_low, spacing_high) ** 2
+            if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0:  # welded: || e ||^2 / w^2, no spacing term
+                value = (e0 * e0 + e1 * e1 + e2 * e2) / (weld_length * weld_length)
+            else:
+                length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
+                value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
+                rest = rest_lengths[i] if spacing != 0.0 else 0.0  # unread without the term (may be a stub)
+                if rest > 0.0:
+                    value += spacing * band_excess(length / rest, spacing_low, spacing_high) ** 2
         w = pull_weight[i]
         inter = 0.0
         body = 0.0
@@ -106,7 +112,7 @@ def gather_trial_points(strands, offsets, packed_offsets, points, step, fraction
 @kernel
 def strand_merits(strands, offsets, first_rows, positions, distance, source_directions, initial, pull_weight,
                   features, gamma, rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c,
-                  min_length, merit):
+                  min_length, weld_length, merit):
     """The merit (:func:`strand_merit`) of each listed strand, at the iterate or at packed trial points.
 
     Parameters
@@ -121,7 +127,7 @@ def strand_merits(strands, offsets, first_rows, positions, distance, source_dire
     source_directions, initial, features : (N, 3) float64
     pull_weight, gamma, rest_lengths : (N,) float64
     fixed : (N,) bool
-    alpha, beta, spacing, spacing_low, spacing_high, eps_c, min_length : float
+    alpha, beta, spacing, spacing_low, spacing_high, eps_c, min_length, weld_length : float
     penalty : (S,) float64
         Each strand's clearance penalty.
     merit : (T,) float64
@@ -131,7 +137,8 @@ def strand_merits(strands, offsets, first_rows, positions, distance, source_dire
         s = strands[t]
         merit[t] = strand_merit(offsets[s], offsets[s + 1] - offsets[s], positions, distance, first_rows[t],
                                 source_directions, initial, pull_weight, features, gamma, rest_lengths, fixed,
-                                alpha, beta, spacing, spacing_low, spacing_high, penalty[s], eps_c, min_length)
+                                alpha, beta, spacing, spacing_low, spacing_high, penalty[s], eps_c, min_length,
+                                weld_length)
 
 
 @kernel
@@ -291,7 +298,8 @@ def _warm() -> None:
     strands = np.arange(2, dtype=np.int64)
     merit = np.zeros(2)
     strand_merits(strands, offsets, offsets[:-1], points, distance, np.tile([0.0, -1.0, 0.0], (n, 1)), points,
-                  np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed, 3e3, 1e3, 1.0, 0.9, 1.1, np.ones(2), 5e-4, 1e-9, merit)
+                  np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed, 3e3, 1e3, 1.0, 0.9, 1.1, np.ones(2), 5e-4, 1e-9, 1e-6,
+                  merit)
     moved, free = np.empty((n, 3)), np.empty(n, dtype=np.bool_)
     gather_trial_points(strands, offsets, offsets, points, np.zeros((n, 3)), np.ones(2), fixed, moved, free)
     commit_trial_points(strands, offsets, offsets, np.ones(2, dtype=np.bool_), moved, distance, normal, near, fixed,

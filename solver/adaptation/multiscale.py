@@ -28,10 +28,17 @@ import scipy.sparse as sp
 from hairport.solver.adaptation.active_set import solve_strands
 from hairport.solver.adaptation.constraints import BodyDistance
 from hairport.solver.adaptation.coupled import solve_hairstyle
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, unit_rows
+from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, source_directions
 from hairport.solver.adaptation.fine_chunks import FineInputs, FineSource
 from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.neighbours import Neighbours, knn_other_strands, laplacian_operator, neighbour_average
+from hairport.solver.adaptation.neighbours import (
+    Neighbours,
+    knn_other_strands,
+    knn_shaped_strands,
+    laplacian_operator,
+    neighbour_average,
+    neighbour_reach,
+)
 from hairport.solver.adaptation.options import ENGINE_COMPILED, SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
 from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.jit import set_threads, threads
@@ -90,10 +97,14 @@ def build_multiscale_model(hair: Hair, n_guides: int, k: int, seed: int = 0) -> 
 def multiscale_model(hair: Hair, guides: np.ndarray, k: int) -> MultiscaleModel:
     """The coarse and fine kNN sets of the source hairstyle with these guides ``(G,) int64``."""
     guide_hair = hair.subset(guides)
-    guide_neighbours = knn_other_strands(guide_hair.points, guide_hair.strand_of, k)
-    is_guide_particle = np.repeat(np.isin(np.arange(hair.n_strands), guides), hair.counts)
+    # collapsed strands are no one's neighbours (flagged guides may hold some), isolated strands have none
+    reach = neighbour_reach(hair)
+    guide_neighbours = knn_shaped_strands(guide_hair, k, reach=reach)
+    is_guide = np.isin(np.arange(hair.n_strands), guides)
+    is_guide_particle = np.repeat(is_guide, hair.counts)
     normal = np.flatnonzero(~is_guide_particle)
-    fine_neighbours = knn_other_strands(hair.points, hair.strand_of, k, candidates=is_guide_particle, queries=normal)
+    pool = np.repeat(is_guide & ~hair.collapsed, hair.counts)
+    fine_neighbours = knn_other_strands(hair.points, hair.strand_of, k, candidates=pool, queries=normal, reach=reach)
     return MultiscaleModel(guides, guide_neighbours, fine_neighbours)
 
 
@@ -109,12 +120,12 @@ def fine_source(hair: Hair, model: MultiscaleModel) -> FineSource:
     """The fine problem's source-only arrays."""
     strands = np.flatnonzero(~model.is_guide(hair.n_strands))
     particles = particle_indices(hair.offsets, strands)
-    _, unit = unit_rows(hair.points[np.minimum(particles + 1, hair.n_particles - 1)] - hair.points[particles])
+    directions = source_directions(hair.points[np.minimum(particles + 1, hair.n_particles - 1)] - hair.points[particles])
     nb = model.fine_neighbours
     pull_weight = nb.weight.sum(axis=1)
     features = neighbour_average(nb, hair.points)
     np.subtract(pull_weight[:, None] * hair.points[particles], features, out=features)
-    return FineSource(strands, particles, unit, pull_weight, features)
+    return FineSource(strands, particles, directions, pull_weight, features)
 
 
 @dataclass
@@ -274,7 +285,7 @@ def fine_problem(hair: Hair, model: MultiscaleModel, fine: FineSource, points: n
     return StrandProblem(
         offsets, fine.source_directions, fine_initial, sp.diags(fine.pull_weight, format="csr"),
         pull_target, np.ones(len(fine.particles)) if gamma is None else gamma[fine.particles],
-        hair.is_root[fine.particles], rest_lengths(hair.points[fine.particles], fine_initial, offsets) if spacing else None,
+        hair.at_root[fine.particles], rest_lengths(hair.points[fine.particles], fine_initial, offsets) if spacing else None,
     )
 
 
@@ -432,8 +443,7 @@ def solve_multiscale(
 
     began = time.perf_counter()
     guide_particles = particle_indices(hair.offsets, model.guides)
-    guide_roots = np.zeros(len(guide_particles), dtype=bool)
-    guide_roots[np.concatenate([[0], np.cumsum(hair.counts[model.guides])[:-1]])] = True
+    guide_roots = hair.at_root[guide_particles]  # the roots and the particles welded to them stay
 
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(

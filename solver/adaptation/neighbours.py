@@ -19,6 +19,12 @@ at 10^6 particles (full sets: 5.5 s against 16 s on a loaded machine), with equa
 A particle may find fewer than ``k`` neighbours (the pool holds fewer particles of other
 strands, or none: a groom of one strand). Eq. 9's weights are normalised over the
 neighbours found; a row without any has weight 0 and adds no Eq. 10 term.
+
+A neighbour at distance 0 (a duplicate strand, :mod:`hairport.solver.model.degenerate`) is no
+singularity: the distances are clamped (:data:`MIN_NEIGHBOUR_DISTANCE`) before they are inverted
+and the weights normalised, so such a neighbour takes (almost) its row's whole weight and every
+weight stays in [0, 1]. Collapsed strands (all their points at the root) are left out of the sets
+of a whole hairstyle (:func:`knn_shaped_strands`).
 """
 
 from __future__ import annotations
@@ -31,6 +37,8 @@ from scipy.spatial import cKDTree
 
 from hairport.solver.adaptation.kdtree import build_tree, query_tree
 from hairport.solver.jit import parallel_kernel, prange, warms
+from hairport.solver.model.degenerate import groom_size
+from hairport.solver.model.hair import Hair
 
 #: neighbour distances are clamped to this (m) before inverting (Eq. 9)
 MIN_NEIGHBOUR_DISTANCE = 1e-9
@@ -49,6 +57,14 @@ KNN_CANDIDATE_BUDGET = KNN_QUERY_CHUNK * (5 + KNN_EXTRA_CANDIDATES)
 #: to a few hundred particles) stay below it
 KNN_MAX_ROUND_CANDIDATES = 512
 
+
+#: a strand farther than this many groom sizes (:func:`~hairport.solver.model.degenerate.groom_size`:
+#: the roots' spread plus a typical strand length, 0.1-0.5 m on a head) from every particle of other
+#: strands has no Eq. 10 rows (:func:`_isolated_rows`). Ordinary strands stay far inside it: on the
+#: MakeHuman and toy grooms (300-3,000 strands, every style, all strands, 40 and 5 guides) no particle's
+#: nearest neighbour lay farther than 0.23 m; a threshold relative to the spacing would not do (the
+#: largest nearest distance reached 34 times the median on dense grooms)
+ISOLATED_SIZES = 2.0
 
 #: storage of the neighbour indices: particle counts stay far below 2^31 (the readers cap them
 #: at tens of millions), and the index array is the largest one a hairstyle keeps
@@ -82,6 +98,7 @@ def knn_other_strands(
     candidates: np.ndarray | None = None,
     queries: np.ndarray | None = None,
     workers: int = -1,
+    reach: float = np.inf,
 ) -> Neighbours:
     """The ``k`` nearest particles of other strands, with Eq. 9 weights.
 
@@ -97,6 +114,9 @@ def knn_other_strands(
         Particles to find neighbours for; all by default.
     workers : int
         Threads for the k-d tree query.
+    reach : float
+        The rows of a strand none of whose rows has a neighbour within this have none
+        (:func:`_isolated_rows`; ``inf``: every row keeps its neighbours).
 
     Returns
     -------
@@ -125,7 +145,43 @@ def knn_other_strands(
     if len(hard):
         index[hard] = queries[hard, None]
         index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
-    return Neighbours(index, _inverse_distance_weights(distance))
+    return Neighbours(index, _inverse_distance_weights(_isolated_rows(index, distance, queries, strand_of, reach)))
+
+
+def knn_shaped_strands(hair: Hair, k: int, candidates: np.ndarray | None = None,
+                       reach: float | None = None) -> Neighbours:
+    """Eq. 8-9 over the strands of ``hair`` but its collapsed ones (:attr:`~hairport.solver.model.hair.Hair.collapsed`),
+    isolated strands without neighbours (:func:`_isolated_rows`).
+
+    A collapsed strand is carried on its root, not solved: it is nobody's neighbour and has none (rows
+    of weight 0), so the other strands' sets are those of the groom without it (its particles, fixed
+    at a root far from theirs, pulled them by up to 1.7 cm through Eq. 10 in the coupled solve of the toy pair).
+
+    Parameters
+    ----------
+    hair : Hair
+    k : int
+    candidates : (N,) bool, optional
+        Particles allowed as neighbours (all by default); a collapsed strand's never are.
+    reach : float, optional
+        :func:`neighbour_reach` of the whole groom (``hair``'s by default; a groom's guides take the groom's).
+
+    Returns
+    -------
+    neighbours : Neighbours
+        One row per particle of ``hair``.
+    """
+    reach = neighbour_reach(hair) if reach is None else reach
+    still = np.repeat(hair.collapsed, hair.counts)
+    if not still.any():
+        return knn_other_strands(hair.points, hair.strand_of, k, candidates, reach=reach)
+    pool = ~still if candidates is None else (np.asarray(candidates, dtype=bool) & ~still)
+    shaped = np.flatnonzero(~still)
+    found = knn_other_strands(hair.points, hair.strand_of, k, candidates=pool, queries=shaped, reach=reach)
+    index = np.repeat(np.arange(hair.n_particles, dtype=NEIGHBOUR_INDEX_DTYPE)[:, None], k, axis=1)
+    weight = np.zeros((hair.n_particles, k))
+    index[shaped], weight[shaped] = found.index, found.weight
+    return Neighbours(index, weight)
 
 
 def knn_other_strands_reference(
@@ -135,6 +191,7 @@ def knn_other_strands_reference(
     candidates: np.ndarray | None = None,
     queries: np.ndarray | None = None,
     workers: int = -1,
+    reach: float = np.inf,
 ) -> Neighbours:
     """:func:`knn_other_strands` by scipy's k-d tree and rounds of candidates (module
     docstring): the reference the compiled tree is tested against (same parameters and results)."""
@@ -151,7 +208,7 @@ def knn_other_strands_reference(
     # only after missing neighbours in the first round does a particle go to the exact search
     if not own.any():  # no query's strand in the pool (Eq. 14: normal particles, guide particles)
         _nearest_in_pool(points, tree, pool, queries, k, workers, index, distance)
-        return Neighbours(index, _inverse_distance_weights(distance))
+        return Neighbours(index, _inverse_distance_weights(_isolated_rows(index, distance, queries, strand_of, reach)))
     long_strand = own + k > KNN_MAX_ROUND_CANDIDATES
     todo = np.arange(len(queries))
     ask = k + KNN_EXTRA_CANDIDATES
@@ -173,7 +230,53 @@ def knn_other_strands_reference(
     hard = np.concatenate(exact)
     if len(hard):
         index[hard], distance[hard] = _other_strand_search(points, strand_of, pool, queries[hard], k, workers)
-    return Neighbours(index, _inverse_distance_weights(distance))
+    return Neighbours(index, _inverse_distance_weights(_isolated_rows(index, distance, queries, strand_of, reach)))
+
+
+def _isolated_rows(index: np.ndarray, distance: np.ndarray, queries: np.ndarray, strand_of: np.ndarray,
+                   reach: float) -> np.ndarray:
+    """Empty (in place: the padding of a row without neighbours) the rows of the strands none of whose rows
+    has a neighbour within ``reach``: strands away from every other.
+
+    Eq. 10 keeps a particle's offset to its neighbours; a strand far from every other (a strand moved away
+    from the groom, a damaged file's points in a heap at the origin) has offsets of metres, and its rows
+    pulled the strands they name (a copy moved 1.5 m away moved them 11 cm in the coupled solve). Such a
+    strand is retargeted by its own terms. Nobody names it back: it is far from them too. A strand that
+    comes near the others anywhere keeps every row (a long strand among short ones reaches far from them
+    with its tip, as hair does).
+
+    Parameters
+    ----------
+    index : (Q, k) int
+    distance : (Q, k) float64
+        ``inf`` for padding.
+    queries : (Q,) int64
+        The particle of each row.
+    strand_of : (N,) int64
+    reach : float
+
+    Returns
+    -------
+    distance : (Q, k) float64
+        ``distance`` itself.
+    """
+    if not np.isfinite(reach) or len(distance) == 0:
+        return distance
+    nearest = distance.min(axis=1)
+    strand = strand_of[queries]
+    closest = np.full(int(strand.max()) + 1, np.inf)
+    np.minimum.at(closest, strand, nearest)
+    far = np.flatnonzero(np.isfinite(nearest) & (closest[strand] > reach))
+    index[far] = queries[far, None]
+    distance[far] = np.inf
+    return distance
+
+
+def neighbour_reach(hair: Hair) -> float:
+    """How far (m) a strand may lie from every other before it has no neighbours: :data:`ISOLATED_SIZES` groom
+    sizes (``inf`` for a groom without a size)."""
+    size, _ = groom_size(hair.points, hair.offsets) if hair.n_strands else (0.0, None)
+    return ISOLATED_SIZES * size if size > 0 else np.inf
 
 
 def _inverse_distance_weights(distance: np.ndarray) -> np.ndarray:

@@ -56,7 +56,8 @@ def _clamped_block(u0, u1, u2, d0, d1, d2, floor, parallel_sine, out):
     if s < parallel_sine:
         e0, e1, e2 = _normal_to(u0, u1, u2)
     e_norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-    e0, e1, e2 = e0 / e_norm, e1 / e_norm, e2 / e_norm
+    if e_norm > 0:  # 0 only where u and d both are (a welded segment at zero length, never assembled)
+        e0, e1, e2 = e0 / e_norm, e1 / e_norm, e2 / e_norm
     w0, w1, w2 = _cross(u0, u1, u2, e0, e1, e2)
     low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
     q0, q1, q2 = s * u0 + low * e0, s * u1 + low * e1, s * u2 + low * e2
@@ -98,8 +99,8 @@ def clamped_direction_hessian(unit, direction, floor, parallel_sine, out):
 
 @kernel
 def assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma, rest_lengths,
-                    alpha, beta, spacing, spacing_low, spacing_high, damping, min_length, curvature_share, parallel_sine, diagonal, upper,
-                    gradient):
+                    alpha, beta, spacing, spacing_low, spacing_high, damping, min_length, weld_length, curvature_share,
+                    parallel_sine, diagonal, upper, gradient):
     """One strand's Newton model of Eq. 1 and the spacing term (:func:`.strand_problem.newton_system` with
     ``K = diag(pull_weight)``).
 
@@ -118,8 +119,9 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
         The spacing term's free band of ``l / t`` (:func:`.spacing.band_excess`).
     damping : float
         The strand's radial damping.
-    min_length, curvature_share, parallel_sine : float
-        :data:`.polyline.MIN_SEGMENT_LENGTH`, :data:`.energies.NEGATIVE_CURVATURE_SHARE`,
+    min_length, weld_length, curvature_share, parallel_sine : float
+        :data:`.polyline.MIN_SEGMENT_LENGTH`, :data:`.energies.WELD_LENGTH_M` (the spring of a welded
+        segment: one whose source direction is 0), :data:`.energies.NEGATIVE_CURVATURE_SHARE`,
         :data:`.energies.PARALLEL_SINE`.
     diagonal, upper : (count, 3, 3) float64
         Receive the blocks (``upper[i]``: particles ``i, i+1``; the last one zero).
@@ -135,9 +137,19 @@ def assemble_strand(first, count, points, source_directions, initial, pull_weigh
         e0 = points[i + 1, 0] - points[i, 0]
         e1 = points[i + 1, 1] - points[i, 1]
         e2 = points[i + 1, 2] - points[i, 2]
+        d = (source_directions[i, 0], source_directions[i, 1], source_directions[i, 2])
+        if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0:  # welded: || e ||^2 / w^2 (.energies.shape_values)
+            stiffness = 2.0 / (weld_length * weld_length)
+            e = (e0, e1, e2)
+            for a in range(3):
+                diagonal[j, a, a] += stiffness
+                diagonal[j + 1, a, a] += stiffness
+                upper[j, a, a] = -stiffness
+                gradient[j, a] -= stiffness * e[a]
+                gradient[j + 1, a] += stiffness * e[a]
+            continue
         length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
         unit = (e0 / length, e1 / length, e2 / length)
-        d = (source_directions[i, 0], source_directions[i, 1], source_directions[i, 2])
         cosine = unit[0] * d[0] + unit[1] * d[1] + unit[2] * d[2]
         floor = curvature_share * beta * min(gamma[i], gamma[i + 1]) * length**2
         _clamped_block(unit[0], unit[1], unit[2], d[0], d[1], d[2], floor, parallel_sine, block)
@@ -315,7 +327,8 @@ def active_set_qp(diagonal, upper, gradient, fixed, constrained, lower, active, 
 @parallel_kernel
 def newton_qp_steps(strands, offsets, points, distance, normal, near, source_directions, initial, pull_weight,
                     features, gamma, rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, eps_c, damping,
-                    penalty, active, step, rounds, predicted, min_length, curvature_share, parallel_sine, penalty_factor, max_rounds):
+                    penalty, active, step, rounds, predicted, min_length, weld_length, curvature_share, parallel_sine,
+                    penalty_factor, max_rounds):
     """One outer iteration's QP of every listed strand: the step, the raised merit penalty, the model's change.
 
     Parameters
@@ -345,7 +358,7 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
         Receives the active-set rounds (-1: a pinned system was not positive definite).
     predicted : (T,) float64
         Receives the quadratic model's change along the step.
-    min_length, curvature_share, parallel_sine, penalty_factor : float
+    min_length, weld_length, curvature_share, parallel_sine, penalty_factor : float
     max_rounds : int
     """
     for t in prange(len(strands)):
@@ -356,8 +369,8 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
         upper = np.empty((count, 3, 3))
         gradient = np.empty((count, 3))
         assemble_strand(first, count, points, source_directions, initial, pull_weight, features, gamma, rest_lengths,
-                        alpha, beta, spacing, spacing_low, spacing_high, damping[s], min_length, curvature_share, parallel_sine, diagonal, upper,
-                        gradient)
+                        alpha, beta, spacing, spacing_low, spacing_high, damping[s], min_length, weld_length,
+                        curvature_share, parallel_sine, diagonal, upper, gradient)
         constrained = np.empty(count, dtype=np.bool_)
         frames = np.empty((count, 3, 3))
         lower = np.empty(count)
@@ -409,4 +422,4 @@ def _warm() -> None:
     newton_qp_steps(np.arange(2, dtype=np.int64), offsets, points, distance, normal, near, directions, points,
                     np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed, 3e3, 1e3, 1.0, 0.9, 1.1, 5e-4, np.ones(2), np.zeros(2),
                     np.zeros(n, dtype=np.bool_), np.zeros((n, 3)), np.zeros(2, dtype=np.int64), np.zeros(2),
-                    1e-9, 0.2, 1e-12, 2.0, 50)
+                    1e-9, 1e-6, 0.2, 1e-12, 2.0, 50)

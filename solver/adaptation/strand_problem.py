@@ -15,7 +15,11 @@ from hairport.solver.adaptation.energies import (
     EnergyWeights,
     ShapeModel,
     clamped_direction_hessians,
+    shape_residuals,
+    shape_values,
     unit_rows,
+    weld_blocks,
+    welded,
 )
 from hairport.solver.adaptation.spacing import spacing_blocks, spacing_gradients, spacing_residuals
 
@@ -30,7 +34,8 @@ class StrandProblem:
     offsets : (S+1,) int64
         CSR strand layout.
     source_directions : (N, 3) float64
-        Unit source direction of the segment starting at each particle (tip rows unused).
+        Unit source direction of the segment starting at each particle, 0 for a welded one
+        (:func:`.energies.source_directions`; tip rows unused).
     initial : (N, 3) float64
         ``p-hat`` (Eq. 11).
     coupling : (N, N) csr_matrix
@@ -181,12 +186,15 @@ def group_energies(
     (:func:`.constraints.clearance_violation`) when ``distance (N,)`` is given: the
     active-set line search's merit."""
     seg = problem.segment_starts
-    length, unit = unit_rows(points[seg + 1] - points[seg])
+    vectors = points[seg + 1] - points[seg]
+    directions = problem.source_directions[seg]
     per_particle = np.zeros(problem.n_particles)
-    per_particle[seg] = np.sum((unit - problem.source_directions[seg]) ** 2, axis=1)
+    per_particle[seg] = shape_values(vectors, directions)
     rest = problem.spacing_rest(weights)
     if rest is not None:
-        per_particle[seg] += weights.spacing * spacing_residuals(length, rest[seg], weights.spacing_band) ** 2
+        length, _ = unit_rows(vectors)
+        rest = np.where(welded(directions), 0.0, rest[seg])  # a weld has no spacing term
+        per_particle[seg] += weights.spacing * spacing_residuals(length, rest, weights.spacing_band) ** 2
     residual = problem.coupling @ points - problem.features
     per_particle += weights.alpha * problem.gamma * np.sum(residual**2, axis=1)
     per_particle += weights.beta * problem.gamma * np.sum((points - problem.initial) ** 2, axis=1)
@@ -233,9 +241,9 @@ def newton_system(
     """
     n = problem.n_particles
     seg = problem.segment_starts
-    length, unit = unit_rows(points[seg + 1] - points[seg])
+    vectors = points[seg + 1] - points[seg]
+    length, unit = unit_rows(vectors)
     d = problem.source_directions[seg]
-    cosine = np.einsum("ij,ij->i", unit, d)
     g = problem.gamma
     floor = NEGATIVE_CURVATURE_SHARE * weights.beta * np.minimum(g[seg], g[seg + 1]) * length**2
     projected = clamped_direction_hessians(unit, d, floor)
@@ -243,8 +251,9 @@ def newton_system(
     blocks = 2.0 * (projected + mu[:, None, None] * unit[:, :, None] * unit[:, None, :]) / length[:, None, None] ** 2
     rest = problem.spacing_rest(weights)
     if rest is not None:
-        rest = rest[seg]
+        rest = np.where(welded(d), 0.0, rest[seg])  # a weld has no spacing term
         blocks += spacing_blocks(unit, length, rest, weights.spacing, weights.spacing_band)
+    weld_blocks(blocks, d, 2.0)
 
     K = problem.coupling
     kdiag = problem.gram.diagonal()
@@ -257,7 +266,7 @@ def newton_system(
     off_diagonal = problem.gram_off_diagonal
     coupling = 2.0 * weights.alpha * off_diagonal if off_diagonal.nnz else None
 
-    shape_residual = (unit * cosine[:, None] - d) / length[:, None]
+    shape_residual = shape_residuals(vectors, d, length, unit)
     if rest is not None:
         shape_residual += 0.5 * spacing_gradients(unit, length, rest, weights.spacing, weights.spacing_band)
     gradient = np.zeros((n, 3))

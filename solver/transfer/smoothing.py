@@ -7,7 +7,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from hairport.solver.jit import parallel_kernel, prange, warms
-from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M
 
 #: Eq. 6's epsilon_s: Laplacian discrepancy (unitless, Eq. 5 divides by lengths)
 SMOOTHING_EPS = 0.3
@@ -37,7 +37,9 @@ def strand_laplacian(points: np.ndarray, offsets: np.ndarray) -> sp.csr_matrix:
     """
     n = len(points)
     lengths = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (N-1,), includes fake cross-strand gaps
-    inv = 1.0 / np.maximum(lengths, MIN_SEGMENT_LENGTH)
+    # a degenerate segment (repeated points) weighs 1 / DEGENERATE_SEGMENT_M, the length the solve's
+    # weld uses: it keeps its two particles together
+    inv = 1.0 / np.maximum(lengths, DEGENERATE_SEGMENT_M)
     is_end = np.zeros(n, dtype=bool)
     is_end[offsets[:-1]] = True
     is_end[offsets[1:] - 1] = True

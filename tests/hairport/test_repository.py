@@ -14,6 +14,7 @@ from hairport.records import (
     PreprocessingRecord,
     PreprocessSettings,
     artifact_key,
+    now,
 )
 from hairport.repository import Repository
 from hairport.storage import LocalStorage
@@ -66,14 +67,14 @@ def test_index_follows_every_state_change_and_drops_purged_jobs(repository):
     repository.create_job(job)
     for state in ("running", "running", "failed", "running", "succeeded"):
         repository.set_job(job.id, state=state, progress=0.5)
-        [row] = repository.job_index.rows()
+        [row] = repository.index.job_rows()
         assert (row.id, row.owner, row.state) == (job.id, "kowner", state)
         assert repository.job_counts()[state] == 1 and sum(repository.job_counts().values()) == 1
     assert repository.job(job.id).updated_at > 0
     record = repository.storage.root / "records" / "jobs" / f"{job.id}.json"
     os.utime(record, (0, 0))
     assert repository.purge(older_than_seconds=3600.0) == 1
-    assert repository.job_index.rows() == [] and repository.list_jobs("kowner") == ([], 0)
+    assert repository.index.job_rows() == [] and repository.list_jobs("kowner") == ([], 0)
     assert repository.job_counts()["succeeded"] == 0
     assert repository.set_job(job.id, state="failed") is None
 
@@ -108,7 +109,7 @@ def test_stage_totals_sum_the_succeeded_jobs_only(repository):
 def test_progress_writes_do_not_touch_the_index(repository, monkeypatch):
     repository.create_job(make_job(1))
     writes = []
-    monkeypatch.setattr(repository.job_index, "put", writes.append)
+    monkeypatch.setattr(repository.index, "put_job", writes.append)
     for progress in (0.1, 0.2, 0.3):
         repository.set_job(f"{1:032x}", progress=progress, stage="solve")
     assert writes == []
@@ -166,3 +167,34 @@ def test_purge_runs_at_most_once_per_interval(repository):
     assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=3600.0) == 0
     assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=3600.0) is None
     assert repository.purge_if_due(older_than_seconds=1e9, interval_seconds=0.0) == 0
+
+
+def test_the_orphan_sweep_keeps_what_a_running_job_saved_until_it_ends(repository):
+    """A running job records its outputs when it ends: what it saved since its start stays, however old."""
+    storage = repository.storage
+    two_hours_ago = now() - 7200
+    job = make_job(5, created_at=two_hours_ago - 60)
+    repository.create_job(job)
+    repository.set_job(job.id, state="running", started_at=two_hours_ago)
+    output = storage.save_bytes(b"a result written an hour and a half into the job", ".npz")
+    before = storage.save_bytes(b"an orphan older than the job", ".npz")
+    for blob, moment in ((output, two_hours_ago + 1800), (before, two_hours_ago - 600)):
+        os.utime(blob.path, (moment, moment))
+    assert repository.sweep_orphans(grace_seconds=3600.0) == 1
+    assert output.path.exists() and not before.path.exists()
+    repository.set_job(job.id, state="succeeded", outputs={"npz": BlobRef(sha256=output.sha256, suffix=".npz")})
+    assert repository.sweep_orphans(grace_seconds=3600.0) == 0 and output.path.exists()  # now its record refers to it
+    lost = storage.save_bytes(b"the result of a run that lost its job", ".npz")
+    os.utime(lost.path, (two_hours_ago, two_hours_ago))
+    assert repository.sweep_orphans(grace_seconds=3600.0) == 1 and not lost.path.exists()
+
+
+def test_the_orphan_sweep_runs_once_per_interval_in_a_deployment(repository, tmp_path):
+    orphan = repository.storage.save_bytes(b"an orphan", ".obj")
+    old = now() - 7200
+    os.utime(orphan.path, (old, old))
+    other = Repository(LocalStorage(tmp_path, durable=False))  # another process of the deployment
+    assert repository.sweep_orphans_if_due(3600.0, interval_seconds=3600.0) == 1 and not orphan.path.exists()
+    again = repository.storage.save_bytes(b"another orphan", ".obj")
+    os.utime(again.path, (old, old))
+    assert other.sweep_orphans_if_due(3600.0, interval_seconds=3600.0) is None and again.path.exists()

@@ -3,7 +3,8 @@ nothing kept on disk), real ``hairport worker`` processes, the FastAPI app in-pr
 
 The tests run in order on one deployment and share its workers: a worker of another deployment,
 a lost message, Redis down at submit, a worker host killed mid-job, a job that kills its worker
-every time. Periods are short here (settings below); production defaults are in hairport/settings.py.
+every time, cancels while Redis is down (through a real ``hairport serve``). Periods are short here
+(settings below); production defaults are in hairport/settings.py.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from ..conftest import free_port
-from .deployment import in_process_app, service_env, spawn_worker
+from .deployment import in_process_app, service_env, spawn_server, spawn_worker, stop
 from .test_service_api import AUTH, KEY, OTHER_KEY, assert_problem, files, upload_character, wait_for  # noqa: F401
 
 #: short periods for the test (s): heartbeat, stale threshold, sweep period, lost-message deadline
@@ -28,6 +29,8 @@ PERIODS = dict(HAIRPORT_HEARTBEAT_SECONDS="1", HAIRPORT_STALE_AFTER_SECONDS="8",
 #: what the issue promises: a job whose worker host died is stale within a minute
 STALE_WITHIN_SECONDS = 60
 JOB_TIMEOUT = 180
+#: the file a Redis saves to in its folder (its default ``dbfilename``) and loads at start
+SAVED = "dump.rdb"
 DONE = ("succeeded", "failed", "cancelled")
 
 
@@ -50,13 +53,21 @@ class RedisServer:
         while True:
             try:
                 client.ping()
-                return
-            except redis.ConnectionError:
+                break
+            except redis.ConnectionError:  # refused, or still loading what a kept stop saved
                 assert self.process.poll() is None and time.monotonic() < deadline, "redis-server did not start"
                 time.sleep(0.05)
+        (self.folder / SAVED).unlink(missing_ok=True)  # loaded once: the next plain restart is empty again
 
-    def stop(self) -> None:
-        self.process.terminate()
+    def stop(self, keep: bool = False) -> None:
+        """Stop the server: it forgets what it holds, or with ``keep`` saves it for the next start (as a Redis
+        with persistence does)."""
+        if keep:
+            import redis
+
+            redis.Redis.from_url(self.url).shutdown(save=True)
+        else:
+            self.process.terminate()
         self.process.wait(10)
 
 
@@ -261,3 +272,63 @@ def test_a_job_that_kills_its_worker_every_time_ends_worker_lost(faults, inputs)
     assert failed["attempts"] == 3 and "died 3 times" in failed["error"]["message"]
     assert running["worker"] == failed["worker"]
     assert all(process.poll() is None for process in faults["workers"].values())  # the worker lives on
+
+
+def test_cancels_while_redis_is_down_apply_whole_and_no_worker_runs_the_jobs(faults, inputs, tmp_path):
+    """Redis down: DELETE of a job and of a batch of two, sent to a real server, answer 200 with every job
+    cancelled, as the records say: a worker reads a job's record before it starts it, so revoking the messages
+    is only a saving, logged when the broker is away. Redis back with the messages it held: a worker receives
+    them and starts none of those jobs, then runs a job sent after them."""
+    import httpx
+
+    client, storage, redis_server, queue = faults["client"], faults["storage"], faults["redis"], faults["queue"]
+    for name in list(faults["workers"]):
+        faults["stop_worker"](name)  # the jobs wait in the queue until the outage
+    hairstyle_id = inputs.get("hairstyle") or hairstyle(client, inputs, 20).json()["id"]
+    port = free_port()
+    server = spawn_server(_env(storage, redis_server.url), port, tmp_path)
+    try:
+        http = httpx.Client(base_url=f"http://127.0.0.1:{port}", headers=AUTH, timeout=60)
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                if http.get("/healthz").status_code == 200:
+                    break
+            except httpx.HTTPError:
+                assert server.poll() is None and time.monotonic() < deadline, (tmp_path / "serve.log").read_text()
+                time.sleep(0.2)
+        options = {"options": {"max_iterations": 5}}
+        job = retarget(http, {"hairstyle_id": hairstyle_id, "target_character_ids": [inputs["target"]], **options})
+        batch = http.post("/v1/batches", json={"hairstyle_ids": [hairstyle_id], **options,
+                                               "target_character_ids": [inputs["target"], inputs["tall"]]})
+        assert (job.status_code, batch.status_code) == (202, 202), (job.text, batch.text)
+        ids = [job.json()["jobs"][0]["id"], *(pair["id"] for pair in batch.json()["jobs"])]
+        task_ids = {job_record(storage, job_id)["task_id"] for job_id in ids}
+        assert len(task_ids) == 3 and task_ids <= queue.task_ids_in_broker()
+
+        redis_server.stop(keep=True)
+        cancelled = http.delete(f"/v1/jobs/{ids[0]}")
+        assert cancelled.status_code == 200 and cancelled.json()["state"] == "cancelled", cancelled.text
+        batch_cancelled = http.delete(f"/v1/batches/{batch.json()['id']}")
+        assert batch_cancelled.status_code == 200, batch_cancelled.text
+        assert [pair["state"] for pair in batch_cancelled.json()["jobs"]] == ["cancelled", "cancelled"]
+        assert batch_cancelled.json()["state"] == "done" and batch_cancelled.json()["counts"]["cancelled"] == 2
+        records = [job_record(storage, job_id) for job_id in ids]
+        assert [(record["state"], record["cancel_requested"]) for record in records] == [("cancelled", True)] * 3
+        assert (tmp_path / "serve.log").read_text().count("not revoked") == 2  # one try per request, logged
+
+        redis_server.start()
+        assert task_ids <= queue.task_ids_in_broker()  # the messages are back, never revoked
+        faults["start_worker"]("w3")
+        deadline = time.monotonic() + JOB_TIMEOUT
+        while task_ids & queue.task_ids_in_broker():  # delivered, and acknowledged once their task returned
+            assert time.monotonic() < deadline, "the worker did not take the messages"
+            time.sleep(0.2)
+        after = retarget(http, {"hairstyle_id": hairstyle_id, "target_character_ids": [inputs["target"]], **options})
+        done = wait_for(http, f"/v1/jobs/{after.json()['jobs'][0]['id']}", lambda b: b["state"] in DONE, JOB_TIMEOUT)
+        assert done["state"] == "succeeded", done
+        # the cancelled jobs' records are as the cancel left them: no worker started them
+        assert [job_record(storage, job_id) for job_id in ids] == records
+        assert all(record["attempts"] == 0 and record["started_at"] is None for record in records)
+    finally:
+        stop(server)

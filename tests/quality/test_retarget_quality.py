@@ -71,7 +71,7 @@ def test_segment_angles_lower_than_every_pushed_out_baseline(case):
 
 
 #: issue 2 asked for 0.1 rad; long hair over the much larger shoulders measured 0.106-0.116 with the
-#: paper's initial transfer, 0.084 with the shape carry (issue 16; README, Fidelity)
+#: paper's initial transfer, 0.084 with the shape carry (issue 16; docs/fidelity.md)
 ANGLE_BOUND_RAD = {"fringe": 0.1, "long": 0.1}
 
 

@@ -19,7 +19,7 @@ from tests.solver.synthetic.toy_fixtures import PRESET_B
 ANGLE_MARGIN_RAD = 0.02
 OPTIONS = pipeline.RetargetOptions(workers=1)
 #: where the heads are cut: the base of the neck, above the shoulders (m below the head joint); a cut
-#: higher up leaves the cheek strands hanging below the open edge (README, limits)
+#: higher up leaves the cheek strands hanging below the open edge (docs/limits.md)
 NECK_BASE_M = 0.10
 
 

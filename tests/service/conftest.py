@@ -28,3 +28,15 @@ def client(settings) -> TestClient:
     app = create_app(settings, readiness=lambda: {"redis": True, "worker": False}, queue_depths=lambda: {"retarget": 3},
                      queue=TaskQueue(celery))
     return TestClient(app)
+
+
+@pytest.fixture
+def client_without_broker(settings) -> TestClient:
+    """The API over the same storage as ``client``, its task queue on a Redis that is down (nothing listens on
+    its port, a connection is refused): every send and revoke meets an outage."""
+    from ..conftest import free_port
+
+    hasty = settings.model_copy(update={"enqueue_timeout_seconds": 0.5})
+    queue = TaskQueue(make_celery(hasty, f"redis://127.0.0.1:{free_port()}/0"))
+    return TestClient(create_app(hasty, readiness=lambda: {"redis": False, "worker": False}, queue_depths=lambda: {},
+                                 queue=queue))

@@ -30,3 +30,24 @@ def test_the_swagger_ui_has_the_two_key_schemes_to_authorize_with(client):
     assert schemes == {
         "bearer": {"type": "http", "scheme": "bearer", "description": "`Authorization: Bearer <key>`"},
         "apiKey": {"type": "apiKey", "in": "header", "name": "X-API-Key", "description": "`X-API-Key: <key>`"}}
+
+
+@pytest.mark.parametrize("page, tags", [("/docs", ("script",)), ("/redoc", ("style",))])
+def test_a_docs_page_allows_exactly_its_inline_blocks_by_hash(client, page, tags):
+    import base64
+    import hashlib
+
+    from hairport.service.docs import REDOC_STYLE_HASHES
+
+    response = client.get(page)
+    directives = dict(part.strip().split(" ", 1) for part in response.headers["content-security-policy"].split(";"))
+    for tag in ("script", "style"):
+        blocks = re.findall(rf"<{tag}>(.*?)</{tag}>", response.text, re.S)
+        assert len(blocks) == (1 if tag in tags else 0), tag
+        hashes = {f"'sha256-{base64.b64encode(hashlib.sha256(block.encode()).digest()).decode()}'" for block in blocks}
+        allowed = set(directives[f"{tag}-src"].split()) - {"'self'"}
+        if page == "/redoc" and tag == "style":  # and the sheets ReDoc's bundle adds (styled-components' is empty)
+            hashes |= {"'sha256-47DEQpj8HBSa+/TImW+5JCeuQeRkm5NMpJWZG3hSuFU='", *REDOC_STYLE_HASHES}
+        assert allowed == hashes, tag
+    assert "unsafe-inline" not in str(directives) and directives["default-src"] == "'none'"
+    assert ("worker-src" in directives) is (page == "/redoc")

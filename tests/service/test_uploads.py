@@ -1,14 +1,15 @@
 """Uploads: extensions, units, limits, and solver errors turned into problems naming the field."""
 
-import asyncio
 import io
+import signal
 
 import pytest
 from starlette.datastructures import UploadFile
 
 from hairport import solver
 from hairport.service.errors import Problem
-from hairport.service.uploads import check_units, extension_of, input_problem, validated
+from hairport.service.uploads import check_units, died, extension_of, input_problem
+from hairport.service.validation import ChildDied
 
 
 def upload(name: str) -> UploadFile:
@@ -34,13 +35,17 @@ def test_input_errors_name_the_field_not_the_file():
     assert (too_large.status, too_large.code, too_large.detail) == (413, "too_large", "hair: 60 strands above 50")
     bad = input_problem(solver.InputError("cut short", "/storage/blobs/y", "truncated"), "mesh")
     assert (bad.status, bad.code) == (422, "truncated") and "/storage" not in bad.detail
+    unnamed = input_problem(solver.InputError("no", code=None), "skeleton")
+    assert (unnamed.status, unnamed.code, unnamed.detail) == (422, "bad_input", "skeleton: no")
+    over = input_problem(solver.InputError("needs 3 GiB", None, solver.OVER_MEMORY_BUDGET), "hair")
+    assert (over.status, over.code) == (413, "over_memory_budget")
 
-    def refuse():
-        raise solver.InputError("no", code=None)
 
-    with pytest.raises(Problem) as refused:
-        asyncio.run(validated(refuse, "skeleton"))
-    assert (refused.value.status, refused.value.code, refused.value.detail) == (422, "bad_input", "skeleton: no")
+def test_a_dead_validating_process_refuses_the_file_by_how_it_died():
+    killed = input_problem(died(ChildDied(-signal.SIGKILL)), "hair")
+    assert (killed.status, killed.code) == (413, "over_memory_budget") and killed.detail.startswith("hair: ")
+    crashed = input_problem(died(ChildDied(-signal.SIGSEGV)), "mesh")
+    assert (crashed.status, crashed.code) == (422, "bad_file") and "exit status -11" in crashed.detail
 
 
 def test_axes_are_checked_and_normalised():

@@ -102,7 +102,7 @@ def test_preprocess_refuses_a_hairstyle_without_hair(female, points, offsets):
 
 
 #: issue 2 asked for 1e-2 rad; with the shape carry (issue 16) the cycle measures 0.0059 rad here
-#: (0.71 mm), 0.0124 rad (0.27 mm) without it; issue 16 asks for 0.005 rad (README, Fidelity)
+#: (0.71 mm), 0.0124 rad (0.27 mm) without it; issue 16 asks for 0.005 rad (docs/fidelity.md)
 CYCLE_ANGLE_BOUND_RAD = 0.01
 
 

@@ -34,3 +34,16 @@ def test_tasks_are_sent_by_name_to_their_queues():
         ("hairport.preprocess", ["b" * 32, {"k": 5, "guides": 10}], mine), ("hairport.preprocess", ["c" * 32, None], mine)]
     assert received(celery, RETARGET_QUEUE) == []
     assert queue.task_ids_in_broker() is None and queue.depths() == {} and queue.broker == "memory"
+
+
+def test_revoking_is_one_broadcast_and_a_broker_that_is_down_is_logged_not_raised(redis_url, tmp_path, caplog):
+    from ..conftest import free_port
+
+    settings = Settings(storage_dir=tmp_path, redis_url=redis_url, enqueue_timeout_seconds=0.5)
+    assert TaskQueue(make_celery(settings)).revoke("t-1", "t-2") is True
+    down = TaskQueue(make_celery(settings, f"redis://127.0.0.1:{free_port()}/0"))
+    with caplog.at_level("WARNING", logger="hairport.worker.queue"):
+        assert down.revoke() is True  # nothing to revoke: the broker is not asked
+        assert caplog.records == []
+        assert down.revoke("t-1", "t-2") is False
+    assert [record.getMessage().split(" not revoked")[0] for record in caplog.records] == ["tasks t-1, t-2"]

@@ -1,5 +1,7 @@
 """The sweeper over a real storage and Celery's in-memory broker: stale runs, lost messages, limits."""
 
+import os
+
 import pytest
 
 from hairport.records import JobRecord, PreprocessingRecord, PreprocessSettings, now
@@ -99,3 +101,15 @@ def test_a_lost_preprocessing_claim_is_sent_again(sweep):
 def test_one_sweep_per_period_for_the_deployment(sweep):
     repository = sweep[0]
     assert repository.sweep_due(60) and not repository.sweep_due(60) and repository.sweep_due(0)
+
+
+def test_the_orphan_sweep_takes_its_grace_from_the_settings_and_runs_once_per_interval(sweep):
+    repository, sweeper, _ = sweep
+    storage = repository.storage
+    sweeper.settings = sweeper.settings.model_copy(update={"orphan_grace_seconds": 600.0})
+    orphan, young = storage.save_bytes(b"never recorded", ".obj"), storage.save_bytes(b"being validated", ".obj")
+    for blob, age in ((orphan, 700), (young, 500)):
+        os.utime(blob.path, (now() - age, now() - age))
+    assert sweeper.sweep_orphans() == 1 and not orphan.path.exists() and young.path.exists()
+    os.utime(young.path, (now() - 700, now() - 700))
+    assert sweeper.sweep_orphans() is None and young.path.exists()  # not due again within the hour

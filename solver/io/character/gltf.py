@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hairport.solver.io.character.gltf_buffers import GltfReader, read_gltf_container
+from hairport.solver.io.character.gltf_buffers import GltfReader, read_gltf_container, refuse_external_uris
 from hairport.solver.io.character.gltf_skin import read_gltf_skin
 from hairport.solver.io.character.mesh_file import (
     DEFAULT_MAX_FACES,
@@ -21,6 +21,7 @@ from hairport.solver.io.character.mesh_file import (
     MeshFile,
     check_counts,
 )
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.model.errors import InputError
 
 #: primitive mode of a triangle list (the only one read)
@@ -36,6 +37,7 @@ def read_gltf(
     max_vertices: int = DEFAULT_MAX_VERTICES,
     max_faces: int = DEFAULT_MAX_FACES,
     mesh_name: str | None = None,
+    allow_external_files: bool = ALLOW_EXTERNAL_FILES,
 ) -> MeshFile:
     """Read one mesh, and its skin if any, from a ``.glb`` or ``.gltf`` file.
 
@@ -53,6 +55,10 @@ def read_gltf(
     path : path
     max_vertices, max_faces : int
     mesh_name : str, optional
+    allow_external_files : bool
+        Read buffers from files beside the document; else any ``uri`` that is not a ``data:``
+        URI (a buffer's, an image's) refuses the file, ``external_reference``, before anything
+        else is read (:func:`~.gltf_buffers.refuse_external_uris`).
 
     Returns
     -------
@@ -61,17 +67,20 @@ def read_gltf(
     """
     path = Path(path)
     try:
-        return _read_gltf(path, max_vertices, max_faces, mesh_name)
+        return _read_gltf(path, max_vertices, max_faces, mesh_name, allow_external_files)
     except InputError:
         raise
     except MALFORMED as error:
         raise InputError(f"malformed glTF: {type(error).__name__}: {error}", str(path), "bad_mesh") from None
 
 
-def _read_gltf(path: Path, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
+def _read_gltf(path: Path, max_vertices: int, max_faces: int, mesh_name: str | None,
+               allow_external_files: bool) -> MeshFile:
     source = str(path)
     document, binary = read_gltf_container(path)
-    reader = GltfReader(document, binary, path)
+    if not allow_external_files:
+        refuse_external_uris(document, source)
+    reader = GltfReader(document, binary, path, allow_external_files)
     node_index, mesh_index, skin_index, label = _select_gltf_mesh(document, mesh_name, reader, source)
     mesh = document["meshes"][mesh_index]
     primitives = mesh.get("primitives", [])
@@ -171,9 +180,11 @@ def _select_gltf_mesh(document: dict, mesh_name: str | None, reader: GltfReader,
     return node, mesh, skin, label
 
 
-def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
+def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,
+          allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
     """:func:`read_gltf` behind the reader interface of the format registry."""
-    return read_gltf(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name)
+    return read_gltf(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name,
+                     allow_external_files=allow_external_files)
 
 
 #: the readers of this module, by file extension

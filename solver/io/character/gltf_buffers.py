@@ -5,7 +5,11 @@ the JSON itself); a :class:`GltfReader` then reads accessors as numpy arrays (nu
 buffers, strides and normalised integers included) and the node hierarchy's transforms, with
 a range check on every index and offset, so a malformed file gives an
 :class:`~hairport.solver.model.errors.InputError` and never reads outside a buffer. Buffers
-are the GLB chunk, ``data:`` URIs, or files beside the document (relative paths only).
+are the GLB chunk, ``data:`` URIs, or, only when external files are allowed (the command line's
+own files), files beside the document (relative paths only). Otherwise a document any ``uri`` of
+which (a buffer's, an image's, an extension's) is not a ``data:`` URI is refused, code
+``external_reference`` (:func:`refuse_external_uris`): in the service's blob store the files beside
+an upload are other uploads.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES, external_reference
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.json_input import parse_json
 
@@ -27,6 +32,45 @@ GLB_BIN_CHUNK = 0x004E4942
 #: accessor component types and element widths (glTF 2.0 specification)
 COMPONENT_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 TYPE_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+#: the scheme of a URI that holds its bytes itself (RFC 2397) rather than naming a file
+DATA_URI = "data:"
+
+
+def refuse_external_uris(document: dict, source: str) -> None:
+    """Refuse a document any ``uri`` of which names a file (code ``external_reference``).
+
+    Every object member ``uri`` of the document (buffers, images, and the extensions' own) is
+    looked at, however deep: a string that is not a ``data:`` URI names a file or a server.
+
+    Parameters
+    ----------
+    document : dict
+        The glTF JSON.
+    source : str
+        The file, for the error.
+
+    Raises
+    ------
+    InputError
+        ``external_reference``, naming the first such ``uri``, where it is, and how many more.
+    """
+    named = []
+    stack: list = [(document, "")]
+    while stack:  # a stack, not recursion: the JSON parser already bounded the nesting
+        value, where = stack.pop()
+        if isinstance(value, dict):
+            uri = value.get("uri")
+            if isinstance(uri, str) and not uri.startswith(DATA_URI):
+                named.append((where or "/", uri))
+            stack.extend((item, f"{where}/{key}") for key, item in reversed(value.items())
+                         if isinstance(item, (dict, list)))
+        else:  # a list; numbers and strings in it are no objects with a uri
+            stack.extend((item, f"{where}/{index}") for index, item in reversed(list(enumerate(value)))
+                         if isinstance(item, (dict, list)))
+    if named:
+        where, uri = named[0]
+        raise external_reference(f"{where} uri", uri, source, more=len(named) - 1)
+
 
 def read_gltf_container(path: Path) -> tuple[dict, bytes | None]:
     """The JSON document and the GLB binary chunk (``None`` for ``.gltf``)."""
@@ -65,10 +109,12 @@ def read_gltf_container(path: Path) -> tuple[dict, bytes | None]:
 class GltfReader:
     """Accessors, buffers and node transforms of a glTF document, with range checks."""
 
-    def __init__(self, document: dict, binary: bytes | None, path: Path):
+    def __init__(self, document: dict, binary: bytes | None, path: Path,
+                 allow_external_files: bool = ALLOW_EXTERNAL_FILES):
         self.document = document
         self.binary = binary
         self.path = path
+        self.allow_external_files = allow_external_files
         self.source = str(path)
         self._buffers: dict[int, bytes] = {}
 
@@ -83,7 +129,8 @@ class GltfReader:
         return items[index]
 
     def buffer(self, index: int) -> bytes:
-        """The bytes of buffer ``index``: the GLB binary chunk, a ``data:`` URI, or a file beside the document."""
+        """The bytes of buffer ``index``: the GLB binary chunk, a ``data:`` URI, or a file beside the document
+        (only when external files are allowed; else ``external_reference``)."""
         if index in self._buffers:
             return self._buffers[index]
         buffer = self.item("buffers", index)
@@ -92,11 +139,13 @@ class GltfReader:
             if self.binary is None:
                 raise self._error(f"buffer {index} has no uri and the file has no binary chunk")
             data = self.binary
-        elif uri.startswith("data:"):
+        elif uri.startswith(DATA_URI):
             try:
                 data = base64.b64decode(uri.split(",", 1)[1], validate=False)
             except (IndexError, ValueError):
                 raise self._error(f"buffer {index} has a malformed data uri") from None
+        elif not self.allow_external_files:
+            raise external_reference(f"buffer {index} uri", uri, self.source)
         else:
             relative = Path(unquote(uri))
             if relative.is_absolute() or ".." in relative.parts or ":" in uri.split("/", 1)[0]:

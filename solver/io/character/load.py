@@ -2,12 +2,18 @@
 the files state) and :func:`load_character` (in meters).
 
 Each format module exports ``READERS = {extension: reader}``, a reader being
-``reader(path, *, max_vertices, max_faces, mesh_name) -> MeshFile`` (in the style of
+``reader(path, *, max_vertices, max_faces, mesh_name, allow_external_files) -> MeshFile`` (in the style of
 trimesh's ``exchange/``); :data:`MESH_READERS` merges them and :data:`MESH_EXTENSIONS` is
 its keys. A character's skeleton comes, in order of precedence, from the ``skeleton_path``
 given to :func:`load_character`, the sidecar ``<mesh>.skeleton.json`` beside the mesh
 (:func:`~hairport.solver.io.character.skeleton_json.resolve_skeleton_path`), the glTF skin or
 UsdSkel binding of the selected mesh, else nowhere.
+
+Other files: unless ``allow_external_files`` (the command line's own files), a mesh file that names
+another file (a glTF buffer or image that is not a ``data:`` URI, a USD sublayer, reference or asset
+path) is refused with code ``external_reference`` before anything it names is opened
+(:mod:`hairport.solver.io.external`). The skeleton sidecar beside the mesh is found by the mesh's
+own name, never by a name inside a file.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from hairport.solver.io.character.obj import READERS as OBJ_READERS
 from hairport.solver.io.character.ply import READERS as PLY_READERS
 from hairport.solver.io.character.skeleton_json import read_skeleton_json, resolve_skeleton_path
 from hairport.solver.io.character.usd import READERS as USD_READERS
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_failure
 from hairport.solver.model.units import unit_scale
@@ -48,6 +55,7 @@ def load_character(
     max_bytes: int = DEFAULT_MAX_FILE_BYTES,
     mesh_name: str | None = None,
     weight_smoothing: int = DEFAULT_WEIGHT_SMOOTHING,
+    allow_external_files: bool = ALLOW_EXTERNAL_FILES,
 ) -> Character:
     """Read a character in meters: :func:`read_character` with a mesh of unstated units read as meters.
 
@@ -59,7 +67,7 @@ def load_character(
     """
     character, stated = read_character(mesh_path, skeleton_path=skeleton_path, units=units, max_vertices=max_vertices,
                                        max_faces=max_faces, max_bytes=max_bytes, mesh_name=mesh_name,
-                                       weight_smoothing=weight_smoothing)
+                                       weight_smoothing=weight_smoothing, allow_external_files=allow_external_files)
     if stated is None and character.skeleton is not None and character.weights is None:
         weights = derive_skin_weights(character.vertices, character.faces, character.skeleton,
                                       smoothing=weight_smoothing)
@@ -77,6 +85,7 @@ def read_character(
     max_bytes: int = DEFAULT_MAX_FILE_BYTES,
     mesh_name: str | None = None,
     weight_smoothing: int = DEFAULT_WEIGHT_SMOOTHING,
+    allow_external_files: bool = ALLOW_EXTERNAL_FILES,
 ) -> tuple[Character, str | None]:
     """Read a character: mesh, and skeleton with skin weights where available, and its units.
 
@@ -101,6 +110,10 @@ def read_character(
     weight_smoothing : int
         Laplacian smoothing steps for weights derived from the geometry (sidecar without
         ``weights``); 0 keeps hard nearest-visible-bone weights.
+    allow_external_files : bool
+        Read what the mesh file names (glTF buffer files beside it, USD sublayers and
+        references), as the command line does with the user's own files. False (the default,
+        for uploads): such a file is refused (``external_reference``).
 
     Returns
     -------
@@ -117,8 +130,8 @@ def read_character(
     ------
     InputError
         Missing or unreadable file, unknown extension, empty mesh, non-finite
-        coordinates, faces that cannot be triangulated, counts above the limits, bad
-        skeleton (see
+        coordinates, faces that cannot be triangulated, counts above the limits, a file
+        naming another one (``external_reference``), bad skeleton (see
         :func:`~hairport.solver.io.character.skeleton_json.load_skeleton_json`).
     """
     units = None if units == "auto" else units
@@ -133,7 +146,8 @@ def read_character(
             "unknown_format",
         )
     try:
-        mesh = reader(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name)
+        mesh = reader(path, max_vertices=max_vertices, max_faces=max_faces, mesh_name=mesh_name,
+                      allow_external_files=allow_external_files)
     except PARSER_FAILURES as error:
         raise parser_failure(error, source) from None
     vertices, faces, skin = mesh.vertices, mesh.faces, mesh.skin

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hairport.solver.io.character.mesh_file import DEFAULT_MAX_FACES, DEFAULT_MAX_VERTICES, MeshFile, check_counts
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write_bytes
 
@@ -170,8 +171,10 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     atomic_write_bytes(path, text.getvalue().encode("utf-8"))
 
 
-def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
-    """:func:`read_obj` behind the reader interface of the format registry (an OBJ has no skin)."""
+def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,
+          allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
+    """:func:`read_obj` behind the reader interface of the format registry (an OBJ has no skin; its
+    ``mtllib`` is never opened, whatever ``allow_external_files``)."""
     vertices, faces = read_obj(path, max_vertices=max_vertices, max_faces=max_faces)
     return MeshFile(vertices, faces)
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from hairport.solver.io.character.mesh_file import DEFAULT_MAX_FACES, DEFAULT_MAX_VERTICES, MeshFile, check_counts
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.model.errors import InputError
 
 #: bytes of a PLY header read at most when looking for ``end_header``
@@ -83,8 +84,10 @@ def _ply_header_counts(path: Path) -> tuple[int, int]:
     return counts["vertex"], counts["face"]
 
 
-def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
-    """:func:`read_ply` behind the reader interface of the format registry (a PLY has no skin)."""
+def _read(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,
+          allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
+    """:func:`read_ply` behind the reader interface of the format registry (a PLY has no skin; the
+    texture its header may name is never opened, whatever ``allow_external_files``)."""
     vertices, faces = read_ply(path, max_vertices=max_vertices, max_faces=max_faces)
     return MeshFile(vertices, faces)
 

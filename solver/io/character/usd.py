@@ -19,6 +19,10 @@ tail as for a glTF skin (:func:`~.gltf_skin.bone_tails`). Weights come from
 Units: the stage's ``metersPerUnit`` (one of hairport's units, else ``bad_header``). The up axis
 is the input frame's to find (``--up-axis`` or inference), as for every format. Parsing runs in
 a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`).
+
+Other files: a stage naming any file (sublayer, reference, payload, clip, asset path) is refused
+(``external_reference``) before anything is composed, unless ``allow_external_files``
+(:mod:`~hairport.solver.io.usd_stage`).
 """
 
 from __future__ import annotations
@@ -32,16 +36,20 @@ import scipy.sparse as sp
 from hairport.solver.body.skinning import normalise_weight_rows
 from hairport.solver.io.character.gltf_skin import bone_tails, unique_names
 from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
 from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
 from hairport.solver.model.character import Skeleton
 
 
-def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None) -> MeshFile:
-    """The mesh (and skin) of a USD stage (module notes), parsed in a limited child."""
+def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,
+             allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
+    """The mesh (and skin) of a USD stage (module notes), parsed in a limited child; a stage naming
+    another file is refused (``external_reference``) unless ``allow_external_files``."""
     source = str(path)
-    arguments = {"name": path.name, "max_vertices": max_vertices, "max_faces": max_faces, "mesh_name": mesh_name}
+    arguments = {"name": path.name, "max_vertices": max_vertices, "max_faces": max_faces, "mesh_name": mesh_name,
+                 "allow_external_files": allow_external_files}
     found = run_in_child(__name__, "mesh_arrays", source, os.path.getsize(source), arguments, source, "USD")
     skin = None
     if "bone_names" in found:
@@ -54,12 +62,12 @@ def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | 
     return MeshFile(found["vertices"], found["faces"], skin, str(found["label"]), str(found["units"]))
 
 
-def mesh_arrays(source: str, name: str, max_vertices: int, max_faces: int, mesh_name: str | None
-                ) -> dict[str, np.ndarray]:
+def mesh_arrays(source: str, name: str, max_vertices: int, max_faces: int, mesh_name: str | None,
+                allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> dict[str, np.ndarray]:
     """In the child: the stage's mesh and skin as arrays (read back by :func:`read_usd`)."""
     Usd, UsdGeom, _, _, Tf = pxr_modules()
     ctx = ReadContext(name, ReadLimits(), "m")
-    stage = open_stage(source, ctx)
+    stage = open_stage(source, ctx, allow_external_files)
     try:
         units = stage_units(stage, ctx)
         prim = _select_mesh(stage, mesh_name, ctx)

@@ -49,6 +49,12 @@ Bad input: every reader checks counts against the bytes present and against
 :class:`~hairport.solver.model.errors.InputError` naming the source with one of the codes in
 ``ERROR_CODES``. Writers go through :func:`~hairport.solver.model.files.atomic_write`, so a
 failed write leaves no partial file.
+
+Other files: a read opens nothing but the file it is given. A USD stage naming another file
+(sublayer, reference, payload, value clip, asset path) is refused with code
+``external_reference`` before anything is composed, unless ``ReadLimits.allow_external_files``
+(the command line, reading the user's own files: the stage is then composed from the file
+itself); see :mod:`hairport.solver.io.external`. No other hair format names files.
 """
 
 from __future__ import annotations
@@ -167,6 +173,8 @@ def read_hair(
     units : str
         Length unit of the file's coordinates: ``m``, ``dm``, ``cm`` or ``mm``.
     limits : ReadLimits
+        Including ``allow_external_files`` (default False: a USD stage naming another file is
+        refused, ``external_reference``).
     format : str, optional
         One of ``SUPPORTED_FORMATS``; from the extension when omitted.
     prim : str, optional
@@ -201,7 +209,7 @@ def read_hair_report(
     unit_scale(units)
     _check_prim(fmt, prim, source)
     content = _read_file(source, limits)
-    return _parse(content, fmt, ReadContext(source, limits, units, prim))
+    return _parse(content, fmt, ReadContext(source, limits, units, prim, path=source))
 
 
 def read_hair_bytes(

@@ -20,6 +20,7 @@ from typing import BinaryIO
 import numpy as np
 
 from hairport.solver.budget import check_memory
+from hairport.solver.io.external import ALLOW_EXTERNAL_FILES, EXTERNAL_REFERENCE
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import (
     ATTRIBUTE_NAME,
@@ -53,6 +54,8 @@ ERROR_CODES: dict[str, str] = {
     "bad_attribute": "an attribute (primvar, property, array) of the wrong length, type or name for its domain",
     "unknown_prim": "no curves prim (USD) or object (Alembic) of the name or path asked for (none in other formats)",
     "format_unavailable": "the format needs an optional library this installation lacks (Alembic: hairport[alembic])",
+    EXTERNAL_REFERENCE: "the file names another file (a USD sublayer, reference, payload, clip or asset path) and "
+                        "ReadLimits.allow_external_files is False",
 }
 
 #: most points one strand may have: real strands have 10^2-10^3; one strand of millions of
@@ -87,6 +90,11 @@ class ReadLimits:
     memory_budget_bytes : int or None
         The declared particle count is refused (``over_memory_budget``) when a retarget of
         it is estimated to need more (:func:`hairport.solver.budget.estimate_bytes`).
+    allow_external_files : bool
+        Whether a USD stage may compose the files it names (sublayers, references, payloads,
+        clips) from the disk, as the command line does with the user's own files. False (the
+        default, for uploads): a file naming any other file is refused (``external_reference``)
+        before anything is opened (:mod:`hairport.solver.io.external`).
     """
 
     max_strands: int = 5_000_000
@@ -94,6 +102,7 @@ class ReadLimits:
     max_bytes: int | None = None
     max_strand_particles: int = MAX_PARTICLES_PER_STRAND
     memory_budget_bytes: int | None = None
+    allow_external_files: bool = ALLOW_EXTERNAL_FILES
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,13 +191,16 @@ class Strands:
 
 @dataclass(frozen=True)
 class ReadContext:
-    """Where the bytes come from (for messages), the limits to enforce, the file's units, and the
-    one prim or object to read (USD, Alembic; None: every curves prim or object)."""
+    """Where the bytes come from (for messages), the limits to enforce, the file's units, the
+    one prim or object to read (USD, Alembic; None: every curves prim or object), and the file on
+    disk the bytes were read from (None for bytes: an upload), which a USD stage is composed from
+    when ``limits.allow_external_files`` (its relative sublayers are beside it, not beside a copy)."""
 
     source: str
     limits: ReadLimits
     units: str
     prim: str | None = None
+    path: str | None = None
 
     def error(self, problem: str, code: str) -> InputError:
         """An :class:`InputError` naming the source, with one of ``ERROR_CODES``."""

@@ -33,6 +33,13 @@ points, negative counts, or a prim whose width or color count fits no interpolat
 copied out of USD. USD parses in a child process under a heap limit and a time limit
 (:mod:`~hairport.solver.io.sandbox`): a damaged crate file whose decoding would take gigabytes is one error, and
 this process never holds more than the arrays the child hands back.
+
+Other files: a stage naming any file (a sublayer, reference, payload, value clip or asset path) is
+refused, ``external_reference``, before anything is composed, unless
+``ReadLimits.allow_external_files`` (the command line: the stage is then composed from the file
+itself, so relative names resolve beside it); see :mod:`~hairport.solver.io.usd_stage`. ``.usdz``
+packages are not read (their extension is no hair format; their bytes under a ``.usd`` name are
+not a stage: ``bad_header``).
 """
 
 from __future__ import annotations
@@ -46,7 +53,14 @@ from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, Wri
 from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child, read_in_child
 from hairport.solver.io.hair.usd_primvars import read_primvar, write_primvars
-from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
+from hairport.solver.io.usd_stage import (
+    open_root_layer,
+    open_stage,
+    pxr_modules,
+    root_layer_units,
+    stage_units,
+    usd_reason,
+)
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
 
@@ -141,7 +155,9 @@ def read_stage(content: bytes | memoryview, ctx: ReadContext, suffix: str) -> St
 def parse_file(path: str, ctx: ReadContext) -> Strands:
     """The stage's strands (module notes); run by :mod:`~hairport.solver.io.sandbox` in its child."""
     _, _, _, _, Tf = pxr_modules()
-    stage = open_stage(path, ctx)
+    if ctx.units == RECORDED_UNITS:  # the root layer's alone: nothing composed (usd_stage notes)
+        raise ctx.error(f"{RECORDED_UNITS}{root_layer_units(open_root_layer(path, ctx), ctx)}", "units_mismatch")
+    stage = open_stage(path, ctx, ctx.limits.allow_external_files)
     try:
         return _strands_of(stage, ctx)
     except Tf.ErrorException as error:  # a damaged value deep in the file, met on reading it
@@ -151,8 +167,6 @@ def parse_file(path: str, ctx: ReadContext) -> Strands:
 def _strands_of(stage, ctx: ReadContext) -> Strands:
     _, UsdGeom, _, _, _ = pxr_modules()
     units = stage_units(stage, ctx)
-    if ctx.units == RECORDED_UNITS:
-        raise ctx.error(f"{RECORDED_UNITS}{units}", "units_mismatch")
     if units != ctx.units:
         raise ctx.error(f"the stage is in {units} (metersPerUnit), read as {ctx.units}", "units_mismatch")
     prims = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.BasisCurves)]
@@ -167,9 +181,9 @@ def _strands_of(stage, ctx: ReadContext) -> Strands:
 
 
 def recorded_units(path: str | os.PathLike[str]) -> str | None:
-    """The units a USD stage records (its ``metersPerUnit``) by name; None if it cannot be read or
-    records none of hairport's (the reader then says what is wrong). Read in a child, like the
-    stage itself."""
+    """The units a USD stage records (its root layer's ``metersPerUnit``) by name; None if it cannot be
+    read or records none of hairport's (the reader then says what is wrong). Read in a child, like the
+    stage itself, from the root layer alone: nothing the file names is opened."""
     from hairport.solver.io.hair.common import ReadLimits
 
     source = os.fspath(path)

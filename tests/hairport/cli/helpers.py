@@ -1,6 +1,6 @@
 """Helpers of the command-line tests: arguments, in-process runs, the one-line error contract.
 
-Contract under test (README, "Command line"): bad input exits with code 2 and ONE line
+Contract under test (README, "Command line"; docs/cli.md): bad input exits with code 2 and ONE line
 ``hairport: error: <file>: <problem>`` on stderr (with ``--quiet``; otherwise progress lines
 precede it); every output (hair, report, preview) is written to a temporary name and
 renamed at the end, so a failed run leaves nothing, not even a temporary ``.part`` file."""

@@ -1,6 +1,7 @@
 """Operations commands: the OpenAPI contract, purging, and refusing to serve without keys."""
 
 import os
+import time
 from pathlib import Path
 
 import yaml
@@ -8,7 +9,7 @@ import yaml
 from hairport import __version__
 from hairport.cli import main
 from hairport.cli.ops import openapi_yaml
-from hairport.records import JobRecord, PreprocessSettings
+from hairport.records import BatchRecord, JobRecord, PreprocessSettings
 from hairport.repository import Repository
 from hairport.storage import LocalStorage
 
@@ -39,6 +40,9 @@ def test_purge_command_removes_old_records_and_their_index_entries(tmp_path, mon
     repository.create_job(job)
     record = tmp_path / "records" / "jobs" / f"{job.id}.json"
     os.utime(record, (0, 0))
+    orphan, young = storage.save_bytes(b"an upload whose record never came"), storage.save_bytes(b"being validated")
+    two_hours_ago = time.time() - 7200  # past the default grace of an hour, well within the retention of a day
+    os.utime(orphan.path, (two_hours_ago, two_hours_ago))
     monkeypatch.setenv("HAIRPORT_STORAGE_DIR", str(tmp_path))
     monkeypatch.setenv("HAIRPORT_RETENTION_DAYS", "1")
     get_settings.cache_clear()
@@ -46,14 +50,15 @@ def test_purge_command_removes_old_records_and_their_index_entries(tmp_path, mon
         assert main(["purge"]) == 0
     finally:
         get_settings.cache_clear()
-    assert "removed 1 files older than 1 days" in capsys.readouterr().out
+    assert "removed 1 files older than 1 days and 1 stored files no record refers to" in capsys.readouterr().out
     assert not record.exists() and repository.list_jobs("kowner") == ([], 0)
-    assert repository.job_index.rows() == [] and sum(repository.job_counts().values()) == 0
+    assert repository.index.job_rows() == [] and sum(repository.job_counts().values()) == 0
+    assert not orphan.path.exists() and young.path.exists()
 
 
-def test_reindex_command_rebuilds_the_job_index_from_the_records(tmp_path, monkeypatch, capsys):
+def test_reindex_command_rebuilds_the_record_index_from_the_records(tmp_path, monkeypatch, capsys):
     from hairport.settings import get_settings
-    from hairport.storage.job_index import INDEX_FILE
+    from hairport.storage.index import INDEX_FILE
 
     repository = Repository(LocalStorage(tmp_path))
     for number, state in enumerate(("queued", "running", "succeeded")):
@@ -61,18 +66,22 @@ def test_reindex_command_rebuilds_the_job_index_from_the_records(tmp_path, monke
                                         target_character_id="c" * 32, options={},
                                         preprocess_options=PreprocessSettings(k=5, guides=9), artifact_key="e" * 64,
                                         output_format="data", created_at=1.0, updated_at=1.0, state=state))
-    repository.job_index._close()
-    with repository.job_index._transaction() as db:  # an index that lost its rows
+    repository.put(BatchRecord(id="b" * 32, owner="kowner", created_at=2.0, hairstyle_ids=["h" * 32],
+                               target_character_ids=["c" * 32], output_format="data", job_ids=[]), "b" * 32)
+    repository.index._close()
+    with repository.index._transaction() as db:  # an index that lost its rows
         db.execute("DELETE FROM jobs")
-    assert repository.list_jobs("kowner")[1] == 0
+        db.execute("DELETE FROM owned")
+    assert repository.list_jobs("kowner")[1] == 0 and repository.list_owned(BatchRecord, "kowner", 10, 0) == ([], 0)
     monkeypatch.setenv("HAIRPORT_STORAGE_DIR", str(tmp_path))
     get_settings.cache_clear()
     try:
         assert main(["reindex"]) == 0
     finally:
         get_settings.cache_clear()
-    assert f"indexed 3 jobs of {tmp_path}" in capsys.readouterr().out
+    assert f"indexed 3 jobs, 0 characters, 0 hairstyles, 1 batches of {tmp_path}" in capsys.readouterr().out
     assert repository.list_jobs("kowner")[1] == 3 and repository.job_counts()["running"] == 1
+    assert [batch.id for batch in repository.list_owned(BatchRecord, "kowner", 10, 0)[0]] == ["b" * 32]
     assert (tmp_path / INDEX_FILE).is_file()
 
 

@@ -1,6 +1,7 @@
 """Retention: old files go, young and referenced ones stay."""
 
 import os
+import time
 
 from hairport.storage import LocalStorage, retention_seconds
 from tests.hairport.storage.helpers import blob_files
@@ -61,3 +62,61 @@ def test_purge_removes_old_files_and_keeps_young_and_referenced_ones(tmp_path):
     storage.delete_record("characters", "young")
     assert storage.purge(retention_seconds(30.0), now=now) == 1
     assert blob_files(tmp_path) == [young_blob.path]
+
+
+HOUR = 3600.0
+
+
+def test_the_orphan_sweep_removes_old_blobs_no_record_refers_to(tmp_path):
+    storage = LocalStorage(tmp_path)
+    now = 1_000 * DAY
+    orphan = storage.save_bytes(b"an upload whose API died before its record", ".obj")
+    young = storage.save_bytes(b"an upload being validated", ".obj")
+    referenced = storage.save_bytes(b"an old character's mesh", ".obj")
+    nested = storage.save_bytes(b"a job's result", ".npz")
+    artifact = storage.save_bytes(b"a preprocessed hairstyle", ".hpa")
+    unrecorded = storage.save_bytes(b"an output of a job running since 3 hours ago", ".png")
+    storage.put_record("characters", "c", {"mesh": {"sha256": referenced.sha256, "suffix": ".obj"}})
+    storage.put_record("jobs", "j", {"outputs": {"npz": {"sha256": nested.sha256, "suffix": ".npz"}}})
+    storage.put_record("artifacts", "a", {"sha256": artifact.sha256, "suffix": ".hpa"})
+    storage.put_record("jobs", "running", {"state": "running", "started_at": now - 3 * HOUR})
+    for blob, age in ((orphan, 4 * HOUR), (young, 0.5 * HOUR), (referenced, 20 * DAY), (nested, 20 * DAY),
+                      (artifact, 20 * DAY), (unrecorded, 2 * HOUR)):
+        os.utime(blob.path, (now - age, now - age))
+
+    def running_since(kind, document):
+        return document["started_at"] if kind == "jobs" and document.get("state") == "running" else None
+
+    assert storage.sweep_orphans(HOUR, now=now, kept_since=running_since) == 1  # older than the running job
+    assert not orphan.path.exists() and unrecorded.path.exists()
+    storage.update_record("jobs", "running", lambda job: {**job, "state": "failed"})  # its outputs stay unrecorded
+    assert storage.sweep_orphans(HOUR, now=now, kept_since=running_since) == 1
+    assert blob_files(tmp_path) == sorted(b.path for b in (young, referenced, nested, artifact))
+    assert list((tmp_path / "tmp").iterdir()) == []  # nothing left aside
+    storage.delete_record("jobs", "j")
+    assert storage.sweep_orphans(HOUR, now=now) == 1 and not nested.path.exists()
+
+
+def test_a_blob_saved_again_while_the_sweep_removes_it_is_kept(tmp_path, monkeypatch):
+    """A save (or read) touches the blob between the sweep's age check and its removal: the blob stays."""
+    from hairport.storage import retention
+
+    storage = LocalStorage(tmp_path)
+    blob = storage.save_bytes(b"content uploaded again right now", ".obj")
+    old = time.time() - 2 * HOUR
+    os.utime(blob.path, (old, old))
+    moves = []
+
+    def saved_meanwhile(source, target):
+        moves.append(source)
+        if len(moves) == 1:
+            assert storage.save_bytes(b"content uploaded again right now", ".obj") == blob  # touches it
+        return os.replace(source, target)
+
+    monkeypatch.setattr(retention.os, "rename", saved_meanwhile)
+    assert storage.sweep_orphans(HOUR) == 0
+    assert blob.path.read_bytes() == b"content uploaded again right now" and moves == [blob.path]
+    assert list((tmp_path / "tmp").iterdir()) == []
+    monkeypatch.undo()
+    os.utime(blob.path, (old, old))  # not saved again this time: it goes
+    assert storage.sweep_orphans(HOUR) == 1 and not blob.path.exists()

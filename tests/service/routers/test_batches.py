@@ -3,6 +3,7 @@ cancel, the results zip and its manifest (no worker here: job outcomes are writt
 
 import io
 import json
+import os
 import zipfile
 
 import pytest
@@ -120,6 +121,25 @@ def succeed(repository, job_id: str, payload: bytes) -> None:
                        metrics={"penetrating_particles": 0})
 
 
+def test_a_batch_cancel_with_the_broker_down_cancels_every_waiting_job(client, client_without_broker, ids, caplog):
+    """Never half-cancelled: with the broker down, every job that has not ended is cancelled (the queued ones at
+    once, the running one at its next iteration) and their messages are revoked in one try, logged as failed."""
+    repository = client.app.state.repository
+    body = batch(client, ids).json()
+    job_ids = [job["id"] for job in body["jobs"]]
+    repository.set_job(job_ids[0], state="running")
+    with caplog.at_level("WARNING", logger="hairport.worker.queue"):
+        cancelled = client_without_broker.delete(body["links"]["self"], headers=AUTH)
+    assert cancelled.status_code == 200, cancelled.text
+    assert (cancelled.json()["counts"]["cancelled"], cancelled.json()["counts"]["running"]) == (3, 1)
+    assert all(repository.job(job_id).cancel_requested for job_id in job_ids)
+    unrevoked = [record.getMessage() for record in caplog.records if "not revoked" in record.getMessage()]
+    assert len(unrevoked) == 1  # one broadcast for the batch, not one wait per job
+    assert all(repository.job(job_id).task_id in unrevoked[0] for job_id in job_ids[1:])
+    again = client_without_broker.delete(body["links"]["self"], headers=AUTH)
+    assert again.json()["counts"] == cancelled.json()["counts"]
+
+
 def test_counts_cancel_and_the_results_zip(client, ids):
     repository = client.app.state.repository
     body = batch(client, ids, output_format="ply").json()
@@ -165,3 +185,52 @@ def test_a_purged_result_is_gone(client, ids):
     response = client.get(f"/v1/batches/{body['id']}/results", headers=AUTH)
     assert (response.status_code, response.json()["code"]) == (410, "gone")
     assert list(repository.storage.work_root.iterdir()) == []
+
+
+def listed_and_own(client) -> tuple[list[dict], list[dict]]:
+    """The batches of the listing, and each one's own page without its jobs."""
+    listed = client.get("/v1/batches", headers=AUTH).json()["batches"]
+    own = [client.get(item["links"]["self"], headers=AUTH).json() for item in listed]
+    return listed, [{key: value for key, value in page.items() if key != "jobs"} for page in own]
+
+
+def test_a_listing_shows_each_batch_as_its_own_page_does_without_its_jobs(client, ids):
+    repository = client.app.state.repository
+    first = batch(client, ids).json()
+    second = batch(client, ids, hairstyle_ids=ids["hairstyles"][:1]).json()
+    jobs = [job["id"] for job in first["jobs"]]
+    succeed(repository, jobs[0], b"result")
+    repository.set_job(jobs[1], state="running", progress=0.3)
+    repository.set_job(jobs[1], progress=0.6125)
+    listed, own = listed_and_own(client)
+    assert [item["id"] for item in listed] == [second["id"], first["id"]] and listed == own
+    assert "jobs" not in listed[0] and listed[1]["progress"] == round((1 + 0.6125) / 4, 4)
+    assert listed[1]["counts"]["running"] == 1 and listed[1]["state"] == "running"
+    assert client.delete(second["links"]["self"], headers=AUTH).status_code == 200
+    listed, own = listed_and_own(client)
+    assert listed == own and listed[0]["state"] == "done" and listed[0]["counts"]["cancelled"] == 2
+    assert listed[0]["finished_at"] is not None and listed[0]["links"]["results"].endswith("/results")
+    for job_id in jobs[1:]:
+        repository.set_job(job_id, state="failed", finished_at=5.0)
+    record = repository.storage.records_dir / "jobs" / f"{jobs[0]}.json"
+    os.utime(record, (0, 0))
+    repository.purge(older_than_seconds=3600.0)  # the succeeded job goes: its batch counts 3 failed ones
+    repository.rebuild_index()
+    listed, own = listed_and_own(client)
+    assert listed == own and listed[1]["counts"]["failed"] == 3 and sum(listed[1]["counts"].values()) == 3
+    assert listed[1]["finished_at"] == 5.0 and listed[1]["progress"] == 1.0
+
+
+def test_a_listing_reads_the_batch_records_of_its_page_and_no_job_record(client, ids, monkeypatch):
+    small = batch(client, ids, hairstyle_ids=ids["hairstyles"][:1], target_character_ids=[ids["target"]]).json()
+    large = batch(client, ids).json()
+    assert len(small["jobs"]) == 1 and len(large["jobs"]) == 4
+    storage = client.app.state.repository.storage
+    reads = []
+    original = storage.get_record_text
+    monkeypatch.setattr(storage, "get_record_text", lambda kind, rid: reads.append(kind) or original(kind, rid))
+    page = client.get("/v1/batches", headers=AUTH, params={"limit": 1}).json()
+    assert [item["id"] for item in page["batches"]] == [large["id"]] and page["total"] == 2
+    assert page["batches"][0]["counts"]["queued"] == 4 and reads == ["batches"]
+    reads.clear()
+    assert client.get("/v1/batches", headers=AUTH).json()["total"] == 2 and reads == ["batches", "batches"]

@@ -100,3 +100,24 @@ def test_a_character_mesh_is_drawn_in_its_own_axes_up_its_given_axis_or_its_long
     np.testing.assert_allclose(np.ptp(lying["vertices"], axis=0)[[0, 2, 1]], np.ptp(upright["vertices"], axis=0),
                                rtol=1e-5)
     assert client.get("/v1/characters/" + "0" * 32 + "/mesh", headers=AUTH).status_code == 404
+
+
+def test_a_listing_reads_the_records_of_its_page_whatever_other_owners_keep(client, monkeypatch):
+    from hairport.records import BlobRef, CharacterRecord
+    from hairport.service.auth import owner_of
+
+    from ..conftest import KEY
+
+    repository = client.app.state.repository
+    for number in range(150):
+        owner = owner_of(KEY) if number % 50 == 0 else f"kother{number % 3}"
+        repository.put(CharacterRecord(id=f"{number:032x}", owner=owner, created_at=float(number), vertices=3, faces=1,
+                                       mesh=BlobRef(sha256=f"{number:064x}", suffix=".obj"), bones=[]),
+                       f"{number:032x}")
+    reads = []
+    original = repository.storage.get_record_text
+    monkeypatch.setattr(repository.storage, "get_record_text",
+                        lambda kind, rid: reads.append(rid) or original(kind, rid))
+    page = client.get("/v1/characters", headers=AUTH, params={"limit": 2}).json()
+    assert [item["id"] for item in page["characters"]] == [f"{100:032x}", f"{50:032x}"] and page["total"] == 3
+    assert reads == [f"{100:032x}", f"{50:032x}"]

@@ -120,3 +120,27 @@ def test_the_caller_lists_its_own_hairstyles_with_their_preprocessing(client, fi
     assert {item["preprocessing"]["state"] for item in page["hairstyles"]} == {"queued"}
     assert client.get("/v1/hairstyles", headers={"X-API-Key": "other"}).status_code == 401
     assert client.get("/v1/hairstyles", headers=AUTH, params={"offset": -1}).status_code == 422
+
+
+def test_a_listing_reads_the_records_of_its_page_whatever_other_owners_keep(client, monkeypatch):
+    from hairport.records import BlobRef, HairstyleRecord, PreprocessSettings
+    from hairport.service.auth import owner_of
+
+    from ..conftest import KEY
+
+    repository = client.app.state.repository
+    for number in range(150):
+        owner = owner_of(KEY) if number % 50 == 0 else f"kother{number % 3}"
+        repository.put(HairstyleRecord(id=f"{number:032x}", owner=owner, created_at=float(number),
+                                       source_character_id="c" * 32, hair=BlobRef(sha256="b" * 64, suffix=".data"),
+                                       format="data", units="m", options=PreprocessSettings(k=5, guides=20),
+                                       artifact_key=f"{number:064x}", strands=2, particles=4), f"{number:032x}")
+    reads = []
+    original = repository.storage.get_record_text
+    monkeypatch.setattr(repository.storage, "get_record_text",
+                        lambda kind, rid: reads.append((kind, rid)) or original(kind, rid))
+    page = client.get("/v1/hairstyles", headers=AUTH, params={"limit": 2}).json()
+    assert [item["id"] for item in page["hairstyles"]] == [f"{100:032x}", f"{50:032x}"] and page["total"] == 3
+    # each item: its record and its preprocessing's (shared by every hairstyle of the same inputs)
+    assert reads == [("hairstyles", f"{100:032x}"), ("hairstyles", f"{50:032x}"),
+                     ("preprocessing", f"{100:064x}"), ("preprocessing", f"{50:064x}")]

@@ -55,6 +55,23 @@ def test_cancelling_a_queued_job(client):
     assert client.get("/v1/jobs", headers=AUTH, params={"state": "cancelled"}).json()["total"] == 1
 
 
+def test_a_cancel_with_the_broker_down_is_whole_and_its_unrevoked_message_logged(client, client_without_broker,
+                                                                                 caplog):
+    """Revoking is best effort (a worker reads the cancel from the record before it starts a job): with the
+    broker down the cancel applies all the same, and the message left in the queue is logged."""
+    queued, running = add_jobs(client, 2)
+    client.app.state.repository.set_job(running, state="running")
+    with caplog.at_level("WARNING", logger="hairport.worker.queue"):
+        cancelled = client_without_broker.delete(f"/v1/jobs/{queued}", headers=AUTH)
+        stopping = client_without_broker.delete(f"/v1/jobs/{running}", headers=AUTH)
+    assert cancelled.status_code == 200 and cancelled.json()["state"] == "cancelled"
+    assert stopping.status_code == 200 and stopping.json()["state"] == "running" and stopping.json()["cancel_requested"]
+    records = [client.app.state.repository.job(job_id) for job_id in (queued, running)]
+    assert [(job.state, job.cancel_requested) for job in records] == [("cancelled", True), ("running", True)]
+    unrevoked = [record.getMessage() for record in caplog.records if "not revoked" in record.getMessage()]
+    assert len(unrevoked) == 1 and "task-0" in unrevoked[0]  # the queued job's; a running one has none waiting
+
+
 def test_results_in_any_format_and_gone_outputs(client, tmp_path):
     repository = client.app.state.repository
     job_id = add_jobs(client, 1)[0]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from hairport.solver.adaptation import line_search_kernels
+from hairport.solver.adaptation.energies import WELD_LENGTH_M
 from hairport.solver.adaptation.strand_problem import group_energies
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 from tests.solver.adaptation.test_strand_kernels import WEIGHTS, random_problem, unit
@@ -33,7 +34,7 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
     merit = np.zeros(3)
     line_search_kernels.strand_merits(strands, problem.offsets, packed[:-1], moved, moved_distance, *arrays,
                                       problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
-                                      MIN_SEGMENT_LENGTH, merit)
+                                      MIN_SEGMENT_LENGTH, WELD_LENGTH_M, merit)
     trial = points.copy()
     trial[index] = moved
     trial_distance = np.full(n, np.inf)
@@ -46,7 +47,7 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
     distance = np.where(np.arange(n) % 3 == 0, np.inf, rng.normal(scale=1e-3, size=n))
     line_search_kernels.strand_merits(strands, problem.offsets, problem.offsets[strands], points, distance, *arrays,
                                       problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
-                                      MIN_SEGMENT_LENGTH,
+                                      MIN_SEGMENT_LENGTH, WELD_LENGTH_M,
                                       at_iterate)
     expected = group_energies(problem, points, WEIGHTS, problem.strand_of, problem.n_strands,
                               penalty[problem.strand_of], distance, 5e-4)

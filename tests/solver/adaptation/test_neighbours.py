@@ -168,3 +168,38 @@ def test_the_compiled_tree_finds_the_reference_s_sets_bit_for_bit(seed):
         np.testing.assert_array_equal(nb.index, reference.index)
         np.testing.assert_array_equal(nb.weight, reference.weight)
         assert nb.index.dtype == np.int32 and (nb.weight > 0).all()
+
+
+def test_a_twin_at_distance_zero_takes_the_whole_bounded_weight():
+    """A duplicate strand (model/degenerate.py): Eq. 9's clamp and normalisation keep the row bounded."""
+    hair = parallel_strands(n_strands=3, spacing=0.01)
+    twins = type(hair).from_strands([hair.strand(0), hair.strand(0).copy(), hair.strand(1), hair.strand(2)])
+    nb = knn_other_strands(twins.points, twins.strand_of, 3)
+    first = np.flatnonzero(twins.strand_of == 0)
+    assert (twins.strand_of[nb.index[first, 0]] == 1).all()  # the twin, nearest
+    assert (nb.weight[first, 0] > 1.0 - 1e-6).all() and (nb.weight >= 0).all() and (nb.weight <= 1).all()
+    np.testing.assert_allclose(nb.weight.sum(axis=1), 1.0, atol=1e-12)
+
+
+def test_rows_farther_than_the_reach_have_no_neighbours_and_no_one_names_them():
+    hair = parallel_strands(n_strands=4, spacing=0.01)
+    away = type(hair).from_strands([hair.strand(s) for s in range(3)] + [hair.strand(3) + np.array([2.0, 0, 0])])
+    free = knn_other_strands(away.points, away.strand_of, 3)
+    cut = knn_other_strands(away.points, away.strand_of, 3, reach=0.5)
+    far = away.strand_of == 3
+    assert (free.weight[far].sum(axis=1) > 0.99).all()  # unbounded, it names the others 2 m away
+    assert (cut.weight[far] == 0).all() and (cut.index[far] == np.flatnonzero(far)[:, None]).all()
+    np.testing.assert_array_equal(cut.weight[~far], free.weight[~far])  # nobody named it: the rest is equal
+    reference = neighbours.knn_other_strands_reference(away.points, away.strand_of, 3, reach=0.5)
+    np.testing.assert_array_equal(reference.weight, cut.weight)
+
+
+def test_collapsed_strands_are_nobodys_neighbours_and_have_none():
+    hair = parallel_strands(n_strands=4, spacing=0.01)
+    strands = [hair.strand(s) for s in range(4)]
+    with_collapsed = type(hair).from_strands(strands[:2] + [np.repeat(strands[1][:1], 6, axis=0)] + strands[2:])
+    nb = neighbours.knn_shaped_strands(with_collapsed, 3)
+    still = with_collapsed.strand_of == 2
+    assert (nb.weight[still] == 0).all() and not still[nb.index[~still]].any()
+    alone = neighbours.knn_shaped_strands(hair, 3)  # the groom without it: the same rows
+    np.testing.assert_array_equal(nb.weight[~still], alone.weight)

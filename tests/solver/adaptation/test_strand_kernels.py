@@ -9,6 +9,7 @@ from hairport.solver.adaptation.contact_qp import Frames, solve_qp
 from hairport.solver.adaptation.energies import (
     NEGATIVE_CURVATURE_SHARE,
     PARALLEL_SINE,
+    WELD_LENGTH_M,
     EnergyWeights,
     clamped_direction_hessians,
 )
@@ -50,7 +51,7 @@ def strand_blocks(problem, points, damping):
         strand_kernels.assemble_strand(
             a, b - a, points, problem.source_directions, problem.initial, w, problem.features, problem.gamma,
             problem.rest_lengths, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, damping[s], MIN_SEGMENT_LENGTH,
-            NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
+            WELD_LENGTH_M, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
             diagonal[a:b], upper[a:b], gradient[a:b],
         )
     return diagonal, upper, gradient
@@ -159,7 +160,7 @@ def test_newton_qp_steps_give_the_steps_and_predictions_of_the_numpy_model():
         strands, problem.offsets, points, distance, normal, near, problem.source_directions, problem.initial,
         problem.coupling.diagonal(), problem.features, problem.gamma, problem.rest_lengths, problem.fixed,
         WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, eps_c, damping, penalty, active, step, rounds, predicted, MIN_SEGMENT_LENGTH,
-        NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, 2.0, 50)
+        WELD_LENGTH_M, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE, 2.0, 50)
     for t, strand in enumerate(strands):
         sub, rows = problem.strand_run(int(strand), int(strand) + 1)
         m = sub.n_particles

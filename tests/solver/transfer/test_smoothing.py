@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
+from hairport.solver.model.hair import DEGENERATE_SEGMENT_M
 from hairport.solver.transfer.smoothing import smooth_strands, strand_laplacian
 from tests.solver.hair_shapes import outward_strands, sphere_character
 
@@ -41,10 +41,10 @@ def test_smoothing_removes_a_staircase_step():
 
 
 def test_strand_laplacian_weights_are_inverse_source_lengths_floored():
-    # a repeated particle: its zero-length segment counts as MIN_SEGMENT_LENGTH long
+    # a repeated particle: its zero-length segment counts as DEGENERATE_SEGMENT_M long (the solve's weld)
     points = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, -0.01, 0.0], [0.0, -0.03, 0.0]])
     L = strand_laplacian(points, np.array([0, 4])).toarray()
-    np.testing.assert_array_equal(L[1], [1 / MIN_SEGMENT_LENGTH, -(1 / MIN_SEGMENT_LENGTH + 100.0), 100.0, 0.0])
+    np.testing.assert_array_equal(L[1], [1 / DEGENERATE_SEGMENT_M, -(1 / DEGENERATE_SEGMENT_M + 100.0), 100.0, 0.0])
     np.testing.assert_allclose(L[2], [0.0, 100.0, -150.0, 50.0], rtol=1e-12)
     assert not L[[0, 3]].any()
 

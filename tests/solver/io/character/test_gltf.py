@@ -59,14 +59,18 @@ def test_glb_bad_input(tmp_path):
     with pytest.raises(InputError) as error:
         load_character(path, max_vertices=10)
     assert error.value.code == "too_large"
-    # a buffer uri escaping the folder is refused
+    # a buffer uri escaping the folder is refused: named at all by default, outside the folder when files
+    # beside the document may be read
     builder, _, _, _ = skinned_body_gltf()
     builder.gltf(tmp_path / "x.gltf", external=True)
     document = json.loads((tmp_path / "x.gltf").read_text())
     document["buffers"][0]["uri"] = "../../etc/passwd"
     (tmp_path / "x.gltf").write_text(json.dumps(document))
     with pytest.raises(InputError, match="relative path"):
+        load_character(tmp_path / "x.gltf", allow_external_files=True)
+    with pytest.raises(InputError) as error:
         load_character(tmp_path / "x.gltf")
+    assert error.value.code == "external_reference" and "'../../etc/passwd'" in error.value.problem
 
 
 def test_corrupted_glb_gives_input_errors_only(tmp_path):

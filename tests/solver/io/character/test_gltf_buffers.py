@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import json
 import struct
 
 import numpy as np
@@ -25,7 +26,8 @@ def test_gltf_buffers(tmp_path, external):
     builder, vertices, _, _ = skinned_body_gltf()
     path = tmp_path / "body.gltf"
     builder.gltf(path, external)
-    character = load_character(path, units="cm")  # explicit units scale mesh and skin alike
+    # explicit units scale mesh and skin alike; a buffer file beside the document is read when allowed
+    character = load_character(path, units="cm", allow_external_files=True)
     np.testing.assert_allclose(character.vertices, vertices * 0.01, atol=1e-8)
     np.testing.assert_allclose(character.skeleton.heads, np.array(BONES_HEADS) * 0.01, atol=1e-8)
 
@@ -106,7 +108,7 @@ def test_buffer_sources(tmp_path):
         {"uri": "missing.bin"},
         {"uri": "data:nocomma"},
     ]}
-    reader = GltfReader(document, b"GL", tmp_path / "x.gltf")
+    reader = GltfReader(document, b"GL", tmp_path / "x.gltf", allow_external_files=True)
     assert reader.buffer(0) == b"abcd" and reader.buffer(1) == b"xyz" and reader.buffer(2) == b"GL"
     for index, code, words in [(3, "truncated", "declares 5 bytes but holds 4"),
                                (4, "bad_mesh", "must be a relative path"),
@@ -183,3 +185,47 @@ def test_containers(tmp_path):
     path = tmp_path / "a.gltf"
     path.write_text('{"asset": {"version": "2.0"}}')
     assert read_gltf_container(path) == ({"asset": {"version": "2.0"}}, None)
+
+
+def test_an_upload_naming_a_file_by_a_buffer_or_image_uri_is_refused(tmp_path):
+    builder, vertices, _, _ = skinned_body_gltf()
+    path = tmp_path / "body.gltf"
+    builder.gltf(path, external=True)  # buffer.bin beside it: in the blob store, another upload
+    with pytest.raises(InputError) as error:
+        load_character(path)
+    assert error.value.code == "external_reference" and "/buffers/0 uri 'buffer.bin'" in error.value.problem
+    assert len(load_character(path, allow_external_files=True).vertices) == len(vertices)
+    # a self-contained document naming a file by an image (never read) or an extension's uri is refused too;
+    # images held as data: URIs are not
+    builder.gltf(path, external=False)
+    document = json.loads(path.read_text())
+    png = "data:image/png;base64," + base64.b64encode(b"\x89PNG\r\n\x1a\n").decode()
+    for images, named in (([{"uri": png}, {"uri": "/etc/passwd"}], "/images/1 uri '/etc/passwd'"),
+                          ([{"uri": png, "extensions": {"X_any": {"uri": "../../x.ktx2"}}}],
+                           "/images/0/extensions/X_any uri '../../x.ktx2'")):
+        path.write_text(json.dumps({**document, "images": images}))
+        with pytest.raises(InputError) as error:
+            load_character(path)
+        assert error.value.code == "external_reference" and named in error.value.problem
+        assert len(load_character(path, allow_external_files=True).vertices) == len(vertices)
+    path.write_text(json.dumps({**document, "images": [{"uri": png}]}))
+    assert len(load_character(path).vertices) == len(vertices)
+
+
+def test_a_glb_naming_a_second_buffer_file_is_refused(tmp_path):
+    builder, _, _, _ = skinned_body_gltf()
+    data = builder.glb()
+    json_length = struct.unpack_from("<I", data, 12)[0]
+    document = json.loads(data[20:20 + json_length])
+    document["buffers"].append({"uri": "/srv/storage/blobs/ab/other.bin", "byteLength": 4})
+    reader = GltfReader(document, data[28 + json_length:], tmp_path / "x.glb")
+    with pytest.raises(InputError) as error:
+        reader.buffer(1)
+    assert error.value.code == "external_reference" and "buffer 1 uri" in error.value.problem
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), GLB_JSON_CHUNK) + text + data[20 + json_length:]
+    (tmp_path / "x.glb").write_bytes(GLB_MAGIC + struct.pack("<II", 2, 12 + len(body)) + body)
+    with pytest.raises(InputError) as error:
+        load_character(tmp_path / "x.glb")
+    assert error.value.code == "external_reference" and "/buffers/1 uri" in error.value.problem

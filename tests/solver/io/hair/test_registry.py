@@ -301,6 +301,11 @@ def test_writer_warns_about_dropped_attributes(tmp_path, groom):
         write_hair(tmp_path / "g.ply", groom)
 
 
+#: formats read in the sandbox's child process, and the mutations tried on each
+SANDBOXED_FORMATS = ("usd", "usda", "usdc", "abc")
+SANDBOXED_MUTATIONS = 25
+
+
 @pytest.mark.parametrize("fmt, ascii", WRITE_VARIANTS)
 def test_damaged_files_give_input_errors(fmt, ascii):
     rng = np.random.default_rng(sum(map(ord, fmt)) + ascii)
@@ -308,8 +313,9 @@ def test_damaged_files_give_input_errors(fmt, ascii):
         warnings.simplefilter("ignore", HairIOWarning)
         data = hair_to_bytes(helix_hair(8, thickness=True, color=True), fmt, ascii=ascii)
         codes = set()
-        # a USD read is a child process (~0.3 s): fewer mutations (test_usd has the crate bomb)
-        for _ in range(25 if fmt.startswith("usd") else 300):
+        # a USD or Alembic read is a child process (0.3-0.5 s): 25 mutations already reach several checks
+        # (test_usd has the crate bomb, test_alembic its own mutated archives)
+        for _ in range(SANDBOXED_MUTATIONS if fmt in SANDBOXED_FORMATS else 300):
             try:
                 read_hair_bytes(mutate(data, rng), fmt)
                 codes.add("ok")
