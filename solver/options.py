@@ -54,7 +54,7 @@ class OptionRange:
 
 #: every numeric option of both stages: the one definition of its range, from which the API
 #: schema (Field ge/le), the command line (argparse types) and ``validate()`` are derived and
-#: the README's table is generated (:func:`option_table`). The upper bounds keep one job
+#: docs/operations.md's table is generated (:func:`option_table`). The upper bounds keep one job
 #: within a worker's means: k and guides size the kNN sets and the coupled QP, eps_c beyond a
 #: few cm leaves the distance grid's narrow band, iterations bound the time.
 OPTION_RANGES: dict[str, OptionRange] = {
@@ -87,7 +87,7 @@ def check_ranges(options) -> None:
 
 
 def option_table(names=None) -> str:
-    """The README's table of option ranges (Markdown), generated from :data:`OPTION_RANGES`."""
+    """docs/operations.md's table of option ranges (Markdown), generated from :data:`OPTION_RANGES`."""
     rows = ["| option | min | max | units | what |", "|---|---|---|---|---|"]
     for name, spec in OPTION_RANGES.items():
         if names is None or name in names:

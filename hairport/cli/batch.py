@@ -49,7 +49,7 @@ def add_batch(sub) -> None:
     p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
                    help=option_help("energy_tolerance"))
     p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
-                                                 "segments within 0.8-1.25 of their strand's stretch (README, Fidelity)"))
+                                                 "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
     add_hairline_arguments(p)

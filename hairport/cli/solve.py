@@ -54,7 +54,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
     p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
-                                                 "segments within 0.8-1.25 of their strand's stretch (README, Fidelity)"))
+                                                 "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
     p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))

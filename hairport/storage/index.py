@@ -33,7 +33,7 @@ Deployment assumption (as for ``flock``, see :mod:`hairport.storage`): every pro
 storage runs on hosts where SQLite's locking works on that volume. WAL mode needs shared memory
 between the processes, i.e. one host (a local disk or a Docker volume of one host). SQLite over
 NFS is unsafe (its locks are unreliable there): a multi-host deployment over NFS must not use
-this index as it is (see the README's architecture section).
+this index as it is (see docs/operations.md, several hosts).
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ Deviations from the paper's text, on purpose:
   (``anchoring="surface"``, the closest-triangle anchoring the paper's Sec. 7.3.2 discusses):
   every particle keeps its offset to its closest surface point in that face's tangent frame,
   the bones' fallback for every particle; about as good as the bones on the MakeHuman pairs
-  (README, method notes). ``auto`` takes the bones when the source has a skeleton with skin
+  (docs/method.md). ``auto`` takes the bones when the source has a skeleton with skin
   weights, else the surface.
 """
 

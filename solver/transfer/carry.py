@@ -33,7 +33,7 @@ from hairport.solver.model.hair import DEGENERATE_SEGMENT_M
 CARRY_CHUNK = 1 << 18
 
 #: the default ``ell`` (m) of a retarget, measured by ``bench/fidelity.py`` over every ordered
-#: MakeHuman pair and groom style (README, "Fidelity"): alone it lowers the mean segment angle on
+#: MakeHuman pair and groom style (docs/fidelity.md): alone it lowers the mean segment angle on
 #: all 150 (0.053 -> 0.037 rad), with the spacing term 0.043; 0.05 gave 0.043 alone, 0.2 raised
 #: the inter-strand error by a fifth on fringes
 CARRY_LENGTH_M = 0.1

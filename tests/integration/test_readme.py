@@ -112,3 +112,23 @@ def test_a_failed_job_fails_the_block_and_saves_no_result(workdir):
     assert failing.returncode == 1, failing.stderr
     assert re.search(r"job [0-9a-f]+: failed off_head ", failing.stderr)
     assert not (folder / "result.ply").exists() and not (folder / "preview.png").exists()
+
+
+def test_a_refused_upload_fails_the_block_and_prints_the_problem(workdir):
+    """The same block with a hair file that is not one: the upload is refused (422), the block exits 1 and
+    prints the API's problem (its code), and nothing is downloaded."""
+    work, env = workdir
+    folder = work / "refused"
+    (folder / "hairport-demo").mkdir(parents=True)
+    for item in (work / "hairport-demo").iterdir():
+        (folder / "hairport-demo" / item.name).symlink_to(item)
+    (folder / "hairport-demo" / "source_hair.hair").unlink()
+    (folder / "hairport-demo" / "source_hair.hair").write_bytes(b"HAIR" + b"\xff" * 60)
+    refused = subprocess.run(["bash", "-euo", "pipefail", "-c", quickstart_block()], cwd=folder,
+                             env={**env, "PORT": str(free_port())}, capture_output=True, text=True,
+                             timeout=BLOCK_LIMIT_SECONDS)
+    assert refused.returncode != 0
+    problem = re.search(r'\{"type":.*"status":422.*"code":"(\w+)"', refused.stderr)
+    assert problem, refused.stderr
+    assert problem.group(1) in {"truncated", "bad_header"}
+    assert not (folder / "result.ply").exists() and not (folder / "preview.png").exists()
