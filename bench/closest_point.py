@@ -99,7 +99,7 @@ def compile_times():
 def retargets(size, runs):
     """Round-robin multi-scale retargets with each face search; prints a table."""
     from hairport import solver
-    from hairport.solver.adaptation import constraints
+    from hairport.solver.adaptation.problem import constraints
     from hairport.solver.mesh import collision
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character

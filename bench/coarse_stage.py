@@ -56,10 +56,10 @@ def main() -> None:
 
     from hairport import solver
     from hairport.solver import jit
-    from hairport.solver.adaptation import active_set, contact_qp
-    from hairport.solver.adaptation.coupled import solve_hairstyle
+    from hairport.solver.adaptation.coupled import contact_qp, numpy_level
+    from hairport.solver.adaptation.loop.options import SolveOptions
     from hairport.solver.adaptation.multiscale import CONTACT_BAND
-    from hairport.solver.adaptation.options import SolveOptions
+    from hairport.solver.adaptation.solve import solve_hairstyle
     from hairport.solver.body.target import prepare_target
     from hairport.solver.mesh.collision import collision_query
     from hairport.solver.mesh.distance_grid import DistanceGrid
@@ -99,7 +99,7 @@ def main() -> None:
                 qps.append(qp)
             return solve_qp(*qp, **{**keywords, **PATHS[path]})
 
-        active_set.solve_qp = patched
+        numpy_level.solve_qp = patched
         try:
             began, began_cpu = time.perf_counter(), time.process_time()
             points, report = solve_hairstyle(
@@ -108,7 +108,7 @@ def main() -> None:
             )
             return points, report, time.perf_counter() - began, time.process_time() - began_cpu
         finally:
-            active_set.solve_qp = solve_qp
+            numpy_level.solve_qp = solve_qp
 
     seconds = {path: [] for path in args.paths}
     cpu_seconds = {path: [] for path in args.paths}

@@ -3,7 +3,7 @@
 Builds Table 4's groom (average female -> heavy male, 'long'; bench/table4.py) at one size,
 runs the initial transfer and the coarse level once, then the fine level as
 :func:`solver.adaptation.multiscale.solve_multiscale` calls it, by each engine
-(:data:`solver.adaptation.options.ENGINES`) in turn, ``--runs`` times in the same process,
+(:data:`solver.adaptation.loop.options.ENGINES`) in turn, ``--runs`` times in the same process,
 and prints per engine the median wall-clock and CPU seconds (this process's threads and its
 worker processes; on a shared machine the CPU time is the steadier figure), the outer
 iterations (the longest chunk's), the microseconds per particle per iteration (seconds /
@@ -32,9 +32,9 @@ from table4 import SOURCE, STYLE, TARGET, _reset_peak, _status_bytes, groom_shap
 def fine_level_case(size: int, guides: int, style: str = STYLE):
     """The fine level's inputs at ``size`` particles: (problem, start, body, grid, weights, options)."""
     from hairport import solver
-    from hairport.solver.adaptation.coupled import solve_hairstyle
+    from hairport.solver.adaptation.loop.options import SolveOptions
     from hairport.solver.adaptation.multiscale import CONTACT_BAND, fine_problem
-    from hairport.solver.adaptation.options import SolveOptions
+    from hairport.solver.adaptation.solve import solve_hairstyle
     from hairport.solver.body.target import prepare_target
     from hairport.solver.mesh.collision import collision_query
     from hairport.solver.mesh.distance_grid import DistanceGrid

@@ -1,5 +1,7 @@
 """All-or-nothing output files: everything is written to temporary names first and renamed
-into place only when every file succeeded, so a failed run leaves no partial output.
+into place only when every file succeeded, so a failed run leaves no partial output. A retarget's
+result goes out one way (:func:`add_result`), whoever writes it: ``hairport retarget``, ``hairport
+batch`` and the worker.
 
 Every output gets one file mode, the solver's ``FILE_MODE`` less the umask (0644 under the
 usual umask 022): the temporary file is created with it, and writers that write into it (the
@@ -11,11 +13,12 @@ from __future__ import annotations
 import json
 import os
 import secrets
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
+from hairport import solver
 from hairport.solver import FILE_MODE
 
 #: random bytes in a temporary output's name (hex-encoded: twice as many characters)
@@ -57,6 +60,47 @@ class OutputSet:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is not None:
             self.abort()
+
+
+def add_result(outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result: solver.RetargetResult,
+               target: solver.Character, hair: Mapping[str, str | os.PathLike], *,
+               report: tuple[str | os.PathLike, dict] | None = None, preview: str | os.PathLike | None = None,
+               flag_guides: bool = False) -> None:
+    """Add a retarget's result to ``outputs`` in the groom's frame: its hair, then its report and preview.
+
+    The hair is written in the units and axes the groom was read in (``adaptable.frame``), as the
+    input was; the report and the preview are the solver's (hairport's frame, meters).
+
+    Parameters
+    ----------
+    outputs : OutputSet
+        Committed by the caller.
+    adaptable : AdaptableHairstyle
+        The hairstyle the result was retargeted from (its frame, guides and source).
+    result : RetargetResult
+    target : Character
+        The target the result was retargeted onto (for the preview).
+    hair : mapping of str to path-like
+        One hair file per format name (:data:`hairport.solver.HAIR_FORMATS`), e.g. ``{"npz": "out/result.npz"}``.
+    report : (path-like, dict), optional
+        Where to write the report, and the report (JSON; numpy values as numbers and lists).
+    preview : path-like, optional
+        Where to write the PNG preview (source against result; Pillow, imported only then).
+    flag_guides : bool
+        Write the guides the solve used as the per-strand attribute :data:`hairport.solver.GUIDE_FLAG`.
+    """
+    frame = adaptable.frame
+    strands = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else result.hair
+    in_frame = solver.hair_in_frame(frame, strands)
+    for name, final in hair.items():
+        outputs.add(final, lambda path, name=name: solver.write_hair(path, in_frame, units=frame.units, format=name,
+                                                                     up_axis=frame.up))
+    if report is not None:
+        outputs.add_json(*report)
+    if preview is not None:
+        from hairport.solver.render.preview import write_result_preview
+
+        outputs.add(preview, lambda path: write_result_preview(path, adaptable, result, target))
 
 
 def _create_temporary(final: Path) -> Path:

@@ -7,9 +7,9 @@ from functools import cached_property
 
 import numpy as np
 
-from hairport.solver.adaptation.energies import ShapeModel
 from hairport.solver.adaptation.multiscale import FineSource, MultiscaleModel, coarse_shape_model, fine_source
-from hairport.solver.adaptation.neighbours import Neighbours, knn_shaped_strands, laplacian_operator
+from hairport.solver.adaptation.problem.energies import ShapeModel
+from hairport.solver.adaptation.source.neighbours import Neighbours, knn_shaped_strands, laplacian_operator
 from hairport.solver.model.character import Character
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
@@ -40,7 +40,7 @@ class AdaptableHairstyle:
     def neighbours(self) -> Neighbours:
         """Eq. 8-9 over all strands: the metrics' inter-strand figures, and the coupled ``global`` solve's ``K``
         (``(N, k)`` int32 indices and float64 weights, built on the first retarget); collapsed strands have
-        none and are none (:func:`~.adaptation.neighbours.knn_shaped_strands`)."""
+        none and are none (:func:`~.adaptation.source.neighbours.knn_shaped_strands`)."""
         return knn_shaped_strands(self.hair, self.options.k)
 
     @cached_property

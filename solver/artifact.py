@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from hairport import __version__
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.adaptation.multiscale import MultiscaleModel
-from hairport.solver.adaptation.neighbours import Neighbours
+from hairport.solver.adaptation.source.neighbours import Neighbours
 from hairport.solver.display import colors_u8
 from hairport.solver.model.character import Character, Skeleton
 from hairport.solver.model.errors import InputError

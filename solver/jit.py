@@ -35,6 +35,10 @@ import numba  # noqa: E402 - after the thread policy
 #: numpy references
 KERNEL_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
+#: wall seconds :func:`warm_up` takes on an empty cache (48 s measured on a shared 2-core AMD EPYC,
+#: ``hairport warmup``, 2026-11-28): what a first run announces before it compiles
+COLD_COMPILE_SECONDS = 50.0
+
 _WARMERS: dict[str, Callable[[], None]] = {}
 #: every dispatcher declared through :func:`kernel` or :func:`parallel_kernel`
 _KERNELS: list = []
@@ -88,17 +92,17 @@ def _import_kernel_modules() -> None:
 
 #: modules that declare kernels (imported by :func:`warm_up`)
 KERNEL_MODULES: tuple[str, ...] = (
-    "hairport.solver.adaptation.coupled_kernels",
-    "hairport.solver.adaptation.kdtree",
-    "hairport.solver.adaptation.neighbours",
+    "hairport.solver.adaptation.coupled.coupled_kernels",
+    "hairport.solver.adaptation.source.kdtree",
+    "hairport.solver.adaptation.source.neighbours",
     "hairport.solver.transfer.bone_rays",
     "hairport.solver.transfer.smoothing",
     "hairport.solver.mesh.bvh_build",
     "hairport.solver.mesh.closest_kernels",
     "hairport.solver.mesh.distance_grid",
-    "hairport.solver.adaptation.band_kernels",
-    "hairport.solver.adaptation.strand_kernels",
-    "hairport.solver.adaptation.line_search_kernels",
+    "hairport.solver.adaptation.fine.band_kernels",
+    "hairport.solver.adaptation.fine.strand_kernels",
+    "hairport.solver.adaptation.fine.line_search_kernels",
     "hairport.solver.metrics",
 )
 
@@ -129,6 +133,30 @@ def _cache_counts() -> tuple[int, int]:
         compiled += sum(dispatcher.stats.cache_misses.values())
         loaded += sum(dispatcher.stats.cache_hits.values())
     return compiled, loaded
+
+
+def uncached_kernels() -> tuple[int, int]:
+    """How many declared kernels have no machine code in numba's on-disk cache for their current
+    source (the ones the next calls compile), and how many are declared.
+
+    Imports the kernel modules and reads the cache's index files only (milliseconds). A kernel no
+    warmer calls stays uncached after :func:`warm_up`: callers compare with a share of the total.
+
+    Returns
+    -------
+    uncached, declared : int
+    """
+    _import_kernel_modules()
+    return sum(1 for dispatcher in _KERNELS if not _cached(dispatcher)), len(_KERNELS)
+
+
+def _cached(dispatcher) -> bool:
+    # numba has no public query for this: its cache object's index lists the signatures stored
+    # for the source file's current stamp (empty when missing or stale)
+    try:
+        return bool(dispatcher._cache._cache_file._load_index())
+    except (AttributeError, OSError, EOFError, ValueError):
+        return True  # unknown: no false alarm
 
 
 def warm_up() -> WarmUp:

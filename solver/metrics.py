@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.adaptation.energies import EnergyTerms, EnergyWeights, shape_values, source_directions
-from hairport.solver.adaptation.neighbours import Neighbours, neighbour_average
-from hairport.solver.adaptation.spacing import spacing_residuals
+from hairport.solver.adaptation.problem.energies import EnergyTerms, EnergyWeights, shape_values, source_directions
+from hairport.solver.adaptation.problem.spacing import spacing_residuals
+from hairport.solver.adaptation.source.neighbours import Neighbours, neighbour_average
 from hairport.solver.jit import parallel_kernel, prange, warms
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
@@ -176,7 +176,7 @@ class SegmentFigures:
 def segment_figures(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarray,
                     chunk: int = METRICS_CHUNK) -> SegmentFigures:
     """Segment angles (as :func:`segment_angles`) and Eq. 7's value (as
-    :func:`~.adaptation.energies.energy_terms`) of every segment, a block of particles at a time.
+    :func:`~.adaptation.problem.energies.energy_terms`) of every segment, a block of particles at a time.
 
     A degenerate source segment (:data:`~hairport.solver.model.hair.DEGENERATE_SEGMENT_M`) has no
     direction, so no angle to measure: it counts in Eq. 7's value (its weld) but not in the angles.
@@ -240,7 +240,7 @@ def bend_errors(points: np.ndarray, source_points: np.ndarray, offsets: np.ndarr
 
 def spacing_energy(points: np.ndarray, source: Hair, initial: np.ndarray, band: tuple[float, float]) -> float:
     """The spacing term's value (unweighted) at ``points (N, 3)``, its rest lengths from ``initial``
-    (:mod:`.adaptation.spacing`)."""
+    (:mod:`.adaptation.problem.spacing`)."""
     rest = rest_lengths(source.points, initial, source.offsets)
     starts = np.flatnonzero((rest > 0) & ~source.short_segments)  # a weld has no spacing term
     length = np.linalg.norm(points[starts + 1] - points[starts], axis=1)

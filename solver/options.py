@@ -6,11 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hairport.solver.adaptation.coupled import QP_BACKENDS
-from hairport.solver.adaptation.energies import EnergyWeights
-from hairport.solver.adaptation.guides import DEFAULT_GUIDES
 from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES
-from hairport.solver.adaptation.spacing import SPACING_BAND, SPACING_WEIGHT
+from hairport.solver.adaptation.problem.energies import EnergyWeights
+from hairport.solver.adaptation.problem.spacing import SPACING_BAND, SPACING_WEIGHT
+from hairport.solver.adaptation.solve import QP_BACKENDS
+from hairport.solver.adaptation.source.guides import DEFAULT_GUIDES
 from hairport.solver.baselines import BASELINE_METHODS, parse_method
 from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.model.errors import InputError
@@ -129,9 +129,9 @@ class RetargetOptions:
     chunks of ``chunk_particles``, in this process on numba's threads (``workers`` ``None`` or
     1), or in ``workers`` processes.
     ``qp_backend`` solves the coupled QPs (``global``, and the guides of ``multiscale``): the
-    active-set method of :mod:`~hairport.solver.adaptation.active_set` or OSQP. ``hairline`` edits the front
+    active-set method of :mod:`~hairport.solver.adaptation.loop.active_set` or OSQP. ``hairline`` edits the front
     hairline (Sec. 6; solver methods only). ``spacing`` weighs the term beyond the paper that keeps
-    particles evenly spaced along their strands (:mod:`~hairport.solver.adaptation.spacing`); 0 solves
+    particles evenly spaced along their strands (:mod:`~hairport.solver.adaptation.problem.spacing`); 0 solves
     the paper's Eq. 1 exactly. ``carry`` (m) lets the anchored strands take back their source shape
     before the solve (:mod:`~hairport.solver.transfer.carry`); 0 is the paper's initial transfer.
     """

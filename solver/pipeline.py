@@ -21,13 +21,8 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
-from hairport.solver.adaptation.active_set import solve_strands
-from hairport.solver.adaptation.constraints import BodyDistance
-from hairport.solver.adaptation.coupled import solve_hairstyle
-from hairport.solver.adaptation.energies import EnergyWeights
-from hairport.solver.adaptation.fine_chunks import FineInputs, chunk_problem
-from hairport.solver.adaptation.guide_flags import flagged_guides
-from hairport.solver.adaptation.guides import select_guides
+from hairport.solver.adaptation.fine.fine_chunks import FineInputs, chunk_problem
+from hairport.solver.adaptation.loop.options import SolveOptions, SolveReport
 from hairport.solver.adaptation.multiscale import (
     CONTACT_BAND,
     FineRunner,
@@ -36,7 +31,11 @@ from hairport.solver.adaptation.multiscale import (
     solve_here,
     solve_multiscale,
 )
-from hairport.solver.adaptation.options import SolveOptions, SolveReport
+from hairport.solver.adaptation.problem.constraints import BodyDistance
+from hairport.solver.adaptation.problem.energies import EnergyWeights
+from hairport.solver.adaptation.solve import solve_hairstyle, solve_strands
+from hairport.solver.adaptation.source.guide_flags import flagged_guides
+from hairport.solver.adaptation.source.guides import select_guides
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
 from hairport.solver.display import scene_arrays

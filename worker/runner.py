@@ -17,7 +17,7 @@ import traceback
 from celery.exceptions import SoftTimeLimitExceeded
 
 from hairport import solver
-from hairport.outputs import json_default
+from hairport.outputs import OutputSet, add_result, json_default
 from hairport.records import (
     CANCELLED,
     FAILED,
@@ -38,7 +38,6 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
-from hairport.solver.render.preview import write_result_preview
 from hairport.storage import Blob, retention_seconds
 
 from . import bodies
@@ -212,7 +211,7 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
                         progress: JobProgress, fine_runner) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
     adaptable, target, target_input = job_inputs(repository, settings, job, artifact)
-    frame = adaptable.frame  # results are written in the groom's units and axes, a drawn hairline read in them
+    frame = adaptable.frame  # a drawn hairline is read in the groom's units and axes, as the result is written
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
     options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
                                      hairline=solver.edit_in_canonical(frame, edit))
@@ -226,18 +225,14 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
                                           "target_character_id": job.target_character_id}}
     storage = repository.storage
     with storage.work_dir() as work:
-        written = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if job.flag_guides else result.hair
-        hair = solver.hair_in_frame(frame, written)
-        for fmt in sorted({"npz", job.output_format}):
-            path = work / f"result.{fmt}"
-            solver.write_hair(path, hair, units=frame.units, format=fmt, up_axis=frame.up)
-            outputs[fmt] = stored(storage.save_file(path, f".{fmt}"), f".{fmt}")
-        path = work / "report.json"
-        path.write_text(json.dumps(report, indent=2, default=json_default) + "\n")
-        outputs["report"] = stored(storage.save_file(path, ".json"), ".json")
-        path = work / "preview.png"
-        write_result_preview(path, adaptable, result, target)
-        outputs["preview"] = stored(storage.save_file(path, ".png"), ".png")
+        hair = {fmt: work / f"result.{fmt}" for fmt in sorted({"npz", job.output_format})}
+        files = {**hair, "report": work / "report.json", "preview": work / "preview.png"}
+        with OutputSet() as written:
+            add_result(written, adaptable, result, target, hair, report=(files["report"], report),
+                       preview=files["preview"], flag_guides=job.flag_guides)
+            written.commit()
+        for name, path in files.items():
+            outputs[name] = stored(storage.save_file(path, path.suffix), path.suffix)
         path = solver.save_scene(work / "scene.npz", solver.display_scene(adaptable, result, target))
         outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
     return outputs, result

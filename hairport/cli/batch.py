@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from hairport import solver
-from hairport.outputs import OutputSet
+from hairport.outputs import OutputSet, add_result
 from hairport.settings import get_settings
 from hairport.solver import InputError
 
@@ -129,10 +129,8 @@ def _retarget_pair(groom: Groom, target_name: str, target: solver.Character, uni
         result = solver.retarget(adaptable, canonical, pair_options, target_input=found)
         report = {**result.report(), "pair": {"groom": groom.name, "target": target_name}}
         with OutputSet() as outputs:
-            outputs.add(folder / f"result.{args.format}", lambda path: solver.write_hair(
-                path, solver.hair_in_frame(frame, result.hair), units=frame.units, format=args.format,
-                up_axis=frame.up))
-            outputs.add_json(folder / "report.json", report)
+            add_result(outputs, adaptable, result, canonical, {args.format: folder / f"result.{args.format}"},
+                       report=(folder / "report.json", report))
             outputs.commit()
         metrics = result.metrics
         row.update(status="ok", **{name: metrics[name] for name in SUMMARY_COLUMNS if name in metrics})

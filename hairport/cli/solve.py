@@ -6,7 +6,7 @@ import argparse
 from dataclasses import replace
 
 from hairport import solver
-from hairport.outputs import OutputSet
+from hairport.outputs import OutputSet, add_result
 from hairport.settings import get_settings
 from hairport.solver import InputError
 
@@ -124,8 +124,6 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 
 def cmd_retarget(args: argparse.Namespace) -> int:
-    from hairport.solver.render.preview import write_result_preview  # Pillow: only when a preview is asked for
-
     settings = get_settings()
     progress = StageProgress(args.quiet)
     check_source_arguments(args)
@@ -145,20 +143,14 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     options = replace(options, hairline=solver.edit_in_canonical(adaptable.frame, options.hairline))
     result = solver.retarget(adaptable, target, options, progress=progress, target_input=target_input)
     hair = adaptable.hair
-    frame = adaptable.frame
-    units = frame.units
     report = result.report()
     report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
     report["inputs"] = {**inputs, "target": args.target, "strands": hair.n_strands, "particles": hair.n_particles,
-                        "guides": len(adaptable.multiscale.guides), "units": units}
-    written = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if args.flag_guides else result.hair
+                        "guides": len(adaptable.multiscale.guides), "units": adaptable.frame.units}
     with OutputSet() as outputs:
-        outputs.add(args.out, lambda path: solver.write_hair(path, solver.hair_in_frame(frame, written),
-                                                             units=units, format=out_format, up_axis=frame.up))
-        if args.report:
-            outputs.add_json(args.report, report)
-        if args.preview:
-            outputs.add(args.preview, lambda path: write_result_preview(path, adaptable, result, target))
+        add_result(outputs, adaptable, result, target, {out_format: args.out},
+                   report=(args.report, report) if args.report else None, preview=args.preview or None,
+                   flag_guides=args.flag_guides)
         written = outputs.commit()
     m = result.metrics
     progress("done", 1.0, f"wrote {', '.join(str(p) for p in written)}")

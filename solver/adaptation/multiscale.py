@@ -2,7 +2,7 @@
 
 1. Guides (:mod:`.guides`): a few hundred representative strands.
 2. Coarse level: Eq. 1 on the guides only, kNN among particles of other guides, solved by
-   the coupled solver of :mod:`.coupled`.
+   the coupled solver of :mod:`.solve` (:func:`~.solve.solve_hairstyle`).
 3. Fine level (Eq. 14): every other ("normal") particle takes its kNN from guide particles
    only; with the guides adapted, these neighbours are constants and all normal strands
    are independent (:mod:`.active_set`; compiled per-strand kernels, :mod:`.fine_solve`).
@@ -25,13 +25,14 @@ from multiprocessing import get_context
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.adaptation.active_set import solve_strands
-from hairport.solver.adaptation.constraints import BodyDistance
-from hairport.solver.adaptation.coupled import solve_hairstyle
-from hairport.solver.adaptation.energies import EnergyWeights, ShapeModel, source_directions
-from hairport.solver.adaptation.fine_chunks import FineInputs, FineSource
-from hairport.solver.adaptation.guides import select_guides
-from hairport.solver.adaptation.neighbours import (
+from hairport.solver.adaptation.fine.fine_chunks import FineInputs, FineSource
+from hairport.solver.adaptation.loop.options import ENGINE_COMPILED, SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
+from hairport.solver.adaptation.problem.constraints import BodyDistance
+from hairport.solver.adaptation.problem.energies import EnergyWeights, ShapeModel, source_directions
+from hairport.solver.adaptation.problem.strand_problem import StrandProblem
+from hairport.solver.adaptation.solve import solve_hairstyle, solve_strands
+from hairport.solver.adaptation.source.guides import select_guides
+from hairport.solver.adaptation.source.neighbours import (
     Neighbours,
     knn_other_strands,
     knn_shaped_strands,
@@ -39,8 +40,6 @@ from hairport.solver.adaptation.neighbours import (
     neighbour_average,
     neighbour_reach,
 )
-from hairport.solver.adaptation.options import ENGINE_COMPILED, SOLVE_STAGE, Cancelled, SolveOptions, SolveReport
-from hairport.solver.adaptation.strand_problem import StrandProblem
 from hairport.solver.jit import set_threads, threads
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.polyline import rest_lengths
@@ -415,7 +414,7 @@ def solve_multiscale(
     grid : DistanceGrid, optional
         Broad phase of the target's distance.
     backend : str
-        QP backend of the coarse level (:data:`.coupled.QP_BACKENDS`).
+        QP backend of the coarse level (:data:`.solve.QP_BACKENDS`).
     progress : ProgressFn, optional
         The coarse level's iterations as ``guides: ...`` in ``[0, COARSE_PROGRESS_SHARE]``,
         then ``strands: chunk i/n`` up to 1.

@@ -16,7 +16,7 @@ is opened.
 What a format can name, and what each reader does with it by default:
 
 - USD (``.usd``, ``.usda``, ``.usdc``): the root layer is opened alone and walked before any
-  composition (:mod:`~hairport.solver.io.usd_assets`); any asset path refuses the file.
+  composition (:mod:`~hairport.solver.io.usd.assets`); any asset path refuses the file.
 - glTF (``.gltf``, ``.glb``): every buffer and image ``uri`` other than a ``data:`` URI refuses the file.
 - OBJ: ``mtllib`` is never opened (both readers read ``v``/``f``/``l`` lines only).
 - PLY: trimesh is asked to skip materials, so a ``comment TextureFile`` is never opened; the hair

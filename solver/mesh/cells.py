@@ -22,7 +22,7 @@ sends its points to the tree.
 Cells are filled on demand: the first query of a point in a cell not yet seen finds its
 candidates (one nearest-first search of the tree whose reach shrinks with the nearest face
 found, ~3 us), later ones reuse them. A cache
-belongs to one solve (:class:`~hairport.solver.adaptation.constraints.BodyDistance`), so
+belongs to one solve (:class:`~hairport.solver.adaptation.problem.constraints.BodyDistance`), so
 it holds the cells its hair visits; :data:`MAX_CACHED_CANDIDATES` bounds it (it starts
 over when full). The kernels are in :mod:`.closest_kernels`.
 """

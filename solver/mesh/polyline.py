@@ -67,7 +67,7 @@ def strand_stretch(source_lengths: np.ndarray, lengths: np.ndarray, segment_stra
 def rest_lengths(source_points: np.ndarray, initial: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """The rest length ``t`` of the segment starting at each particle (0 at tips): its source length
     times its strand's stretch from ``source_points`` to ``initial`` (the spacing term's and the shape
-    carry's, :mod:`hairport.solver.adaptation.spacing`, :mod:`hairport.solver.transfer.carry`).
+    carry's, :mod:`hairport.solver.adaptation.problem.spacing`, :mod:`hairport.solver.transfer.carry`).
 
     A strand's sums run over its own rows only, in order, so the rows of a run of strands
     equal the same rows computed over the whole hairstyle bit for bit (fine-level chunks).

@@ -10,7 +10,7 @@ input's strand layout (attributes are carried per strand and per particle), so n
   length squared: at zero length the block came out NaN (no normal to a zero direction) and the
   strand-banded Hessian "not positive definite", the ``internal`` error of a penetration test. Its
   two particles are *welded*: a stiff spring of that length scale replaces the term
-  (:mod:`hairport.solver.adaptation.energies`), so the segment stays of zero length and the solve
+  (:mod:`hairport.solver.adaptation.problem.energies`), so the segment stays of zero length and the solve
   stays well conditioned. Carried, with a warning (count, strands).
 * **Collapsed strand** (every segment of zero length), and the zero-length run at a strand's
   start (a repeated root point): welded to the root, these particles *are* the root
@@ -25,7 +25,7 @@ input's strand layout (attributes are carried per strand and per particle), so n
 * **Strand of two points**: one segment, an ordinary strand; carried without a warning.
 * **Far strand** (a particle farther than two groom sizes from every other strand, :func:`groom_size`):
   its Eq. 10 rows held offsets of metres and pulled the strands they named (a copy moved 1.5 m off the
-  toy head moved its neighbours by 11 cm); it has no neighbours (:mod:`hairport.solver.adaptation.neighbours`)
+  toy head moved its neighbours by 11 cm); it has no neighbours (:mod:`hairport.solver.adaptation.source.neighbours`)
   and is retargeted by its own anchors and shape. Carried, with the input report's warning of roots off
   the body when its root is. Closer strands are neighbours like any (a copy 0.5 m away moved its
   neighbours by up to 6 cm: a groom decides where its strands are).

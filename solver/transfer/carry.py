@@ -14,7 +14,7 @@ strand's stretch, :func:`~hairport.solver.mesh.polyline.rest_lengths`): the sour
 with its strand, laid along the anchored strand and held to it over the length ``ell`` (m). Far
 below ``ell`` a strand keeps its source shape, far above it the anchoring's positions. Directions
 are carried unrotated: the MakeHuman bodies share one pose, and rotating them by the anchor
-bone's or the surface normal's turn measured worse (``bench/fidelity.py``; README, method notes).
+bone's or the surface normal's turn measured worse (``bench/fidelity.py``; docs/method.md).
 A reflexive transfer is a fixed point (the source satisfies both sums exactly).
 
 Each strand is a tridiagonal system (a Laplacian plus the identity, SPD), the same for x, y and z;

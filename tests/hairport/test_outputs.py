@@ -1,4 +1,4 @@
-"""All-or-nothing output files."""
+"""All-or-nothing output files, and a retarget's result written in the groom's frame."""
 
 import json
 import os
@@ -7,8 +7,13 @@ import stat
 import numpy as np
 import pytest
 
-from hairport.outputs import OutputSet, json_default
+from hairport import solver
+from hairport.outputs import OutputSet, add_result, json_default
 from hairport.solver import FILE_MODE, atomic_write_bytes
+from hairport.solver.model.frame import InputFrame
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.toy import toy_character
+from tests.solver.frames import hair_in
 
 
 def test_files_appear_only_on_commit(tmp_path):
@@ -70,3 +75,47 @@ def test_every_output_has_the_file_mode_less_the_umask(tmp_path, umask, mask, mo
     assert FILE_MODE & ~mask == mode
     assert {p.name: stat.S_IMODE(p.stat().st_mode) for p in written} == dict.fromkeys(
         ["preview.png", "report.json", "hair.data"], mode)
+
+
+@pytest.fixture(scope="module")
+def retargeted():
+    """A toy groom read in centimetres with Z up, retargeted onto its own body (a baseline: fast)."""
+    toy = toy_character()
+    frame = InputFrame("cm", "z", "-y")
+    adaptable = solver.preprocess(toy, generate_groom(toy, "short", 30, 6, seed=1), solver.PreprocessOptions(guides=5),
+                                  frame=frame)
+    return adaptable, solver.retarget(adaptable, toy, solver.RetargetOptions(method="root-translate")), toy
+
+
+def test_a_result_is_written_in_the_grooms_units_and_axes_with_its_report_and_preview(tmp_path, retargeted):
+    adaptable, result, toy = retargeted
+    report = {**result.report(), "pair": "toy"}
+    hair = {"npz": tmp_path / "result.npz", "ply": tmp_path / "result.ply"}
+    with OutputSet() as outputs:
+        add_result(outputs, adaptable, result, toy, hair, report=(tmp_path / "report.json", report),
+                   preview=tmp_path / "preview.png", flag_guides=True)
+        assert [p for p in tmp_path.iterdir() if not p.name.startswith(".")] == []  # nothing before the commit
+        written = outputs.commit()
+    assert [p.name for p in written] == ["result.npz", "result.ply", "report.json", "preview.png"]
+    expected = hair_in(adaptable.frame, result.hair).points
+    np.testing.assert_allclose(expected[:, 2], 100.0 * result.hair.points[:, 1], rtol=1e-15)  # centimetres, Z up
+    for path in hair.values():
+        back = solver.read_hair(path, units="cm")  # read back in meters, in the file's axes (PLY: float32)
+        np.testing.assert_allclose(back.points, expected / 100.0, rtol=0, atol=1e-6)
+        flags = back.attributes_of("strand")[solver.GUIDE_FLAG].values
+        assert np.flatnonzero(flags).tolist() == sorted(adaptable.multiscale.guides.tolist())
+    assert solver.recorded_hair_units(hair["npz"]) == "cm"
+    with np.load(hair["npz"]) as archive:
+        np.testing.assert_allclose(archive["points"], expected, rtol=1e-15, atol=0)
+    document = json.loads((tmp_path / "report.json").read_text())
+    assert document["pair"] == "toy" and document["metrics"]["method"] == "root-translate"
+    assert (tmp_path / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_result_without_flags_report_or_preview_is_the_hair_alone(tmp_path, retargeted):
+    adaptable, result, toy = retargeted
+    with OutputSet() as outputs:
+        add_result(outputs, adaptable, result, toy, {"npz": tmp_path / "result.npz"})
+        written = outputs.commit()
+    assert [p.name for p in written] == ["result.npz"]
+    assert solver.GUIDE_FLAG not in solver.read_hair(written[0], units="cm").attributes_of("strand")

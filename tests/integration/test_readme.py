@@ -18,11 +18,13 @@ from pathlib import Path
 
 import pytest
 
+from hairport.cli.demo import DEFAULT_PARTICLES, DEFAULT_STRANDS
+
 README = Path(__file__).resolve().parents[2] / "README.md"
 #: the marker the README puts before the quick start's fenced block
 MARKER = "<!-- quickstart -->"
-#: the demo's groom (``hairport demo`` defaults): 200 strands of 20 particles
-DEMO_STRANDS, DEMO_PARTICLES = 200, 20 * 200
+#: the demo's groom (``hairport demo`` defaults): strands, and particles in all
+DEMO_STRANDS, DEMO_PARTICLES = DEFAULT_STRANDS, DEFAULT_PARTICLES * DEFAULT_STRANDS
 #: bound on the whole block (server start, uploads, preprocessing, one small retarget): a hang guard, not
 #: a timing assertion
 BLOCK_LIMIT_SECONDS = 600

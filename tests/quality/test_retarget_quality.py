@@ -7,7 +7,7 @@ transfers penetrate the body by thousands of particles. Grooms with 3-5 mm segme
 import pytest
 
 from hairport.solver import pipeline
-from hairport.solver.adaptation.spacing import EVEN_SPACING_WEIGHT
+from hairport.solver.adaptation.problem.spacing import EVEN_SPACING_WEIGHT
 from hairport.solver.baselines import BASELINE_METHODS
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.synthetic.groom import generate_groom

@@ -16,9 +16,9 @@ import numpy as np
 import scipy.sparse as sp
 import trimesh
 
-from hairport.solver.adaptation.energies import ShapeModel, unit_rows
-from hairport.solver.adaptation.neighbours import knn_other_strands, laplacian_operator
-from hairport.solver.adaptation.strand_problem import StrandProblem
+from hairport.solver.adaptation.problem.energies import ShapeModel, unit_rows
+from hairport.solver.adaptation.problem.strand_problem import StrandProblem
+from hairport.solver.adaptation.source.neighbours import knn_other_strands, laplacian_operator
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.triangles import interpolate_barycentric

@@ -203,7 +203,7 @@ def test_an_alembic_file_whose_middle_reads_as_zeros_is_refused_or_retargets(toy
 
 def test_a_strand_far_from_the_groom_is_retargeted_without_neighbours(toy_a, toy_b, strands, base):
     """1.5 m off the head (not stray: 3.7 groom sizes): its particles are farther than two groom sizes from
-    every other strand, so they have no Eq. 10 rows (adaptation/neighbours.py) and pull no strand."""
+    every other strand, so they have no Eq. 10 rows (adaptation/source/neighbours.py) and pull no strand."""
     hair = with_strand(strands, strands[COPIED] + np.array([1.5, 0.0, 0.0]))
     inputs, result = run(toy_a, toy_b, hair, "global")
     moved = np.linalg.norm(others(hair, result.hair.points) - base["global"].hair.points, axis=1)

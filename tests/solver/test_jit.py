@@ -1,6 +1,7 @@
 """The compiled kernels: ``hairport warmup`` compiles every signature a retarget uses, and a
 second process loads them from numba's on-disk cache instead of compiling."""
 
+import importlib
 import json
 import re
 import subprocess
@@ -15,6 +16,7 @@ SUMMARY = re.compile(r"(\d+) kernels: (\d+) signatures compiled, (\d+) loaded fr
 #: levels, then the global solve) and prints the kernel signatures the solve added: each one
 #: would be a compilation in a worker that had warmed up
 NEW_SIGNATURES_AFTER_WARMUP = """
+import importlib
 import json
 from hairport import solver
 from hairport.solver import jit
@@ -56,3 +58,31 @@ def test_warm_up_reports_each_kernel_module():
     done = jit.warm_up()
     assert set(done.seconds) and all(seconds >= 0 for seconds in done.seconds.values())
     assert done.kernels == len(jit._KERNELS) >= 10
+
+
+#: a module declaring one kernel, written to a temporary folder (numba caches beside it)
+FRESH_KERNEL_MODULE = '''
+from hairport.solver.jit import kernel
+
+
+@kernel
+def twice(x):
+    return 2.0 * x
+'''
+
+
+def test_a_kernel_counts_as_uncached_until_its_first_call_stores_it(tmp_path, monkeypatch):
+    jit.warm_up()
+    uncached, declared = jit.uncached_kernels()
+    # after the warm-up only kernels that no warmer calls directly (called by other kernels) lack a cache entry
+    assert uncached <= declared // 10
+    (tmp_path / "fresh_kernel_module.py").write_text(FRESH_KERNEL_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    module = importlib.import_module("fresh_kernel_module")
+    try:
+        assert jit.uncached_kernels() == (uncached + 1, declared + 1)
+        assert module.twice(2.0) == 4.0  # compiled, and written to numba's cache
+        assert jit.uncached_kernels() == (uncached, declared + 1)
+    finally:
+        jit._KERNELS.remove(module.twice)
+        sys.modules.pop("fresh_kernel_module", None)

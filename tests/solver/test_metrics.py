@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from hairport.solver.adaptation.energies import EnergyWeights, energy_terms
-from hairport.solver.adaptation.neighbours import knn_other_strands
+from hairport.solver.adaptation.problem.energies import EnergyWeights, energy_terms
+from hairport.solver.adaptation.source.neighbours import knn_other_strands
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import (

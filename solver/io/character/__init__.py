@@ -9,8 +9,12 @@ Modules
 -------
 - :mod:`.load`: :func:`load_character` and the registry of mesh formats;
 - one module per format, each exporting ``READERS = {extension: reader}``: :mod:`.obj`
-  (our own reader, and the writer), :mod:`.ply` (through trimesh), :mod:`.gltf` with
-  :mod:`.gltf_buffers` and :mod:`.gltf_skin` (our own reader, skin included);
+  (our own reader, and the writer), :mod:`.ply` (through trimesh), :mod:`.usd` (through
+  usd-core, in the sandbox's child; the stage opened by :mod:`hairport.solver.io.usd`), and the
+  package :mod:`.gltf` (our own reader, skin included: :mod:`.gltf.buffers`, :mod:`.gltf.skin`);
+  a format needing several modules is a package whose ``__init__`` exports ``READERS``;
+- :mod:`.bones`: the bones of a skin's joints (tails, unique names), as the glTF and USD
+  readers make them;
 - :mod:`.skeleton_json`: the skeleton sidecar ``<mesh>.skeleton.json`` (read, write, find);
 - :mod:`.mesh_file`: the limits and checks every reader shares;
 - :mod:`.export`: :func:`write_character` (OBJ + sidecar).

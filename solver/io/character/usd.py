@@ -12,7 +12,7 @@ The skeleton: the ``UsdSkel.Skeleton`` bound to the mesh (``skel:skeleton``, inh
 Bone ``b`` is joint ``b``, named after the last element of its path (made unique like
 glTF's), its parent the joint whose path is its path's parent. Its head is the translation of
 its ``bindTransforms`` matrix (world space of the skeleton, taken to the stage's world), its
-tail as for a glTF skin (:func:`~.gltf_skin.bone_tails`). Weights come from
+tail as for a glTF skin (:func:`~hairport.solver.io.character.bones.bone_tails`). Weights come from
 ``primvars:skel:jointIndices``/``jointWeights`` (``elementSize`` influences a vertex, or
 ``constant`` for all), through the mesh's own ``skel:joints`` order when it has one.
 
@@ -22,7 +22,7 @@ a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`).
 
 Other files: a stage naming any file (sublayer, reference, payload, clip, asset path) is refused
 (``external_reference``) before anything is composed, unless ``allow_external_files``
-(:mod:`~hairport.solver.io.usd_stage`).
+(:mod:`~hairport.solver.io.usd.stage`).
 """
 
 from __future__ import annotations
@@ -34,12 +34,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from hairport.solver.body.skinning import normalise_weight_rows
-from hairport.solver.io.character.gltf_skin import bone_tails, unique_names
+from hairport.solver.io.character.bones import bone_tails, unique_names
 from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts
 from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
-from hairport.solver.io.usd_stage import open_stage, pxr_modules, stage_units, usd_reason
+from hairport.solver.io.usd.stage import open_stage, pxr_modules, stage_units, usd_reason
 from hairport.solver.model.character import Skeleton
 
 

@@ -1,30 +1,34 @@
 """Readers and writers for strand hair files: the format registry and the public API.
 
 Formats (``SUPPORTED_FORMATS``, chosen from the file extension unless given), one module
-each, where its layout is described:
+each (a package when the format needs several), where its layout is described:
 
 ``data``  USC-HairSalon (:mod:`.data`), float32 points only.
 ``hair``  Cem Yuksel's HAIR (:mod:`.yuksel`), with thickness and color arrays.
 ``ply``   Polyline PLY, ``ascii``, ``binary_little_endian`` or ``binary_big_endian``
-          (:mod:`.ply`; header and bodies in :mod:`.ply_header`, :mod:`.ply_ascii`,
-          :mod:`.ply_binary`).
+          (:mod:`.ply`; header and bodies in :mod:`.ply.header`, :mod:`.ply.ascii_body`,
+          :mod:`.ply.binary_body`).
 ``npz``   hairport's own archive (:mod:`.npz`), float64 and exact.
 ``obj``   Wavefront OBJ polylines (:mod:`.obj`).
 ``usd``, ``usda``, ``usdc``  USD ``BasisCurves`` (:mod:`.usd`, through usd-core), with
-          widths and displayColor; the stage's metersPerUnit is its recorded unit.
-``abc``   Alembic ``ICurves`` (:mod:`.alembic`, through the optional ``alembic3d``), in
-          Unreal Engine's groom convention.
+          widths and displayColor (primvars in :mod:`.usd.primvars`; the stage opened by
+          :mod:`hairport.solver.io.usd`, shared with the character reader); the stage's
+          metersPerUnit is its recorded unit.
+``abc``   Alembic ``ICurves`` (:mod:`.alembic`, through the optional ``alembic3d``; parameters
+          in :mod:`.alembic.params`), in Unreal Engine's groom convention.
 
 Attributes: every per-strand and per-point array a file holds beyond positions, thickness and
 colour (UVs, ids, group ids, transparency, custom primvars) is read into ``Hair.attributes`` and
 written back by the formats that hold it (``npz``, ``ply``, ``usd*``, ``abc``; ``hair`` holds
 transparency only); writing to a format that cannot hold something warns once, naming it.
 
-Each format module exports ``FORMAT``, a :class:`~.common.HairFormat` naming its reader,
-its writer and what the format keeps; :data:`FORMATS` below lists them, and everything else
-(the format names, the extensions, the writer's warnings) is derived from it. A new format
-is one new module, imported here and entered in :data:`FORMATS`. The machinery every format
-shares (limits, reports, the checks) is in :mod:`.common`.
+Each format module (a format package's ``__init__``) exports ``FORMAT``, a
+:class:`~.common.HairFormat` naming its reader, its writer and what the format keeps;
+:data:`FORMATS` below lists them, and everything else (the format names, the extensions, the
+writer's warnings) is derived from it. A new format is one new module (or package), imported
+here and entered in :data:`FORMATS`. The machinery every format shares (limits, reports, the
+checks) is in :mod:`.common`; what the formats of several curves prims or objects share (USD,
+Alembic) in :mod:`.curves`, their child process in :mod:`.sandboxed`.
 
 Units: hairport works in meters. ``read_hair(..., units="cm")`` multiplies coordinates and
 thickness by :func:`~hairport.solver.model.units.unit_scale`; ``write_hair(..., units="cm")``

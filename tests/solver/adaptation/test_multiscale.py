@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from hairport.solver import pipeline
+from hairport.solver.adaptation.loop.options import SolveOptions
 from hairport.solver.adaptation.multiscale import (
     COARSE_PROGRESS_SHARE,
     build_multiscale_model,
@@ -11,7 +12,6 @@ from hairport.solver.adaptation.multiscale import (
     fine_source,
     solve_multiscale,
 )
-from hairport.solver.adaptation.options import SolveOptions
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.hair import particle_indices
 from hairport.solver.synthetic.groom import generate_groom

@@ -17,7 +17,7 @@ from hairport.solver.io.character.load import read_character
 from hairport.solver.io.external import EXTERNAL_REFERENCE, MAX_QUOTED_CHARS, external_reference, quoted
 from hairport.solver.io.hair import ReadLimits, read_hair, read_hair_bytes, recorded_units, write_hair
 from hairport.solver.io.hair.common import ReadContext
-from hairport.solver.io.usd_stage import open_stage
+from hairport.solver.io.usd.stage import open_stage
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
 from hairport.solver.synthetic import toy

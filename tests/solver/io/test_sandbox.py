@@ -26,3 +26,14 @@ def test_an_unknown_parser_is_refused_by_the_child(tmp_path):
     with pytest.raises(InputError) as caught:
         run_in_child("os", "system", "x", 1, {}, "x", "USD")
     assert caught.value.code == "too_large"  # the child exits without running anything
+
+
+def test_every_parser_the_child_may_import_is_a_module_with_one_of_its_functions():
+    import importlib
+
+    from hairport.solver.io.sandbox import FUNCTIONS, PARSERS
+
+    found = {parser: [name for name in FUNCTIONS if callable(getattr(importlib.import_module(parser), name, None))]
+             for parser in PARSERS}
+    assert found == {"hairport.solver.io.hair.sandboxed": ["strands_arrays"],
+                     "hairport.solver.io.character.usd": ["mesh_arrays"]}

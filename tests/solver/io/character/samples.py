@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import trimesh
 
-from hairport.solver.io.character.gltf_buffers import GLB_BIN_CHUNK, GLB_JSON_CHUNK, GLB_MAGIC
+from hairport.solver.io.character.gltf.buffers import GLB_BIN_CHUNK, GLB_JSON_CHUNK, GLB_MAGIC
 from hairport.solver.io.character.obj import fan_triangulate
 from tests.solver.capsule import CHAIN_HEADS, CHAIN_NAMES, CHAIN_PARENTS, CHAIN_TAILS, capsule
 

@@ -24,3 +24,12 @@ def test_strands_come_back_from_their_arrays_with_attributes(monkeypatch, tmp_pa
 def test_only_the_known_parsers_run():
     with pytest.raises(ValueError, match="unknown hair parser"):
         strands_arrays("x", "os", "x", "m", 1, 1)
+
+
+def test_every_known_hair_parser_is_a_module_with_parse_file():
+    import importlib
+
+    from hairport.solver.io.hair.sandboxed import HAIR_PARSERS
+
+    assert HAIR_PARSERS == ("hairport.solver.io.hair.usd", "hairport.solver.io.hair.alembic")
+    assert all(callable(importlib.import_module(parser).parse_file) for parser in HAIR_PARSERS)
