@@ -43,7 +43,7 @@ import time
 
 import numpy as np
 
-from hairport.solver import jit
+from hairport.solver import jit, kernels
 from hairport.solver.mesh import backends
 from hairport.solver.mesh.query import MeshQuery
 
@@ -175,7 +175,7 @@ def main():
     character = build_character(PRESETS["heavy-male"])
     vertices, faces = np.asarray(character.vertices, float), np.asarray(character.faces, np.int64)
     igl_query, bvh_query = forced(vertices, faces, "igl"), forced(vertices, faces, "bvh")
-    jit.warm_up()
+    kernels.warm_up()
     print(f"mesh: MakeHuman heavy-male, {len(faces)} faces; {jit.threads()} numba threads; "
           f"median of {args.runs} runs, methods round-robin\n")
 

@@ -55,7 +55,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from hairport import solver
-    from hairport.solver import jit
+    from hairport.solver import kernels
     from hairport.solver.adaptation.coupled import contact_qp, numpy_level
     from hairport.solver.adaptation.loop.options import SolveOptions
     from hairport.solver.adaptation.multiscale import CONTACT_BAND
@@ -80,7 +80,7 @@ def main() -> None:
                                             initial.max(axis=0) + GRID_REGION_MARGIN))
     solve_options = SolveOptions(eps_c=options.eps_c, max_iterations=options.max_iterations,
                                  step_tolerance=options.step_tolerance, energy_tolerance=options.energy_tolerance)
-    jit.warm_up()
+    kernels.warm_up()
 
     # the guides' problem exactly as solve_multiscale poses it
     model = adaptable.multiscale

@@ -52,6 +52,7 @@ def seed_job(storage: Path, particles: int, per_strand: int, folder: Path) -> st
     from hairport.records import BlobRef, JobRecord, PreprocessSettings, now
     from hairport.repository import Repository
     from hairport.service.auth import owner_of
+    from hairport.solver import display
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
     from hairport.storage import LocalStorage
@@ -59,9 +60,9 @@ def seed_job(storage: Path, particles: int, per_strand: int, folder: Path) -> st
     body = build_character(PRESETS["average-female"])
     groom = generate_groom(body, "long", particles // per_strand, per_strand, seed=0)
     hairline = {"points": [[0.07, 1.6, 0.05], [0.0, 1.65, 0.1], [-0.07, 1.6, 0.05]], "turning_points": [0, 2]}
-    scene = solver.scene_arrays(groom.points, groom.offsets, np.zeros(groom.n_particles, bool), None, body.vertices,
+    scene = display.scene_arrays(groom.points, groom.offsets, np.zeros(groom.n_particles, bool), None, body.vertices,
                                 body.faces, np.eye(3), hairline, {})
-    solver.save_scene(folder / "scene.npz", scene)
+    display.save_scene(folder / "scene.npz", scene)
     solver.write_hair(folder / "result.npz", groom, format="npz")
     repository = Repository(LocalStorage(storage))
     outputs = {}

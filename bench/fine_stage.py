@@ -84,7 +84,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES, solve_fine_level
-    from hairport.solver.jit import threads, warm_up
+    from hairport.solver.kernels import threads, warm_up
 
     warm_up()
     problem, start, body, grid, weights, options = fine_level_case(int(float(args.size)), args.guides, args.style)

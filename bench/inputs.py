@@ -17,13 +17,14 @@ import time
 
 from hairport import solver
 from hairport.solver.model.character import Character, Skeleton
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
 #: particles per strand of the grooms
 PARTICLES = 50
 #: the frame the inputs are written in
-FRAME = solver.InputFrame("mm", "z", "-y")
+FRAME = InputFrame("mm", "z", "-y")
 
 
 def in_frame(character: Character, hair: solver.Hair) -> tuple[Character, solver.Hair]:

@@ -110,7 +110,7 @@ def measure_size(size: str, solve: bool, workers: int | None) -> dict:
     import numpy as np
 
     from hairport import solver
-    from hairport.solver.jit import warm_up
+    from hairport.solver.kernels import warm_up
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 

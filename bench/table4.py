@@ -74,10 +74,12 @@ def _reset_peak() -> bool:
 def measure_size(args) -> dict:
     """One size, in this process: preprocess, multi-scale retargets, baselines."""
     from hairport import solver
+    from hairport.solver import kernels
+    from hairport.solver import options as solver_options
     from hairport.solver.synthetic.groom import generate_groom
     from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
-    warm = solver.warm_up()  # compiled kernels come from the on-disk cache, as in a warmed worker
+    warm = kernels.warm_up()  # compiled kernels come from the on-disk cache, as in a warmed worker
     strands, per_strand = groom_shape(int(float(args.one)))
     source, target = build_character(PRESETS[SOURCE]), build_character(PRESETS[TARGET])
     hair = generate_groom(source, STYLE, strands, per_strand, seed=0)
@@ -107,7 +109,7 @@ def measure_size(args) -> dict:
     fine_work = sum(sum(f.open_groups) for f in report.fine) * per_strand
 
     baselines = {}
-    for method in solver.BASELINE_METHODS:
+    for method in solver_options.BASELINE_METHODS:
         began = time.perf_counter()
         solver.retarget(adaptable, target, solver.RetargetOptions(method=f"{method}+pushout"))
         baselines[method] = time.perf_counter() - began

@@ -87,7 +87,7 @@ def add_result(outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result:
     preview : path-like, optional
         Where to write the PNG preview (source against result; Pillow, imported only then).
     flag_guides : bool
-        Write the guides the solve used as the per-strand attribute :data:`hairport.solver.GUIDE_FLAG`.
+        Write the guides the solve used as the per-strand attribute :data:`hairport.solver_options.GUIDE_FLAG`.
     """
     frame = adaptable.frame
     strands = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else result.hair

@@ -279,6 +279,10 @@ class BatchRecord(Record):
     job_ids: list[str]
 
 
+#: a batch's progress while any of its jobs has not ended: never shown as complete before it is
+MAX_PROGRESS_NOT_DONE = 0.9999
+
+
 class BatchTotals(BaseModel):
     """A batch's jobs summed: the one rule for its state, progress and end, whether the sums come from its job
     records (:meth:`of_jobs`) or from the record index."""
@@ -307,10 +311,12 @@ class BatchTotals(BaseModel):
 
     @property
     def progress(self) -> float:
-        """Mean progress of the jobs, an ended job counting 1 (rounded to 1e-4)."""
+        """Mean progress of the jobs, an ended job counting 1 (rounded to 1e-4); below 1 until the batch is done
+        (a job at progress 1 is still writing its outputs)."""
         ended = sum(self.counts.get(state, 0) for state in TERMINAL_STATES)
         total = max(1, sum(self.counts.values()))
-        return round((ended * PROGRESS_UNITS + self.progress_units) / (total * PROGRESS_UNITS), 4)
+        mean = round((ended * PROGRESS_UNITS + self.progress_units) / (total * PROGRESS_UNITS), 4)
+        return mean if self.state == BATCH_DONE else min(mean, MAX_PROGRESS_NOT_DONE)
 
     @property
     def ended_at(self) -> float | None:

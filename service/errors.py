@@ -10,8 +10,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from hairport import solver
 from hairport.messages import safe_detail
+from hairport.solver import options as solver_options
 
 from . import headers as response_headers
 
@@ -75,7 +75,7 @@ def install(app: FastAPI) -> None:
             parts.append(f"{where}: {item.get('msg')}" if where else str(item.get("msg")))
         # an option outside its range (the solver's OPTION_RANGES) has the solver's own code
         fields = {str(item.get("loc", ("",))[-1]) for item in error.errors()}
-        code = "bad_option" if fields and fields <= set(solver.OPTION_RANGES) else "invalid_request"
+        code = "bad_option" if fields and fields <= set(solver_options.OPTION_RANGES) else "invalid_request"
         return problem_response(422, code, "; ".join(parts) or "invalid request")
 
     @app.exception_handler(StarletteHTTPException)

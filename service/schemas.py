@@ -22,18 +22,20 @@ from hairport.records import (
     JobState,
     PreprocessingState,
 )
+from hairport.solver import display
+from hairport.solver import options as solver_options
 
 HairFormat = Literal[solver.HAIR_FORMATS]
 Units = Literal[solver.UNITS]
-HairlinePresetName = Literal[solver.HAIRLINE_PRESETS]
-Anchoring = Literal[solver.ANCHORINGS]
+HairlinePresetName = Literal[solver_options.HAIRLINE_PRESETS]
+Anchoring = Literal[solver_options.ANCHORINGS]
 #: the hair format of a result unless the request names one
 DEFAULT_OUTPUT_FORMAT = "data"
 #: most points of a drawn hairline accepted in a request
 MAX_CURVE_POINTS = 10_000
 _RETARGET = solver.RetargetOptions()
 _PREPROCESS = solver.PreprocessOptions()
-_HAIRLINE = solver.HairlineEdit(preset=solver.HAIRLINE_PRESETS[0])
+_HAIRLINE = solver.HairlineEdit(preset=solver_options.HAIRLINE_PRESETS[0])
 
 
 
@@ -118,8 +120,8 @@ class HairstylePage(BaseModel):
 
 def ranged(name: str, default=None):
     """A ``Field`` whose bounds and description come from the solver's range of option ``name``
-    (:data:`hairport.solver.OPTION_RANGES`): values outside it are 422 at the door."""
-    spec = solver.OPTION_RANGES[name]
+    (:data:`hairport.solver_options.OPTION_RANGES`): values outside it are 422 at the door."""
+    spec = solver_options.OPTION_RANGES[name]
     units = f" ({spec.units})" if spec.units else ""
     return Field(default, ge=spec.minimum, le=spec.maximum, allow_inf_nan=False,
                  description=f"{spec.description}{units}; {spec.text()}")
@@ -133,7 +135,7 @@ class RetargetOptionsIn(BaseModel):
 
     method: str = Field(_RETARGET.method, description=(
         "the paper's solvers (multiscale, global) or a naive baseline; a baseline may carry the suffix +pushout"),
-        json_schema_extra={"examples": list(solver.METHODS)})
+        json_schema_extra={"examples": list(solver_options.METHODS)})
     guides: int | None = ranged("guides")
     k: int | None = ranged("k")
     alpha: float = ranged("alpha", _RETARGET.alpha)
@@ -145,7 +147,7 @@ class RetargetOptionsIn(BaseModel):
     max_iterations: int = ranged("max_iterations", _RETARGET.max_iterations)
     step_tolerance: float = ranged("step_tolerance", _RETARGET.step_tolerance)
     energy_tolerance: float = ranged("energy_tolerance", _RETARGET.energy_tolerance)
-    qp_backend: Literal[solver.QP_BACKENDS] = _RETARGET.qp_backend
+    qp_backend: Literal[solver_options.QP_BACKENDS] = _RETARGET.qp_backend
 
 
 class HairlineCurveIn(BaseModel):
@@ -167,9 +169,9 @@ class HairlineIn(BaseModel):
     preset: HairlinePresetName | None = None
     amount: float = Field(_HAIRLINE.amount, ge=0.0, le=1.0, description="strength of the preset (0: no change)")
     curve: HairlineCurveIn | None = None
-    method: Literal[solver.RELOCATION_METHODS] = Field(
+    method: Literal[solver_options.RELOCATION_METHODS] = Field(
         _HAIRLINE.method, description="how the roots follow: the embedded membrane, or a Sec. 7.5 baseline")
-    parameterization: Literal[solver.PARAMETERIZATIONS] = _HAIRLINE.parameterization
+    parameterization: Literal[solver_options.PARAMETERIZATIONS] = _HAIRLINE.parameterization
 
 
 class RetargetIn(BaseModel):
@@ -181,7 +183,7 @@ class RetargetIn(BaseModel):
     hairline: HairlineIn | None = None
     output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
     flag_guides: bool = Field(False, description=f"write the guides the solve used as the per-strand attribute "
-                                                 f"{solver.GUIDE_FLAG} (1 guide, 0 other: Unreal's convention) in "
+                                                 f"{solver_options.GUIDE_FLAG} (1 guide, 0 other: Unreal's convention) in "
                                                  "formats with attributes")
 
 
@@ -199,7 +201,7 @@ DISPLAY_DESCRIPTION = (
 
 #: the OpenAPI ``responses`` entry of a display payload
 DISPLAY_RESPONSE = {200: {"description": DISPLAY_DESCRIPTION, "content": {
-    solver.DISPLAY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}}}
+    display.MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}}}
 
 
 class HairlineOut(BaseModel):
@@ -310,7 +312,7 @@ class BatchIn(BaseModel):
     hairline: HairlineIn | None = None
     items: list[BatchItemIn] = Field(default_factory=list, description="per-pair options replacing the batch's")
     output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
-    flag_guides: bool = Field(False, description=f"write the guides as the attribute {solver.GUIDE_FLAG}")
+    flag_guides: bool = Field(False, description=f"write the guides as the attribute {solver_options.GUIDE_FLAG}")
 
 
 class BatchJobOut(BaseModel):

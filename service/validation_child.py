@@ -148,10 +148,8 @@ CHECKS = {"hair": check_hair, "character": check_character}
 
 
 def prewarm() -> None:
-    """Load what a validation runs (readers, the body queries and their compiled kernels) on a tiny
+    """Run what a validation runs (readers, the body queries and their compiled kernels) on a tiny
     box with a few strands on its top, so that the first upload does not pay for it."""
-    for name in ("read_hair", "read_character", "recorded_hair_units", "flagged_guides", "ReadLimits"):
-        getattr(solver, name)
     # the BLAS library allocates its work buffer on its first product and exits the process when it
     # cannot (under the heap limit): allocated now, before the limit
     square = np.ones((BLAS_WARM_SIZE, BLAS_WARM_SIZE))

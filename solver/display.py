@@ -200,7 +200,7 @@ def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, co
         ``R`` with ``canonical = R @ groom axes`` (:attr:`~hairport.solver.model.frame.InputFrame.rotation`).
     hairline, presets : dict
         The target's current front hairline and each preset's edit of it (curve documents in meters:
-        ``points``, ``turning_points``), as :func:`~hairport.solver.pipeline.hairline_document` gives them.
+        ``points``, ``turning_points``), as :func:`~hairport.solver.documents.hairline_document` gives them.
     """
     arrays = {
         "points": np.asarray(points, dtype=np.float32), "offsets": np.asarray(offsets, dtype=np.int64),

@@ -427,10 +427,3 @@ def edit_in_canonical(frame: InputFrame, edit: HairlineEdit | None) -> HairlineE
     if edit is None or edit.curve is None or frame.is_canonical_axes:
         return edit
     return replace(edit, curve=replace(edit.curve, points=frame.axes_in(edit.curve.points)))
-
-
-def curve_document_in_frame(frame: InputFrame, document: dict) -> dict:
-    """A hairline curve document (canonical, meters) in the groom's axes and units."""
-    points = frame.axes_out(np.asarray(document["points"], dtype=np.float64)) / frame.scale
-    decimals = 7 + int(round(np.log10(frame.scale)))  # 0.1 micrometre, as the canonical document
-    return {**document, "units": frame.units, "points": np.round(points, decimals).tolist()}

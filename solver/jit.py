@@ -7,8 +7,10 @@ module's source when that folder is writable, else under ``NUMBA_CACHE_DIR`` or 
 cache folder), so only the first process on a machine pays for compilation.
 
 Each module with kernels registers one small function with :func:`warms` that calls its
-kernels on tiny inputs; :func:`warm_up` runs them all (``hairport warmup``, the worker at
-start, the Docker image build), so a user's first retarget does not wait for the compiler.
+kernels on tiny inputs; :func:`run_warmers` runs those registered. This module sits below every
+kernel and names none of them: :mod:`hairport.solver.kernels` imports every module that declares
+kernels and warms them all (``hairport warmup``, the worker at start, the Docker image build), so
+a user's first retarget does not wait for the compiler.
 
 Kernels take and return plain contiguous numpy arrays (float64 math, int64 indices); the
 numpy implementation of the same step stays beside each kernel as the tested reference.
@@ -35,8 +37,8 @@ import numba  # noqa: E402 - after the thread policy
 #: numpy references
 KERNEL_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 
-#: wall seconds :func:`warm_up` takes on an empty cache (48 s measured on a shared 2-core AMD EPYC,
-#: ``hairport warmup``, 2026-11-28): what a first run announces before it compiles
+#: wall seconds :func:`hairport.solver.kernels.warm_up` takes on an empty cache (48 s measured on a shared
+#: 2-core AMD EPYC, ``hairport warmup``, 2026-11-28): what a first run announces before it compiles
 COLD_COMPILE_SECONDS = 50.0
 
 _WARMERS: dict[str, Callable[[], None]] = {}
@@ -72,44 +74,15 @@ def parallel_kernel(function=None, **options):
 prange = numba.prange
 
 
-def warms(name: str):
-    """Register ``function()``, which calls some kernels on tiny inputs, under ``name``."""
-
-    def register(function: Callable[[], None]) -> Callable[[], None]:
-        _WARMERS[name] = function
-        return function
-
-    return register
-
-
-def _import_kernel_modules() -> None:
-    # the modules register their warmers when imported
-    import importlib
-
-    for module in KERNEL_MODULES:
-        importlib.import_module(module)
-
-
-#: modules that declare kernels (imported by :func:`warm_up`)
-KERNEL_MODULES: tuple[str, ...] = (
-    "hairport.solver.adaptation.coupled.coupled_kernels",
-    "hairport.solver.adaptation.source.kdtree",
-    "hairport.solver.adaptation.source.neighbours",
-    "hairport.solver.transfer.bone_rays",
-    "hairport.solver.transfer.smoothing",
-    "hairport.solver.mesh.bvh_build",
-    "hairport.solver.mesh.closest_kernels",
-    "hairport.solver.mesh.distance_grid",
-    "hairport.solver.adaptation.fine.band_kernels",
-    "hairport.solver.adaptation.fine.strand_kernels",
-    "hairport.solver.adaptation.fine.line_search_kernels",
-    "hairport.solver.metrics",
-)
+def warms(function: Callable[[], None]) -> Callable[[], None]:
+    """Register ``function()``, which calls its module's kernels on tiny inputs, under its module's name."""
+    _WARMERS[function.__module__] = function
+    return function
 
 
 @dataclass(frozen=True)
 class WarmUp:
-    """What :func:`warm_up` did.
+    """What :func:`run_warmers` did.
 
     Attributes
     ----------
@@ -135,18 +108,17 @@ def _cache_counts() -> tuple[int, int]:
     return compiled, loaded
 
 
-def uncached_kernels() -> tuple[int, int]:
-    """How many declared kernels have no machine code in numba's on-disk cache for their current
-    source (the ones the next calls compile), and how many are declared.
+def count_uncached() -> tuple[int, int]:
+    """How many kernels declared so far have no machine code in numba's on-disk cache for their
+    current source (the ones the next calls compile), and how many are declared.
 
-    Imports the kernel modules and reads the cache's index files only (milliseconds). A kernel no
-    warmer calls stays uncached after :func:`warm_up`: callers compare with a share of the total.
+    Reads the cache's index files only (milliseconds). A kernel no warmer calls stays uncached
+    after :func:`run_warmers`: callers compare with a share of the total.
 
     Returns
     -------
     uncached, declared : int
     """
-    _import_kernel_modules()
     return sum(1 for dispatcher in _KERNELS if not _cached(dispatcher)), len(_KERNELS)
 
 
@@ -159,9 +131,9 @@ def _cached(dispatcher) -> bool:
         return True  # unknown: no false alarm
 
 
-def warm_up() -> WarmUp:
-    """Compile (or load from the on-disk cache) every registered kernel."""
-    _import_kernel_modules()
+def run_warmers() -> WarmUp:
+    """Compile (or load from the on-disk cache) the kernels of every module imported so far, by its
+    registered warmer (:mod:`hairport.solver.kernels` imports them all)."""
     seconds = {}
     for name, function in sorted(_WARMERS.items()):
         began = time.perf_counter()

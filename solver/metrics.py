@@ -152,7 +152,7 @@ def _residual_norms(index, weight, points, source_points, norms):
         norms[i] = np.sqrt(x * x + y * y + z * z)
 
 
-@warms("metrics")
+@warms
 def _warm() -> None:
     for dtype in (np.int32, np.int64):
         _residual_norms(np.zeros((1, 2), dtype), np.ones((1, 2)), np.ones((1, 3)), np.zeros((1, 3)), np.empty(1))

@@ -1,4 +1,10 @@
-"""The options of the two stages, with their defaults and ranges (Table 1, meters): the one place they are defined."""
+"""The options of the two stages, with their defaults and ranges (Table 1, meters): the one place they are defined.
+
+A public module of the solver (``from hairport.solver import options``): besides the two option sets, it
+names every choice an option takes (methods, anchorings, QP back-ends, hairline presets, relocation
+methods, parameterizations, the guide flag's attribute name), which the command line and the API's
+schemas list.
+"""
 
 from __future__ import annotations
 
@@ -8,19 +14,27 @@ import numpy as np
 
 from hairport.solver.adaptation.multiscale import DEFAULT_CHUNK_PARTICLES
 from hairport.solver.adaptation.problem.energies import EnergyWeights
+from hairport.solver.adaptation.problem.spacing import EVEN_SPACING_WEIGHT as EVEN_SPACING_WEIGHT
 from hairport.solver.adaptation.problem.spacing import SPACING_BAND, SPACING_WEIGHT
-from hairport.solver.adaptation.solve import QP_BACKENDS
+from hairport.solver.adaptation.solve import QP_BACKENDS as QP_BACKENDS
+from hairport.solver.adaptation.source.guide_flags import GUIDE_FLAG as GUIDE_FLAG
 from hairport.solver.adaptation.source.guides import DEFAULT_GUIDES
 from hairport.solver.baselines import BASELINE_METHODS, parse_method
+from hairport.solver.hairline.edit import RELOCATION_METHODS as RELOCATION_METHODS
 from hairport.solver.hairline.edit import HairlineEdit
+from hairport.solver.hairline.presets import PRESETS
+from hairport.solver.mesh.parameterization import PARAMETERIZATIONS as PARAMETERIZATIONS
 from hairport.solver.model.errors import InputError
 from hairport.solver.transfer.anchors import ANCHOR_AUTO, ANCHOR_SIGMA, ANCHORINGS
+from hairport.solver.transfer.anchors import ANCHOR_BY_BONES as ANCHOR_BY_BONES
 from hairport.solver.transfer.carry import CARRY_LENGTH_M
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS
 
 #: the shape-adaptation solvers: guides then independent strands (Sec. 5), or all strands coupled
 SOLVER_METHODS = ("multiscale", "global")
 METHODS = SOLVER_METHODS + BASELINE_METHODS
+#: the named edits of the front hairline (``hairline.preset``)
+HAIRLINE_PRESETS = PRESETS
 
 
 #: the solvers stop a strand (or the coupled guides) once an iteration lowers Eq. 1 by less

@@ -12,7 +12,6 @@ roots' metrics against its whole mesh.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -21,29 +20,22 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
-from hairport.solver.adaptation.fine.fine_chunks import FineInputs, chunk_problem
 from hairport.solver.adaptation.loop.options import SolveOptions, SolveReport
 from hairport.solver.adaptation.multiscale import (
-    CONTACT_BAND,
     FineRunner,
     MultiscaleReport,
     multiscale_model,
     solve_here,
     solve_multiscale,
 )
-from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.problem.energies import EnergyWeights
-from hairport.solver.adaptation.solve import solve_hairstyle, solve_strands
+from hairport.solver.adaptation.solve import solve_hairstyle
 from hairport.solver.adaptation.source.guide_flags import flagged_guides
 from hairport.solver.adaptation.source.guides import select_guides
 from hairport.solver.baselines import parse_method, retarget_baseline
 from hairport.solver.body.target import prepare_target
-from hairport.solver.display import scene_arrays
-from hairport.solver.hairline.curve import HairlineCurve
 from hairport.solver.hairline.edit import HairlineEdit
-from hairport.solver.hairline.presets import PRESETS as HAIRLINE_PRESETS
-from hairport.solver.hairline.presets import parse_preset
-from hairport.solver.hairline.relocation import Relocation, edit_curve, relocate_roots, scalp_chart
+from hairport.solver.hairline.relocation import Relocation, relocate_roots
 from hairport.solver.hairline.weights import adaptive_weights
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
@@ -52,7 +44,6 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.metrics import hairstyle_metrics, penetration
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import require_no_stray_strands
-from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import DEGENERATE_SEGMENT_M, Hair, require_hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
@@ -195,8 +186,8 @@ def retarget(
         What :func:`~hairport.solver.inputs.canonical_target` found; with the hairstyle's own
         it makes the metrics' ``input`` section.
     fine_runner : FineRunner
-        Solves the multi-scale fine level (in this process by default; :func:`solve_fine_chunk`
-        solves a run of its strands in another).
+        Solves the multi-scale fine level (in this process by default;
+        :func:`hairport.solver.distributed.solve_fine_chunk` solves a run of its strands in another).
     collision_surface : (F,) bool, optional
         The target's :func:`~hairport.solver.mesh.collision.collision_faces`, kept from an earlier
         build (a per-target cache); built here when omitted.
@@ -333,50 +324,6 @@ def grid_region(initial: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return initial.min(axis=0) - GRID_REGION_MARGIN, initial.max(axis=0) + GRID_REGION_MARGIN
 
 
-def solve_fine_chunk(
-    adaptable: AdaptableHairstyle,
-    target: Character,
-    options: RetargetOptions,
-    inputs: FineInputs,
-    first: int,
-    stop: int,
-    progress: ProgressFn | None = None,
-    should_stop: Callable[[], bool] | None = None,
-    collision_surface: np.ndarray | None = None,
-) -> tuple[np.ndarray, SolveReport]:
-    """Solve the normal strands ``first .. stop - 1`` of a multi-scale retarget's fine level in this
-    process, as :func:`retarget` with the same ``adaptable``, ``target`` and ``options`` would have
-    (bit for bit): the chunk a :data:`FineRunner` handed to another process.
-
-    Parameters
-    ----------
-    inputs : FineInputs
-        The retarget's :attr:`FineLevel.inputs <.multiscale.FineLevel.inputs>` (its adapted guides).
-    first, stop : int
-        Indices into the normal strands (the hairstyle's strands that are not guides, in order).
-    collision_surface : (F,) bool, optional
-        As for :func:`retarget`.
-
-    Returns
-    -------
-    points : (n, 3) float64
-        The chunk's particles.
-    report : SolveReport
-    """
-    options.validate()
-    fine = adaptable.fine_source
-    if not 0 <= first < stop <= len(fine.strands):
-        raise InputError(f"strands {first}..{stop} are not a run of the {len(fine.strands)} normal strands",
-                         code="bad_fine_chunk")
-    target = prepare_target(adaptable, target)
-    body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
-    grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
-    problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,
-                                   fine, inputs, first, stop, spacing=bool(options.spacing))
-    return solve_strands(problem, BodyDistance(body, CONTACT_BAND, grid), options.energy_weights(),
-                         shape_solve_options(options), start=start, progress=progress, should_stop=should_stop)
-
-
 def relocate_hairline(
     adaptable: AdaptableHairstyle, target: Character, initial: np.ndarray, roots: np.ndarray, edit: HairlineEdit
 ) -> tuple[Relocation, np.ndarray, np.ndarray]:
@@ -408,49 +355,6 @@ def relocate_hairline(
     start = initial + (1.0 - gamma)[:, None] * shift
     start[hair.roots] = relocation.roots
     return relocation, hair.place_at_roots(start), gamma
-
-
-def hairline_document(adaptable: AdaptableHairstyle, target: Character, preset: str | None = None,
-                      parameterization: str = "harmonic") -> dict:
-    """The target's current front hairline (or a preset's edit of it) as a curve document,
-    ``{"units": "m", "points": [[x, y, z], ...], "turning_points": [...]}``, ready to be
-    edited and passed back as a hairline curve (same ends, same turning points)."""
-    return hairline_documents(adaptable, target, (preset,), parameterization)[preset]
-
-
-def hairline_documents(adaptable: AdaptableHairstyle, target: Character, presets: tuple[str | None, ...],
-                       parameterization: str = "harmonic") -> dict[str | None, dict]:
-    """:func:`hairline_document` for several presets (None: the current hairline), the scalp chart built once."""
-    target = prepare_target(adaptable, target)
-    roots = adaptable.hair.roots
-    setup = scalp_chart(target, adaptable.anchors.face[roots], parameterization)
-    documents = {}
-    for preset in presets:
-        if preset is None:
-            curve = HairlineCurve(setup.rest[setup.front], setup.turning)
-        else:
-            name, amount = parse_preset(preset)
-            curve = edit_curve(setup, HairlineEdit(preset=name, amount=amount))
-        documents[preset] = {"units": "m", "points": np.round(curve.points, 7).tolist(),
-                             "turning_points": np.asarray(curve.turning_points).tolist()}
-    return documents
-
-
-def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> dict[str, np.ndarray]:
-    """What the dashboard draws of a retarget (:func:`~hairport.solver.display.scene_arrays`): the result, its
-    particles inside the body, the target, and the target's current front hairline with every preset's edit of
-    it (left out, with the reason in ``meta``, when the groom has no front hairline to find)."""
-    inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
-    try:
-        documents = hairline_documents(adaptable, target, (None, *HAIRLINE_PRESETS))
-        hairline, hairline_error = documents.pop(None), None
-    except InputError as error:
-        documents, hairline, hairline_error = {}, {"points": [], "turning_points": []}, error.problem
-    arrays = scene_arrays(result.hair.points, result.hair.offsets, inside, result.hair.color, target.vertices,
-                          target.faces, adaptable.frame.rotation, hairline, documents)
-    meta = {"groom_units": adaptable.frame.units, "hairline_error": hairline_error}
-    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    return arrays
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:

@@ -37,11 +37,7 @@ TESTED_ELSEWHERE = {
 MAX_FUNCTION_LINES = 80
 #: the functions over MAX_FUNCTION_LINES, each with why it stays whole for now: ``path::qualname``, the
 #: path a module or a folder (any module under it)
-LONG_FUNCTIONS = {
-    "solver/adaptation::solve_shape_adaptation": "the coupled SQP loop on OSQP (Eq. 1 under Eq. 12-13): the "
-    "QP, the line search and the stopping tests share one iteration's state; solver/adaptation/ is being "
-    "re-laid out, and this loop with it",
-}
+LONG_FUNCTIONS: dict[str, str] = {}
 
 
 def modules_with_code():

@@ -4,7 +4,7 @@ The job's own run solves everything up to the guides (the coarse level), then ha
 fine level (Eq. 14: the normal strands, independent once the guides are adapted) to
 :class:`SpreadFineLevel`. When the level is larger than ``Settings.fine_chunk_particles``,
 it splits the normal strands into chunks of whole strands (:func:`plan_chunks`), saves the
-level's inputs (:class:`hairport.solver.FineInputs`) in a scratch folder of the shared
+level's inputs (:class:`hairport.distributed.FineInputs`) in a scratch folder of the shared
 storage, lists the chunks in the job's record (``fine``) and sends one ``fine`` task per
 chunk. A worker's task claims its chunk under the job record's lock, rebuilds the chunk's
 problem from the artifact, the target and those inputs (the same rows as the job's run
@@ -56,6 +56,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import distributed
 
 from . import bodies
 from .loading import error_info, job_inputs
@@ -89,7 +90,7 @@ def plan_chunks(counts: np.ndarray, chunk_particles: int, max_chunks: int) -> li
     that would make more than ``max_chunks``); ``counts : (R,) int`` particles per normal strand."""
     total = int(np.sum(counts))
     size = max(int(chunk_particles), math.ceil(total / max(1, int(max_chunks))))
-    return [(int(run[0]), int(run[-1]) + 1) for run in solver.chunk_strands(np.asarray(counts), size)]
+    return [(int(run[0]), int(run[-1]) + 1) for run in distributed.chunk_strands(np.asarray(counts), size)]
 
 
 def scratch_folder(repository: Repository, job_id: str, run_token: str | None = None) -> Path:
@@ -111,7 +112,7 @@ def _save_atomic(path: Path, write: Callable[[Path], None]) -> None:
         partial.unlink(missing_ok=True)
 
 
-def save_chunk_result(path: Path, points: np.ndarray, report: solver.SolveReport) -> None:
+def save_chunk_result(path: Path, points: np.ndarray, report: distributed.SolveReport) -> None:
     """A chunk's points ``(n, 3) float64`` and its solver report, as one ``.npz`` (atomically)."""
     document = json.dumps(asdict(report), default=json_default)
 
@@ -122,12 +123,12 @@ def save_chunk_result(path: Path, points: np.ndarray, report: solver.SolveReport
     _save_atomic(path, write)
 
 
-def load_chunk_result(path: Path, particles: int) -> tuple[np.ndarray, solver.SolveReport]:
+def load_chunk_result(path: Path, particles: int) -> tuple[np.ndarray, distributed.SolveReport]:
     with np.load(path, allow_pickle=False) as archive:
         points, document = np.asarray(archive["points"], dtype=np.float64), str(archive["report"])
     if points.shape != (particles, 3):
         raise ChunkFailed(f"chunk result {path.name} holds {points.shape} points, not ({particles}, 3)")
-    return points, solver.SolveReport(**json.loads(document))
+    return points, distributed.SolveReport(**json.loads(document))
 
 
 class ChunkClaim:
@@ -250,10 +251,10 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
                 raise solver.InputError("the hairstyle's artifact is gone", code="gone")
             adaptable, target, _ = job_inputs(repository, settings, job, artifact)
             folder = scratch_folder(repository, job_id, run_token)
-            inputs = solver.FineInputs.load(folder / INPUTS_FILE, adaptable.hair, adaptable.multiscale.guides)
+            inputs = distributed.FineInputs.load(folder / INPUTS_FILE, adaptable.hair, adaptable.multiscale.guides)
             options = solver.RetargetOptions(**job.options)
             surface, _ = bodies.collision_surface(repository, settings, target)
-            points, report = solver.solve_fine_chunk(adaptable, target, options, inputs, chunk.first_strand,
+            points, report = distributed.solve_fine_chunk(adaptable, target, options, inputs, chunk.first_strand,
                                                      chunk.stop_strand, progress, progress.should_stop,
                                                      collision_surface=surface)
             save_chunk_result(chunk_file(folder, index), points, report)
@@ -274,7 +275,7 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
 
 
 class SpreadFineLevel:
-    """A :data:`hairport.solver.FineRunner` for a job's run: its fine level over the ``fine`` queue's workers
+    """A :data:`hairport.distributed.FineRunner` for a job's run: its fine level over the ``fine`` queue's workers
     and itself (see the module docstring); in this process alone when the level is small or there is no
     queue to send to."""
 
@@ -283,12 +284,12 @@ class SpreadFineLevel:
         self.repository, self.settings, self.job_id, self.run = repository, settings, job_id, run
         self.worker, self.dispatch = worker, dispatch
 
-    def __call__(self, level: solver.FineLevel, progress: solver.ProgressFn | None,
-                 should_stop: Callable[[], bool] | None) -> tuple[np.ndarray, list[solver.SolveReport], int]:
+    def __call__(self, level: distributed.FineLevel, progress: solver.ProgressFn | None,
+                 should_stop: Callable[[], bool] | None) -> tuple[np.ndarray, list[distributed.SolveReport], int]:
         counts = level.counts
         plan = plan_chunks(counts, self.settings.fine_chunk_particles, self.settings.max_fine_chunks)
         if len(plan) < 2 or self.dispatch is None:
-            return solver.solve_here(level, progress, should_stop)
+            return distributed.solve_here(level, progress, should_stop)
         token = self.run.token
         shutil.rmtree(scratch_folder(self.repository, self.job_id), ignore_errors=True)  # earlier, dead runs'
         folder = scratch_folder(self.repository, self.job_id, token)
@@ -311,7 +312,7 @@ class SpreadFineLevel:
                 self.dispatch.send(self.job_id, token, chunk.index, chunk.task_id)
             except Exception as error:  # noqa: BLE001 - an unsent chunk is solved here
                 log.warning("job %s: chunk %d not sent (%s): this run solves it", self.job_id, chunk.index, error)
-        results: dict[int, tuple[np.ndarray, solver.SolveReport]] = {}
+        results: dict[int, tuple[np.ndarray, distributed.SolveReport]] = {}
         total = float(counts.sum())
         while len(results) < len(chunks):
             if should_stop is not None and should_stop():
@@ -331,7 +332,7 @@ class SpreadFineLevel:
             done = sum(chunk.particles for chunk in current if chunk.index in results)
             running = sum(chunk.particles * chunk.progress for chunk in current
                           if chunk.state == CHUNK_RUNNING and chunk.index not in results)
-            progress(solver.SOLVE_STAGE, (done + running) / total,
+            progress(distributed.SOLVE_STAGE, (done + running) / total,
                      f"strands: {len(results)} of {len(chunks)} chunks done")
             free = [chunk for chunk in current if chunk.index not in results and (
                 chunk.state == CHUNK_QUEUED or chunk_gone(chunk, self.settings))]
@@ -354,12 +355,12 @@ class SpreadFineLevel:
 
         def report(stage: str, fraction: float, message: str) -> None:
             chunk_progress(stage, fraction, message)
-            progress(solver.SOLVE_STAGE, (before + chunk.particles * fraction) / total,
+            progress(distributed.SOLVE_STAGE, (before + chunk.particles * fraction) / total,
                      f"strands: {len(results)} chunks done, chunk {chunk.index} here: {message}")
 
         began = time.perf_counter()
         with Heartbeat(claim.beat, self.settings.heartbeat_seconds):
-            results[chunk.index] = solver.solve_level_run(level, chunk.first_strand, chunk.stop_strand, report,
+            results[chunk.index] = distributed.solve_level_run(level, chunk.first_strand, chunk.stop_strand, report,
                                                           should_stop)
         claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began,
                     solve_seconds=results[chunk.index][1].seconds)

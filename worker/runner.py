@@ -38,6 +38,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import display, documents
 from hairport.storage import Blob, retention_seconds
 
 from . import bodies
@@ -233,7 +234,7 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
             written.commit()
         for name, path in files.items():
             outputs[name] = stored(storage.save_file(path, path.suffix), path.suffix)
-        path = solver.save_scene(work / "scene.npz", solver.display_scene(adaptable, result, target))
+        path = display.save_scene(work / "scene.npz", documents.display_scene(adaptable, result, target))
         outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
     return outputs, result
 

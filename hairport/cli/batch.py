@@ -16,6 +16,7 @@ from hairport import solver
 from hairport.outputs import OutputSet, add_result
 from hairport.settings import get_settings
 from hairport.solver import InputError
+from hairport.solver import options as solver_options
 
 from .common import EXIT_BAD_INPUT, add_units, axes, load_source, mesh_limits, mesh_units, option_help, option_type
 from .solve import _DEFAULTS, add_hairline_arguments, hairline_edit
@@ -42,13 +43,13 @@ def add_batch(sub) -> None:
     p.add_argument("--k", type=option_type("k"), default=solver.PreprocessOptions.k, help=option_help("k"))
     add_units(p)
     p.add_argument("--method", default=_DEFAULTS.method,
-                   help=f"one of {', '.join(solver.METHODS)}; baselines accept the suffix +pushout "
+                   help=f"one of {', '.join(solver_options.METHODS)}; baselines accept the suffix +pushout "
                         f"(default: {_DEFAULTS.method})")
     p.add_argument("--max-iterations", type=option_type("max_iterations"), default=_DEFAULTS.max_iterations,
                    help=option_help("max_iterations"))
     p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
                    help=option_help("energy_tolerance"))
-    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
+    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver_options.EVEN_SPACING_WEIGHT:g} keeps "
                                                  "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
@@ -104,7 +105,7 @@ def _load_grooms(args: argparse.Namespace, settings, bar: ProgressBar) -> list[G
     for path in args.adaptable:
         bar.note(f"reading {path}")
         grooms.append(Groom(Path(path).stem, solver.load_adaptable(path)))
-    options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides)
+    options = solver.PreprocessOptions(k=args.k, guides=solver_options.DEFAULT_GUIDES if args.guides is None else args.guides)
     options.validate()
     for source_path, hair_path in args.groom:
         bar.note(f"preprocessing {hair_path}")

@@ -8,6 +8,7 @@ import time
 
 from hairport import solver
 from hairport.solver import InputError
+from hairport.solver import options as solver_options
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILURE = 1
@@ -38,8 +39,8 @@ class StageProgress:
 
 def option_type(name: str):
     """An argparse ``type`` for option ``name``: parses it and checks the solver's range
-    (:data:`hairport.solver.OPTION_RANGES`); argparse exits 2 naming the option and its range."""
-    spec = solver.OPTION_RANGES[name]
+    (:data:`hairport.solver_options.OPTION_RANGES`); argparse exits 2 naming the option and its range."""
+    spec = solver_options.OPTION_RANGES[name]
 
     def parse(text: str):
         try:
@@ -58,7 +59,7 @@ def option_type(name: str):
 
 
 def option_help(name: str, note: str = "") -> str:
-    spec = solver.OPTION_RANGES[name]
+    spec = solver_options.OPTION_RANGES[name]
     return f"{spec.description}, {spec.text()}" + (f"; {note}" if note else "")
 
 
@@ -72,11 +73,11 @@ def add_source_arguments(p: argparse.ArgumentParser, required: bool) -> None:
     p.add_argument("--guides", type=option_type("guides"), default=None,
                    help=option_help("guides", "default 300, or every strand if fewer"))
     p.add_argument("--guides-from", metavar="ATTRIBUTE", default=None,
-                   help=f"take as guides the strands this per-strand attribute flags (e.g. {solver.GUIDE_FLAG} of an "
+                   help=f"take as guides the strands this per-strand attribute flags (e.g. {solver_options.GUIDE_FLAG} of an "
                         "Unreal groom) instead of selecting --guides of them"),
     p.add_argument("--k", type=option_type("k"), default=solver.PreprocessOptions.k,
                    help=option_help("k"))
-    p.add_argument("--anchoring", default=solver.PreprocessOptions.anchoring, choices=solver.ANCHORINGS,
+    p.add_argument("--anchoring", default=solver.PreprocessOptions.anchoring, choices=solver_options.ANCHORINGS,
                    help="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
                         "when the source has a skeleton with skin weights, else the surface)")
 
@@ -98,7 +99,7 @@ def add_units(p: argparse.ArgumentParser) -> None:
 def preprocess_options(args: argparse.Namespace) -> solver.PreprocessOptions:
     if args.guides_from is not None and args.guides is not None:
         raise InputError("give --guides or --guides-from, not both", code="bad_option")
-    options = solver.PreprocessOptions(k=args.k, guides=solver.DEFAULT_GUIDES if args.guides is None else args.guides,
+    options = solver.PreprocessOptions(k=args.k, guides=solver_options.DEFAULT_GUIDES if args.guides is None else args.guides,
                                        anchoring=args.anchoring, guides_from=args.guides_from)
     options.validate()
     return options

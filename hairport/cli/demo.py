@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 from hairport import solver
 from hairport.outputs import OutputSet
-from hairport.solver import InputError
+from hairport.solver import InputError, kernels
 
 from .common import StageProgress
 
@@ -213,13 +213,13 @@ def announce_assets() -> None:
 def compile_kernels_once() -> None:
     """Compile the solver's kernels first when numba's cache lacks them, having said so (first run only);
     a warm cache is left to load lazily."""
-    uncached, declared = solver.uncached_kernels()
-    estimate = solver.COLD_COMPILE_SECONDS * uncached / max(declared, 1)
+    uncached, declared = kernels.uncached_kernels()
+    estimate = kernels.COLD_COMPILE_SECONDS * uncached / max(declared, 1)
     if estimate < COMPILE_NOTICE_SECONDS:
         return
     notice(f"compiling the solver's kernels once (about {estimate:.0f} s; later runs load them from numba's cache, "
            "and `hairport warmup` does this ahead)")
-    done = solver.warm_up()
+    done = kernels.warm_up()
     notice(f"compiled {done.compiled} kernel signatures in {sum(done.seconds.values()):.0f} s")
 
 

@@ -93,9 +93,9 @@ def add_warmup(sub) -> None:
 
 
 def cmd_warmup(args: argparse.Namespace) -> int:
-    from hairport import solver
+    from hairport.solver import kernels
 
-    done = solver.warm_up()
+    done = kernels.warm_up()
     for name, seconds in sorted(done.seconds.items()):
         print(f"{name}: {seconds:.2f} s")
     print(f"{done.kernels} kernels: {done.compiled} signatures compiled, {done.loaded} loaded from the cache, "

@@ -8,7 +8,8 @@ from dataclasses import replace
 from hairport import solver
 from hairport.outputs import OutputSet, add_result
 from hairport.settings import get_settings
-from hairport.solver import InputError
+from hairport.solver import InputError, documents
+from hairport.solver import options as solver_options
 
 from .common import (
     StageProgress,
@@ -43,17 +44,17 @@ def add_retarget(sub) -> None:
     p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
     p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
     p.add_argument("--method", default=_DEFAULTS.method,
-                   help=f"one of {', '.join(solver.METHODS)}; baselines accept the suffix +pushout "
+                   help=f"one of {', '.join(solver_options.METHODS)}; baselines accept the suffix +pushout "
                         f"(default: {_DEFAULTS.method})")
     p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
     p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
     p.add_argument("--flag-guides", action="store_true",
-                   help=f"write the guides the solve used as the per-strand attribute {solver.GUIDE_FLAG} "
+                   help=f"write the guides the solve used as the per-strand attribute {solver_options.GUIDE_FLAG} "
                         "(1 guide, 0 other; Unreal's convention)")
     add_units(p)
     p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
-    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver.EVEN_SPACING_WEIGHT:g} keeps "
+    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver_options.EVEN_SPACING_WEIGHT:g} keeps "
                                                  "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
@@ -62,7 +63,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--energy-tolerance", type=option_type("energy_tolerance"), default=_DEFAULTS.energy_tolerance,
                    help=option_help("energy_tolerance", "0 runs every strand to the step tolerance or the cap"))
     p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: 1, this process on its threads"))
-    p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver.QP_BACKENDS,
+    p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver_options.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
     add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -72,15 +73,15 @@ def add_retarget(sub) -> None:
 def add_hairline_arguments(p: argparse.ArgumentParser) -> None:
     edit = p.add_mutually_exclusive_group()
     edit.add_argument("--hairline", metavar="PRESET[:AMOUNT]",
-                      help=f"edit the front hairline: one of {', '.join(solver.HAIRLINE_PRESETS)}, "
+                      help=f"edit the front hairline: one of {', '.join(solver_options.HAIRLINE_PRESETS)}, "
                            "amount in [0, 1] (default 1)")
     edit.add_argument("--hairline-curve", metavar="FILE.json",
                       help='edit the front hairline to a drawn curve: {"units": "m", "points": [[x, y, z], ...], '
                            '"turning_points": [i, ...]} (see `hairport hairline`)')
-    p.add_argument("--hairline-method", default=solver.HairlineEdit.method, choices=solver.RELOCATION_METHODS,
+    p.add_argument("--hairline-method", default=solver.HairlineEdit.method, choices=solver_options.RELOCATION_METHODS,
                    help="how the roots follow the hairline: the embedded membrane (default) or a baseline")
     p.add_argument("--parameterization", default=solver.HairlineEdit.parameterization,
-                   choices=solver.PARAMETERIZATIONS,
+                   choices=solver_options.PARAMETERIZATIONS,
                    help=f"head parameterization the scalp moves in (default {solver.HairlineEdit.parameterization})")
 
 
@@ -171,7 +172,7 @@ def cmd_hairline(args: argparse.Namespace) -> int:
     adaptable, _ = adaptable_from_args(args, settings, progress)
     target, _ = load_target(args, settings, adaptable, progress)
     # written in the groom's axes and units, as the result of a retarget (and read back so)
-    document = solver.curve_document_in_frame(adaptable.frame, solver.hairline_document(adaptable, target,
+    document = documents.curve_document_in_frame(adaptable.frame, documents.hairline_document(adaptable, target,
                                                                                           args.preset))
     with OutputSet() as outputs:
         outputs.add_json(args.out, document)

@@ -6,8 +6,8 @@ from typing import Annotated
 
 from fastapi import APIRouter, File, Form, Response
 
-from hairport import solver
 from hairport.records import CharacterRecord
+from hairport.solver import display as wire
 
 from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedCharacter, PageLimit, PageOffset, RepositoryDep, SettingsDep
@@ -52,7 +52,7 @@ def list_characters(owner: Owner, repository: RepositoryDep, limit: PageLimit = 
 @router.get("/{character_id}/mesh", summary="The character's mesh for drawing (its own units and axes)",
             response_class=Response, responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 410, 422)})
 def get_mesh(repository: RepositoryDep, settings: SettingsDep, character: OwnedCharacter):
-    return Response(display.character_mesh(repository, settings, character), media_type=solver.DISPLAY_MEDIA_TYPE)
+    return Response(display.character_mesh(repository, settings, character), media_type=wire.MEDIA_TYPE)
 
 
 @router.get("/{character_id}", response_model=CharacterOut, summary="A character",

@@ -8,6 +8,7 @@ from fastapi import APIRouter, File, Form
 
 from hairport import solver
 from hairport.records import HairstyleRecord
+from hairport.solver import options as solver_options
 
 from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedHairstyle, PageLimit, PageOffset, QueueDep, RepositoryDep, SettingsDep
@@ -21,7 +22,7 @@ router = APIRouter(prefix="/v1/hairstyles", tags=["hairstyles"])
 
 def ranged_form(name: str, note: str = ""):
     """A form field bounded by the solver's range of option ``name`` (422 outside it)."""
-    spec = solver.OPTION_RANGES[name]
+    spec = solver_options.OPTION_RANGES[name]
     return Form(ge=spec.minimum, le=spec.maximum,
                 description=f"{spec.description}; {spec.text()}" + (f" ({note})" if note else ""))
 _DEFAULTS = solver.PreprocessOptions()
@@ -43,7 +44,7 @@ async def create_hairstyle(
     units: Annotated[str, Form(description="units of the hair file (default auto: those a .npz records, else "
                                            "inferred from where its roots sit on the source character)",
                                            json_schema_extra=UNITS_ENUM)] = "auto",
-    guides: Annotated[int | None, ranged_form("guides", f"default {solver.DEFAULT_GUIDES}")] = None,
+    guides: Annotated[int | None, ranged_form("guides", f"default {solver_options.DEFAULT_GUIDES}")] = None,
     k: Annotated[int, ranged_form("k")] = _DEFAULTS.k,
     anchoring: Annotated[Anchoring, Form(
         description="anchor particles to the source's bones (Eq. 2) or to its surface (default auto: the bones "
@@ -52,7 +53,7 @@ async def create_hairstyle(
         description="USD or Alembic hair: read only the curves prim or object of this name or path (default: all); "
                     "other formats refuse it", min_length=1, max_length=MAX_PRIM_CHARACTERS)] = None,
     guides_from: Annotated[str | None, Form(
-        description=f"take as guides the strands this per-strand attribute flags (e.g. {solver.GUIDE_FLAG} of an "
+        description=f"take as guides the strands this per-strand attribute flags (e.g. {solver_options.GUIDE_FLAG} of an "
                     "Unreal groom) instead of selecting `guides` of them", min_length=1,
         max_length=MAX_ATTRIBUTE_NAME)] = None,
 ) -> HairstyleOut:

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Response
 from fastapi.responses import FileResponse
 
-from hairport import solver
+from hairport.solver import display as wire
 
 from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedJob, PageLimit, PageOffset, QueueDep, RepositoryDep
@@ -29,7 +29,7 @@ from ..services import display, jobs
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 #: most strands a display request may name: each strand drawn is at least its root and its tip, and a display
 #: holds at most MAX_DISPLAY_VERTICES vertices
-MAX_DISPLAY_STRANDS = solver.MAX_DISPLAY_VERTICES // 2
+MAX_DISPLAY_STRANDS = wire.MAX_DISPLAY_VERTICES // 2
 
 
 @router.get("", response_model=JobPage, summary="The caller's jobs, newest first",
@@ -84,19 +84,19 @@ def get_display(
                      ] = "result",
     strands: Annotated[int | None, Query(ge=1, le=MAX_DISPLAY_STRANDS, description=(
         "strands drawn, spread over the groom (default: as many as the vertex budget allows)"))] = None,
-    stride: Annotated[int | None, Query(ge=1, le=solver.MAX_DISPLAY_STRIDE, description=(
+    stride: Annotated[int | None, Query(ge=1, le=wire.MAX_STRIDE, description=(
         "every stride-th particle of a strand, and its tip (default: the smallest that fits the budget)"))] = None,
-    max_vertices: Annotated[int, Query(ge=1, le=solver.MAX_DISPLAY_VERTICES, description=(
-        "the vertex budget when strands or stride is left out"))] = solver.DEFAULT_DISPLAY_VERTICES,
+    max_vertices: Annotated[int, Query(ge=1, le=wire.MAX_DISPLAY_VERTICES, description=(
+        "the vertex budget when strands or stride is left out"))] = wire.DEFAULT_DISPLAY_VERTICES,
 ):
     return Response(display.strands(repository, job, layer, strands, stride, max_vertices),
-                    media_type=solver.DISPLAY_MEDIA_TYPE)
+                    media_type=wire.MEDIA_TYPE)
 
 
 @router.get("/{job_id}/body", summary="The target (as solved) or source body, for drawing", response_class=Response,
             responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
 def get_body(repository: RepositoryDep, job: OwnedJob, layer: BodyLayer = "target"):
-    return Response(display.body(repository, job, layer), media_type=solver.DISPLAY_MEDIA_TYPE)
+    return Response(display.body(repository, job, layer), media_type=wire.MEDIA_TYPE)
 
 
 @router.get("/{job_id}/hairline", response_model=HairlineOut,

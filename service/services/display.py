@@ -12,6 +12,8 @@ from hairport import solver
 from hairport.records import BlobRef, CharacterRecord, JobRecord
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import display, documents
+from hairport.solver import options as solver_options
 
 from ..errors import Problem
 from ..uploads import input_problem
@@ -23,12 +25,12 @@ SCENES_KEPT = 4
 
 @lru_cache(maxsize=SCENES_KEPT)
 def _scene(path: str, names: tuple[str, ...] | None) -> dict[str, np.ndarray]:
-    return solver.load_scene(path, names)
+    return display.load_scene(path, names)
 
 
 @lru_cache(maxsize=SCENES_KEPT)
 def _source_scene(path: str) -> dict[str, np.ndarray]:
-    return solver.source_scene(path)
+    return documents.source_scene(path)
 
 
 def _blob(repository: Repository, ref: BlobRef) -> Path:
@@ -68,10 +70,10 @@ def strands(repository: Repository, job: JobRecord, layer: str, strand_count: in
     """The job's ``layer`` strands, decimated (422 for a plan over the display limits)."""
     arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "color"))
     try:
-        strand_ids, stride = solver.plan_display(arrays["offsets"], max_vertices, strand_count, stride)
+        strand_ids, stride = display.plan_display(arrays["offsets"], max_vertices, strand_count, stride)
     except solver.InputError as error:
         raise input_problem(error, "strands") from None
-    return solver.strands_payload(arrays, strand_ids, stride, layer)
+    return display.strands_payload(arrays, strand_ids, stride, layer)
 
 
 def body(repository: Repository, job: JobRecord, layer: str) -> bytes:
@@ -80,19 +82,19 @@ def body(repository: Repository, job: JobRecord, layer: str) -> bytes:
         arrays = _layer_arrays(repository, job, "result", ("body_vertices", "body_faces"))
     else:
         arrays = _layer_arrays(repository, job, "source", ())
-    return solver.body_payload(arrays["body_vertices"], arrays["body_faces"], layer, up=[0.0, 1.0, 0.0])
+    return display.body_payload(arrays["body_vertices"], arrays["body_faces"], layer, up=[0.0, 1.0, 0.0])
 
 
 def hairline(repository: Repository, job: JobRecord) -> dict:
     """The target's current front hairline, each preset's edit of it, and the rotation to the groom's axes."""
     names = ("hairline_points", "hairline_turning", "groom_rotation", "meta",
-             *(solver.scene_preset_array(name) for name in solver.HAIRLINE_PRESETS))
+             *(display.scene_preset_array(name) for name in solver_options.HAIRLINE_PRESETS))
     scene = _scene(str(scene_path(repository, job)), names)
-    meta = solver.scene_meta(scene)
+    meta = display.scene_meta(scene)
     if meta.get("hairline_error"):
         raise Problem(409, "no_hairline", f"the groom of job {job.id} has no front hairline to edit: "
                                           f"{meta['hairline_error']}")
-    return {**solver.hairline_json(scene), "groom_units": meta.get("groom_units", "m")}
+    return {**display.hairline_json(scene), "groom_units": meta.get("groom_units", "m")}
 
 
 def character_mesh(repository: Repository, settings: Settings, character: CharacterRecord) -> bytes:
@@ -104,6 +106,6 @@ def character_mesh(repository: Repository, settings: Settings, character: Charac
                                               max_faces=settings.max_faces, max_bytes=settings.max_file_bytes)
     except solver.InputError as error:
         raise input_problem(error, "mesh") from None
-    up, how = solver.display_up(loaded.vertices, character.up_axis)
-    return solver.body_payload(loaded.vertices, loaded.faces, "character", up=up, up_found=how, units=units)
+    up, how = display.display_up(loaded.vertices, character.up_axis)
+    return display.body_payload(loaded.vertices, loaded.faces, "character", up=up, up_found=how, units=units)
 

@@ -18,6 +18,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import options as solver_options
 from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
 from ..deps import owned
@@ -41,7 +42,7 @@ def preprocessing_settings(k: int, guides: int | None, anchoring: str,
     """Validated preprocessing options (``guides=None``: the solver's default)."""
     if guides is not None and guides_from is not None:
         raise Problem(422, "bad_option", "options: give guides or guides_from, not both")
-    options = solver.PreprocessOptions(k=k, guides=solver.DEFAULT_GUIDES if guides is None else guides,
+    options = solver.PreprocessOptions(k=k, guides=solver_options.DEFAULT_GUIDES if guides is None else guides,
                                        anchoring=anchoring, guides_from=guides_from)
     try:
         options.validate()
@@ -60,7 +61,7 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
     check_units(units)
     character: CharacterRecord = owned(repository, CharacterRecord, owner, source_character_id, "character")
     options = preprocessing_settings(k, guides, anchoring, guides_from)
-    if options.anchoring == solver.ANCHOR_BY_BONES and not character.bones:
+    if options.anchoring == solver_options.ANCHOR_BY_BONES and not character.bones:
         raise Problem(422, "no_skeleton", "anchoring by bones needs a source character with a skeleton "
                                           "(skeleton JSON or glTF skin); anchor by the surface (anchoring surface or auto)")
     suffix = extension_of(hair, tuple(f".{name}" for name in solver.HAIR_FORMATS), "hair")
@@ -77,7 +78,7 @@ async def create_hairstyle(repository: Repository, queue: TaskQueue, settings: S
                 limits={"max_strands": settings.max_strands, "max_particles": settings.max_particles,
                         "max_bytes": settings.max_upload_bytes, "memory_budget_bytes": settings.memory_budget_bytes},
                 source=source_files(repository, settings, character), guides_from=guides_from,
-                max_guides=solver.OPTION_RANGES["guides"].maximum,
+                max_guides=solver_options.OPTION_RANGES["guides"].maximum,
             )
         except Problem:
             repository.storage.discard_new(blob)  # a refused upload keeps no file

@@ -213,7 +213,7 @@ def solve_here(level: FineLevel, progress: ProgressFn | None = None,
 def solve_level_run(level: FineLevel, first: int, stop: int, progress: ProgressFn | None = None,
                     should_stop: Callable[[], bool] | None = None) -> tuple[np.ndarray, SolveReport]:
     """The normal strands ``first .. stop - 1`` of ``level``, in this process: ``points (n, 3)`` and the report
-    (what :func:`hairport.solver.pipeline.solve_fine_chunk` gives for them in another)."""
+    (what :func:`hairport.solver.distributed.solve_fine_chunk` gives for them in another)."""
     piece, rows = level.problem.strand_run(first, stop)
     return solve_strands(piece, BodyDistance(level.body, CONTACT_BAND, level.grid), level.weights, level.options,
                          start=level.start[rows], progress=progress, should_stop=should_stop, engine=level.engine)

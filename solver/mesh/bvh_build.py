@@ -184,7 +184,7 @@ def _partition(centroids, order, start, stop, axis, low, high, split):
     return i
 
 
-@warms("hairport.solver.mesh.bvh_build")
+@warms
 def _warm() -> None:
     # a tetrahedron's four faces, one per leaf
     vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])

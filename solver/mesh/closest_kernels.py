@@ -469,7 +469,7 @@ def signed_kernel(points, hints, pseudonormals, boxes, child, first, count, face
             out_feature[i] = feature
 
 
-@warms("hairport.solver.mesh.closest_kernels")
+@warms
 def _warm() -> None:
     # a tetrahedron, a tree of one face per leaf, every kernel on two points and a NaN
     vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])

@@ -494,7 +494,7 @@ def _bound_and_sign_kernel(values, nx, ny, nz, origin, spacing, points, covers_m
         out_sign[i] = sign if closed else 0
 
 
-@warms("hairport.solver.mesh.distance_grid")
+@warms
 def _warm() -> None:
     values = np.arange(8, dtype=np.float64).reshape(2, 2, 2) - 3.5
     points = np.array([[0.5, 0.5, 0.5], [3.0, 0.0, 0.0], [np.nan, 0.0, 0.0]])

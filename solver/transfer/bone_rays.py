@@ -298,7 +298,7 @@ def _sort_rows(values, order):
             values[i, k + 1], order[i, k + 1] = value, origin
 
 
-@warms("transfer.bone_rays")
+@warms
 def _warm() -> None:
     one = np.zeros((1, 3))
     _score_bounds_kernel(np.ones((2, 3)), np.ones(2), np.ones(2), one, one + 1.0, one + 1.0, one, one + 1.0, 100.0,

@@ -191,7 +191,7 @@ def _solve_runs(indptr, data, unsmooth, run_first, run_end, source_features, poi
                 points[unsmooth[j], c] = value[j, c] - ratio[j] * points[unsmooth[j + 1], c]
 
 
-@warms("transfer.smoothing")
+@warms
 def _warm() -> None:
     points = np.array([[0.0, 0.0, 0.0], [0.0, -0.01, 0.001], [0.0, -0.02, 0.0]])
     restore_laplacian(strand_laplacian(points, np.array([0, 3])), points, np.zeros((3, 3)), np.array([1]))

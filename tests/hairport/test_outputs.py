@@ -9,7 +9,7 @@ import pytest
 
 from hairport import solver
 from hairport.outputs import OutputSet, add_result, json_default
-from hairport.solver import FILE_MODE, atomic_write_bytes
+from hairport.solver import FILE_MODE, atomic_write_bytes, options
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.toy import toy_character
@@ -102,7 +102,7 @@ def test_a_result_is_written_in_the_grooms_units_and_axes_with_its_report_and_pr
     for path in hair.values():
         back = solver.read_hair(path, units="cm")  # read back in meters, in the file's axes (PLY: float32)
         np.testing.assert_allclose(back.points, expected / 100.0, rtol=0, atol=1e-6)
-        flags = back.attributes_of("strand")[solver.GUIDE_FLAG].values
+        flags = back.attributes_of("strand")[options.GUIDE_FLAG].values
         assert np.flatnonzero(flags).tolist() == sorted(adaptable.multiscale.guides.tolist())
     assert solver.recorded_hair_units(hair["npz"]) == "cm"
     with np.load(hair["npz"]) as archive:
@@ -118,4 +118,4 @@ def test_a_result_without_flags_report_or_preview_is_the_hair_alone(tmp_path, re
         add_result(outputs, adaptable, result, toy, {"npz": tmp_path / "result.npz"})
         written = outputs.commit()
     assert [p.name for p in written] == ["result.npz"]
-    assert solver.GUIDE_FLAG not in solver.read_hair(written[0], units="cm").attributes_of("strand")
+    assert options.GUIDE_FLAG not in solver.read_hair(written[0], units="cm").attributes_of("strand")

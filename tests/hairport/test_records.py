@@ -6,6 +6,7 @@ from hairport.records import (
     JOB_STATES,
     TERMINAL_STATES,
     WAITING_STATES,
+    BatchTotals,
     BlobRef,
     CharacterRecord,
     JobRecord,
@@ -14,6 +15,7 @@ from hairport.records import (
     digest,
     new_job_id,
     owned_id,
+    progress_units,
 )
 
 
@@ -80,3 +82,15 @@ def test_artifact_key_changes_with_a_characters_given_axes():
     assert len({base, turned, other}) == 3
     # axes left to inference keep the key of a record that never had them
     assert artifact_key(character(up_axis=None), "h" * 64, "auto", options, 1) == base
+
+
+def test_a_batch_shows_complete_only_when_every_job_has_ended():
+    # one job succeeded, the other at progress 1 but still writing its outputs
+    running = BatchTotals(counts={**dict.fromkeys(JOB_STATES, 0), "succeeded": 1, "running": 1},
+                          progress_units=progress_units(1.0))
+    assert running.state == "running" and running.progress == 0.9999
+    nearly = BatchTotals(counts={**dict.fromkeys(JOB_STATES, 0), "succeeded": 1, "running": 1},
+                         progress_units=progress_units(0.5))
+    assert nearly.progress == 0.75
+    done = BatchTotals(counts={**dict.fromkeys(JOB_STATES, 0), "succeeded": 1, "failed": 1})
+    assert done.state == "done" and done.progress == 1.0

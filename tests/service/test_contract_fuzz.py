@@ -25,6 +25,7 @@ from schemathesis.config import SchemathesisConfig
 from hairport import solver
 from hairport.service.app import create_app
 from hairport.settings import Settings
+from hairport.solver import display
 
 from .routers.uploads import write_inputs
 
@@ -111,7 +112,7 @@ def succeed(repository, job_id: str, folder) -> None:
     solver.write_hair(folder / "preview.png", hair, format="npz")  # bytes only: the route does not read them
     (folder / "report.json").write_text(json.dumps({"metrics": {}}))
     hairline = {"points": [[-0.05, 0.0, 0.0], [0.0, 0.01, 0.02], [0.05, 0.0, 0.0]], "turning_points": [0, 2]}
-    solver.save_scene(folder / "scene.npz", solver.scene_arrays(
+    display.save_scene(folder / "scene.npz", display.scene_arrays(
         hair.points, hair.offsets, np.zeros(3, bool), None, np.eye(3), np.array([[0, 1, 2]]), np.eye(3), hairline,
         {"round": hairline}))
     files = (("npz", "result.npz", ".npz"), ("preview", "preview.png", ".png"), ("report", "report.json", ".json"),

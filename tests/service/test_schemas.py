@@ -5,14 +5,15 @@ from typing import get_args
 from hairport import solver
 from hairport.records import JOB_STATES, BlobRef, CharacterRecord
 from hairport.service import schemas
+from hairport.solver import options
 
 
 def test_choices_come_from_their_definitions():
     assert get_args(schemas.HairFormat) == solver.HAIR_FORMATS
     assert get_args(schemas.Units) == solver.UNITS
-    assert get_args(schemas.HairlinePresetName) == solver.HAIRLINE_PRESETS
+    assert get_args(schemas.HairlinePresetName) == options.HAIRLINE_PRESETS
     assert get_args(schemas.JobState) == JOB_STATES
-    assert get_args(schemas.RetargetOptionsIn.model_fields["qp_backend"].annotation) == solver.QP_BACKENDS
+    assert get_args(schemas.RetargetOptionsIn.model_fields["qp_backend"].annotation) == options.QP_BACKENDS
 
 
 def test_defaults_are_the_solver_defaults():

@@ -10,7 +10,6 @@ from hairport.solver.inputs import (
     ROOT_OFF_SURFACE_MM,
     canonical_source,
     canonical_target,
-    curve_document_in_frame,
     edit_in_canonical,
     hair_in_frame,
     measure_groom,
@@ -136,13 +135,9 @@ def test_a_target_takes_the_sources_units_and_axes_unless_it_states_them(toy_a, 
         canonical_target(toy_a, Character(toy_b.vertices[:-1], toy_b.faces[:100]))
 
 
-def test_hairline_curves_are_read_and_written_in_the_grooms_frame():
+def test_a_hairline_curve_drawn_in_the_grooms_axes_comes_to_hairports_frame():
     frame = InputFrame("mm", "z", "-y")
     points = np.array([[0.1, 1.6, 0.05], [0.0, 1.7, 0.09], [-0.1, 1.6, 0.05]])
-    document = {"units": "m", "points": points.tolist(), "turning_points": [1]}
-    written = curve_document_in_frame(frame, document)
-    assert written["units"] == "mm" and written["turning_points"] == [1]
-    assert np.allclose(written["points"], frame.axes_out(points) * 1000.0, atol=1e-4)
     curve = HairlineCurve(frame.axes_out(points), np.array([1]))
     edit = edit_in_canonical(frame, HairlineEdit(curve=curve))
     assert np.array_equal(edit.curve.points, points) and np.array_equal(edit.curve.turning_points, [1])

@@ -66,7 +66,8 @@ def test_preprocess_options_out_of_range_are_refused(options):
     {"max_iterations": 10**9}, {"workers": 0}, {"step_tolerance": -1e-9}, {"alpha": "3"},
 ])
 def test_retarget_options_out_of_range_are_refused(options):
-    from hairport.solver import OPTION_RANGES, InputError, RetargetOptions
+    from hairport.solver import InputError, RetargetOptions
+    from hairport.solver.options import OPTION_RANGES
 
     name = next(iter(options))
     with pytest.raises(InputError) as error:

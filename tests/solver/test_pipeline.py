@@ -197,23 +197,3 @@ def test_a_body_that_traps_hair_fails_with_its_code(method):
     # the baseline without push-out claims nothing, and reports its penetration
     plain = pipeline.retarget(adaptable, body, pipeline.RetargetOptions(method="root-translate"))
     assert plain.metrics["penetrating_particles"] > 20 and "penetration_resolved" not in plain.metrics
-
-
-def test_the_display_scene_holds_the_result_its_inside_flags_and_the_hairlines(female, fringe):
-    from hairport.solver import display
-
-    male = build_character(PRESETS["heavy-male"])
-    adaptable = pipeline.preprocess(female, fringe)
-    result = pipeline.retarget(adaptable, male, pipeline.RetargetOptions(method="root-translate"))
-    scene = pipeline.display_scene(adaptable, result, male)
-    inside = np.unpackbits(scene["inside"], count=fringe.n_particles).astype(bool)
-    np.testing.assert_array_equal(inside, pipeline.penetrating_mask(result.hair, male))
-    assert inside.sum() == result.metrics["penetrating_particles"] > 0  # the baseline leaves hair inside
-    np.testing.assert_allclose(scene["points"], result.hair.points, atol=1e-6)
-    np.testing.assert_allclose(scene["body_vertices"], male.vertices, atol=1e-6)
-    current = pipeline.hairline_document(adaptable, male)
-    np.testing.assert_allclose(scene["hairline_points"], current["points"], atol=1e-6)
-    np.testing.assert_array_equal(scene["hairline_turning"], current["turning_points"])
-    widows = pipeline.hairline_document(adaptable, male, "widows-peak")
-    np.testing.assert_allclose(scene[display.scene_preset_array("widows-peak")], widows["points"], atol=1e-6)
-    assert display.scene_meta(scene) == {"groom_units": "m", "hairline_error": None}

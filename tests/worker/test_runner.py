@@ -21,6 +21,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver.io.character import load_character
 from hairport.solver.io.character.obj import write_obj
 from hairport.solver.synthetic import toy
 from hairport.solver.synthetic.groom import generate_groom
@@ -238,7 +239,7 @@ def test_inputs_in_centimetres_and_z_up_give_the_result_in_their_frame(world, tm
     frame = InputFrame("cm", "z", "-y")
     records = {}
     for name, letter in (("source", "c"), ("target", "d")):
-        character = solver.load_character(root / f"{name}.obj")  # the numbers the world's files hold
+        character = load_character(root / f"{name}.obj")  # the numbers the world's files hold
         mesh, skeleton = tmp_path / f"{name}.obj", tmp_path / f"{name}.skeleton.json"
         write_character(character_in(frame, character), mesh, skeleton)
         document = json.loads(skeleton.read_text())

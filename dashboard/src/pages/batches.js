@@ -24,7 +24,7 @@ export async function batchPage(main, { params: [id], signal }) {
   main.append(h("h1", {}, `Batch ${short(id)}`), head, actions, jobs);
   poll(async () => {
     const batch = await get(`/v1/batches/${id}`);
-    const percent = Math.round(100 * batch.progress);
+    const percent = Math.floor(100 * batch.progress);
     fill(head, h("p", {}, stateCell(batch.state), " ",
       h("progress", { id: "batch-progress", max: 1, value: batch.progress }), h("span", { id: "batch-percent" }, ` ${percent} %`), " ",
       Object.entries(batch.counts).filter(([, count]) => count).map(([state, count]) => `${count} ${state}`).join(", ")));

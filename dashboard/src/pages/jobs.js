@@ -9,7 +9,7 @@ export const ENDED = ["succeeded", "failed", "cancelled"];
 /** A job's progress: where a failed or cancelled job stopped, not 100 %. */
 export function progressCell(job) {
   const progress = job.state === "succeeded" ? 1 : job.progress;
-  return h("td", {}, h("progress", { max: 1, value: progress }), ` ${Math.round(100 * progress)} %`);
+  return h("td", {}, h("progress", { max: 1, value: progress }), ` ${Math.floor(100 * progress)} %`);
 }
 
 export async function jobsPage(main, { signal }) {

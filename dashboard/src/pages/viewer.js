@@ -25,7 +25,7 @@ export async function viewerPage(main, { params: [id], query, signal }) {
   let job = null;
   await new Promise((resolve) => poll(async () => {
     job = await get(`/v1/jobs/${id}`);
-    status.textContent = `job ${job.state} (${job.stage ?? ""} ${Math.round(100 * job.progress)} %)`;
+    status.textContent = `job ${job.state} (${job.stage ?? ""} ${Math.floor(100 * job.progress)} %)`;
     if (ENDED.includes(job.state)) resolve();
     return ENDED.includes(job.state);
   }, 1000, signal));

@@ -448,7 +448,7 @@ def reference_pinned_solve(hessian: RotatedHessian, rhs: np.ndarray, pinned: np.
     return y, steps, residual
 
 
-@warms("coupled active-set kernels")
+@warms
 def _warm() -> None:
     n = 4
     R = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import osqp
@@ -71,6 +72,41 @@ def _merit(model, points, initial, weights, gamma, rest, distance, eps_c, penalt
     """Eq. 1's energy (and the spacing term's) plus an l1 penalty on violated clearance (the line search's merit)."""
     violation = float(np.sum(clearance_violation(distance, eps_c)))
     return energy_terms(model, points, initial, gamma, rest, weights.spacing_band).total(weights) + penalty * violation
+
+
+class _ReusedQP:
+    """One OSQP workspace reused across outer iterations while the Hessian's sparsity pattern
+    holds (set up again when it changes), warm-started from the previous iteration's duals."""
+
+    def __init__(self, options: SolveOptions):
+        self.options = options
+        self.settings = dict(verbose=False, eps_abs=options.osqp_eps_abs, eps_rel=options.osqp_eps_rel,
+                             max_iter=options.osqp_max_iter, polishing=False, warm_starting=True)
+        self.solver: osqp.OSQP | None = None
+        self.pattern: tuple[np.ndarray, np.ndarray] | None = None
+        self.dual: np.ndarray | None = None
+
+    def solve(self, P: sp.csc_matrix, q: np.ndarray, A: sp.csc_matrix, lower: np.ndarray, last_step: float):
+        """The step ``x (3F,)`` of ``min 1/2 x^T P x + q^T x`` s.t. ``A x >= lower``, OSQP's result
+        (status, iterations) and the constraints' duals."""
+        upper = np.full(len(lower), np.inf)
+        if self.solver is None or not (np.array_equal(self.pattern[0], P.indptr)
+                                       and np.array_equal(self.pattern[1], P.indices)):
+            self.solver = osqp.OSQP()
+            self.solver.setup(P, q, A, lower, upper, **self.settings)
+            self.pattern = (P.indptr.copy(), P.indices.copy())
+        else:
+            self.solver.update(q=q, l=lower, u=upper, Px=P.data, Ax=A.data)
+        # the QP need only be as accurate as the step it yields is small: loose while the
+        # hairstyle still moves by millimetres, tight (options.osqp_eps_*) near convergence
+        options = self.options
+        accuracy = min(QP_LOOSEST_EPS, max(1.0, QP_ACCURACY_PER_STEP * last_step / options.osqp_eps_abs))
+        self.solver.update_settings(eps_abs=options.osqp_eps_abs * accuracy, eps_rel=options.osqp_eps_rel * accuracy)
+        self.solver.warm_start(x=np.zeros(len(q)), y=self.dual if self.dual is not None else np.zeros(len(lower)))
+        result = self.solver.solve(raise_error=False)
+        if result.x is not None and np.all(np.isfinite(result.x)):
+            self.dual = result.y
+        return result
 
 
 def solve_shape_adaptation(
@@ -121,24 +157,14 @@ def solve_shape_adaptation(
     if len(free) == 0:
         report.converged = True
         return points, report
-    settings = dict(
-        verbose=False,
-        eps_abs=options.osqp_eps_abs,
-        eps_rel=options.osqp_eps_rel,
-        max_iter=options.osqp_max_iter,
-        polishing=False,
-        warm_starting=True,
-    )
-    solver: osqp.OSQP | None = None
-    pattern: tuple[np.ndarray, np.ndarray] | None = None
-    dual = None
+    qp = _ReusedQP(options)
     penalty = 0.0
     radial_damping = INITIAL_RADIAL_DAMPING
     last_step = np.inf
-    f = len(free)
     free3 = free_coordinates(fixed)
     sd = target.signed_distance(points[free])
     rest = model.rest_lengths(initial) if weights.spacing else None
+    merit = partial(_merit, model, initial=initial, weights=weights, gamma=gamma, rest=rest, eps_c=options.eps_c)
     for iteration in range(options.max_iterations):
         if should_stop is not None and should_stop():
             raise Cancelled("solve cancelled")
@@ -148,55 +174,22 @@ def solve_shape_adaptation(
         q = gradient(model, points, initial, weights, gamma, rest)[free].ravel()
         # one half-space per free particle: without a broad phase every one is constrained
         _, lower = linearised_clearance(sd.distance, options.eps_c)
-        A = _constraint_matrix(sd.normal)
-        upper = np.full(f, np.inf)
-        if solver is None or pattern is None or not (
-            np.array_equal(pattern[0], P.indptr) and np.array_equal(pattern[1], P.indices)
-        ):
-            solver = osqp.OSQP()
-            solver.setup(P, q, A, lower, upper, **settings)
-            pattern = (P.indptr.copy(), P.indices.copy())
-        else:
-            solver.update(q=q, l=lower, u=upper, Px=P.data, Ax=A.data)
-        # the QP need only be as accurate as the step it yields is small: loose while the
-        # hairstyle still moves by millimetres, tight (options.osqp_eps_*) near convergence
-        accuracy = min(QP_LOOSEST_EPS, max(1.0, QP_ACCURACY_PER_STEP * last_step / options.osqp_eps_abs))
-        solver.update_settings(eps_abs=options.osqp_eps_abs * accuracy, eps_rel=options.osqp_eps_rel * accuracy)
-        solver.warm_start(x=np.zeros(3 * f), y=dual if dual is not None else np.zeros(f))
-        result = solver.solve(raise_error=False)
+        result = qp.solve(P, q, _constraint_matrix(sd.normal), lower, last_step)
         status = str(result.info.status)
         if result.x is None or not np.all(np.isfinite(result.x)):
             raise RuntimeError(f"QP solver failed at outer iteration {iteration}: {status}")
-        dual = result.y
-        step = result.x.reshape(f, 3)
-        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(dual), initial=0.0)))
-        merit_now = _merit(model, points, initial, weights, gamma, rest, sd.distance, options.eps_c, penalty)
+        penalty = max(penalty, MERIT_PENALTY_FACTOR * float(np.max(np.abs(result.y), initial=0.0)))
         predicted = float(q @ result.x + 0.5 * result.x @ (H @ result.x))
-        fraction = 1.0
-        for attempt in range(MAX_BACKTRACKS):
-            trial = points.copy()
-            trial[free] += fraction * step
-            trial_sd = target.signed_distance(trial[free])
-            merit_trial = _merit(model, trial, initial, weights, gamma, rest, trial_sd.distance, options.eps_c, penalty)
-            if attempt == 0:
-                radial_damping = float(adapt_damping(radial_damping, merit_trial - merit_now, predicted))
-            if merit_trial <= merit_now:
-                break
-            fraction *= BACKTRACK_FACTOR
-        points, sd = trial, trial_sd
-        report.step_fractions.append(fraction)
-        max_step = fraction * float(np.max(np.linalg.norm(step, axis=1)))
-        last_step = max_step
-        report.iterations = iteration + 1
-        report.max_step.append(max_step)
-        report.osqp_status.append(status)
-        report.osqp_iterations.append(int(result.info.iter))
+        step = result.x.reshape(len(free), 3)
+        points, sd, fraction, radial_damping = _backtrack(points, sd, free, step, target, merit, penalty, predicted,
+                                                          radial_damping)
+        last_step = fraction * float(np.max(np.linalg.norm(step, axis=1)))
         clearance = float(np.min(sd.distance))
-        report.min_clearance.append(clearance)
+        _record(report, iteration, fraction, last_step, status, int(result.info.iter), clearance)
         if progress is not None:
             progress(SOLVE_STAGE, (iteration + 1) / options.max_iterations,
-                     f"iteration {iteration + 1}: max step {max_step:.2e} m")
-        if max_step < options.step_tolerance and clearance >= options.eps_c - options.clearance_tolerance:
+                     f"iteration {iteration + 1}: max step {last_step:.2e} m")
+        if last_step < options.step_tolerance and clearance >= options.eps_c - options.clearance_tolerance:
             report.converged = True
             break
     if not report.converged:
@@ -207,3 +200,31 @@ def solve_shape_adaptation(
         )
     report.seconds = time.perf_counter() - began
     return points, report
+
+
+def _backtrack(points, sd, free, step, target, merit, penalty, predicted, radial_damping):
+    """The QP's ``step (F, 3)`` shortened (by BACKTRACK_FACTOR, at most MAX_BACKTRACKS times) until the merit
+    does not rise: the new points, their signed distances, the fraction taken and the adapted radial damping."""
+    merit_now = merit(points, distance=sd.distance, penalty=penalty)
+    fraction = 1.0
+    for attempt in range(MAX_BACKTRACKS):
+        trial = points.copy()
+        trial[free] += fraction * step
+        trial_sd = target.signed_distance(trial[free])
+        merit_trial = merit(trial, distance=trial_sd.distance, penalty=penalty)
+        if attempt == 0:
+            radial_damping = float(adapt_damping(radial_damping, merit_trial - merit_now, predicted))
+        if merit_trial <= merit_now:
+            break
+        fraction *= BACKTRACK_FACTOR
+    return trial, trial_sd, fraction, radial_damping
+
+
+def _record(report: SolveReport, iteration: int, fraction: float, max_step: float, status: str, qp_iterations: int,
+            clearance: float) -> None:
+    report.iterations = iteration + 1
+    report.step_fractions.append(fraction)
+    report.max_step.append(max_step)
+    report.osqp_status.append(status)
+    report.osqp_iterations.append(qp_iterations)
+    report.min_clearance.append(clearance)

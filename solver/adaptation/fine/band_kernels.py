@@ -102,7 +102,7 @@ def band_solve(band, x):
         x[j] = value / band[j, 0]
 
 
-@warms("hairport.solver.adaptation.fine.band_kernels")
+@warms
 def _warm() -> None:
     """A 2-particle system with one pinned unknown through every kernel."""
     diagonal = np.broadcast_to(4.0 * np.eye(3), (2, 3, 3)).copy()

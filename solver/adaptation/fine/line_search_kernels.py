@@ -283,7 +283,7 @@ def strand_clearances(strands, offsets, distance, fixed, eps_c, shortfall, clear
         clearance[t] = closest
 
 
-@warms("hairport.solver.adaptation.fine.line_search_kernels")
+@warms
 def _warm() -> None:
     """Two strands (3 and 2 particles) through every kernel."""
     offsets = np.array([0, 3, 5], dtype=np.int64)

@@ -412,7 +412,7 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
         penalty[s] = max(penalty[s], penalty_factor * largest)
 
 
-@warms("hairport.solver.adaptation.fine.strand_kernels")
+@warms
 def _warm() -> None:
     """Two strands (3 and 2 particles, the first touching the body) through every kernel."""
     offsets = np.array([0, 3, 5], dtype=np.int64)

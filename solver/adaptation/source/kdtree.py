@@ -239,7 +239,7 @@ def _search(points, ids, groups, start, end, axis, split, qx, qy, qz, own, max_s
     return True
 
 
-@warms("adaptation.kdtree")
+@warms
 def _warm() -> None:
     points = np.random.default_rng(0).random((40, 3))
     tree = build_tree(points, np.arange(40), np.arange(40) // 4)

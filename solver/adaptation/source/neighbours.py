@@ -447,7 +447,7 @@ def _neighbour_average_kernel(index, weight, points, out):
         out[i, 0], out[i, 1], out[i, 2] = x, y, z
 
 
-@warms("adaptation.neighbours")
+@warms
 def _warm() -> None:
     for dtype in (np.int32, np.int64):
         _neighbour_average_kernel(np.zeros((1, 2), dtype), np.ones((1, 2)), np.ones((1, 3)), np.empty((1, 3)))

@@ -14,7 +14,7 @@ from hairport import solver
 from hairport.cli import demo as demo_module
 from hairport.cli import main
 from hairport.cli.demo import BASELINES, TABLE_ROWS, format_legend, format_table, row_meaning
-from hairport.solver import read_hair
+from hairport.solver import kernels, read_hair
 from hairport.solver.render.preview import MAX_ITEMS_PER_ROW, TITLE_HEIGHT_PX, VIEW_SIZE_PX, preview_layout
 
 #: a small groom: the demo's whole story in a few seconds
@@ -102,15 +102,15 @@ def test_the_preview_draws_every_panel_at_one_scale(demo):
 
 
 def test_a_cold_kernel_cache_is_announced_before_it_compiles(monkeypatch, capsys):
-    monkeypatch.setattr(solver, "uncached_kernels", lambda: (60, 68))
+    monkeypatch.setattr(kernels, "uncached_kernels", lambda: (60, 68))
     demo_module.compile_kernels_once()
     lines = capsys.readouterr().err.splitlines()
-    expected = round(solver.COLD_COMPILE_SECONDS * 60 / 68)
+    expected = round(kernels.COLD_COMPILE_SECONDS * 60 / 68)
     assert lines[0] == (f"hairport: compiling the solver's kernels once (about {expected} s; later runs load them "
                         "from numba's cache, and `hairport warmup` does this ahead)")
     assert re.fullmatch(r"hairport: compiled \d+ kernel signatures in \d+ s", lines[1])
     # one kernel that no warmer calls (or two after an update): nothing to say, nothing done
-    monkeypatch.setattr(solver, "uncached_kernels", lambda: (2, 68))
+    monkeypatch.setattr(kernels, "uncached_kernels", lambda: (2, 68))
     demo_module.compile_kernels_once()
     assert capsys.readouterr().err == ""
 

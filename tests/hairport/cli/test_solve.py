@@ -15,7 +15,7 @@ import pytest
 
 from hairport import cli, solver
 from hairport.settings import get_settings
-from hairport.solver import pipeline
+from hairport.solver import options, pipeline
 from hairport.solver.io.character import load_character
 from hairport.solver.io.character.obj import write_obj
 from hairport.solver.io.hair import read_hair, write_hair
@@ -167,7 +167,7 @@ def test_skeleton_with_unknown_parent(capsys, world, out, tmp_path):
 
 
 def test_unknown_output_format_refused_before_any_work(capsys, world, out, monkeypatch):
-    loads = call_log(monkeypatch, solver, "load_character")
+    loads = call_log(monkeypatch, solver, "read_character")
     args = retarget_args(world, out, quiet=False, all_outputs=False)
     args[args.index("--out") + 1] = str(out / "result.foo")
     code, _, err = run(capsys, args)
@@ -180,7 +180,7 @@ def test_unknown_output_format_refused_before_any_work(capsys, world, out, monke
 def test_unknown_hair_format_refused_before_any_work(capsys, world, out, tmp_path, monkeypatch):
     hair = tmp_path / "hair.xyz"
     shutil.copy(world["dir"] / "hair.data", hair)
-    loads = call_log(monkeypatch, solver, "load_character")
+    loads = call_log(monkeypatch, solver, "read_character")
     code, _, err = run(capsys, retarget_args(world, out, hair=hair, quiet=False))
     assert code == 2, err
     assert loads == [], "characters were loaded before the hair format was checked"
@@ -208,7 +208,7 @@ def test_bad_method_lists_valid_methods(capsys, world, out, monkeypatch, method)
     preprocessed = call_log(monkeypatch, solver, "preprocess")
     code, _, err = run(capsys, retarget_args(world, out, method=method))
     line = assert_input_error(code, err, f"unknown method {method!r}", "+pushout")
-    for name in solver.METHODS:
+    for name in options.METHODS:
         assert name in line, f"{name!r} not listed in {line!r}"
     assert preprocessed == [], "the method was checked only after preprocessing"
     assert_nothing_written(out)

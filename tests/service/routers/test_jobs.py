@@ -8,7 +8,9 @@ import pytest
 from hairport import solver
 from hairport.records import BlobRef, JobRecord, PreprocessSettings, now
 from hairport.service.auth import owner_of
+from hairport.solver import display
 from hairport.solver import display as solver_display
+from hairport.solver.model.frame import InputFrame
 
 from ..conftest import AUTH, KEY
 
@@ -115,7 +117,7 @@ def test_a_result_in_millimetres_converts_in_millimetres(client, tmp_path):
 
 
 #: the frame of a groom file with Z up (its rotation takes a drawn curve to the file's axes)
-Z_UP = solver.InputFrame(units="cm", up="+z", front="-y")
+Z_UP = InputFrame(units="cm", up="+z", front="-y")
 
 
 def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=True) -> str:
@@ -133,11 +135,11 @@ def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=Tr
     inside = np.zeros(groom.n_particles, bool)
     inside[[3, 7]] = True
     hairline = {"points": [[0.05, 0.0, 0.0], [0.0, 0.02, 0.05], [-0.05, 0.0, 0.0]], "turning_points": [0, 2]}
-    scene = solver.scene_arrays(result.points, result.offsets, inside, None, head.vertices, head.faces,
+    scene = display.scene_arrays(result.points, result.offsets, inside, None, head.vertices, head.faces,
                                 Z_UP.rotation, hairline if hairline_error is None else
                                 {"points": [], "turning_points": []}, {} if hairline_error else {"round": hairline})
     scene["meta"] = np.frombuffer(json.dumps({"groom_units": "cm", "hairline_error": hairline_error}).encode(), np.uint8)
-    solver.save_scene(tmp_path / "scene.npz", scene)
+    display.save_scene(tmp_path / "scene.npz", scene)
     blob = repository.storage.save_file(tmp_path / "scene.npz", ".npz")
     repository.set_job(job_id, state="succeeded", outputs={"scene": BlobRef(sha256=blob.sha256, suffix=".npz")})
     if with_artifact:
@@ -151,7 +153,7 @@ def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=Tr
 def test_a_job_draws_its_result_decimated_with_the_particles_inside_flagged(client, tmp_path):
     job_id = succeeded_with_scene(client, tmp_path)
     response = client.get(f"/v1/jobs/{job_id}/display", headers=AUTH)
-    assert response.status_code == 200 and response.headers["content-type"] == solver.DISPLAY_MEDIA_TYPE
+    assert response.status_code == 200 and response.headers["content-type"] == display.MEDIA_TYPE
     header, arrays = solver_display.decode(response.content)
     assert header["drawn_strands"] == 12 and header["drawn_vertices"] == 72 and header["inside"] == 2
     assert arrays["positions"].shape == (72, 3) and arrays["inside"].sum() == 2
@@ -162,7 +164,7 @@ def test_a_job_draws_its_result_decimated_with_the_particles_inside_flagged(clie
                                               params={"layer": "source"}).content)
     assert source[0]["inside"] is None and source[0]["drawn_vertices"] == 72
     assert np.abs(source[1]["positions"] - arrays["positions"]).max() == pytest.approx(0.001, abs=1e-6)
-    for params, status in (({"stride": 0}, 422), ({"max_vertices": solver.MAX_DISPLAY_VERTICES + 1}, 422),
+    for params, status in (({"stride": 0}, 422), ({"max_vertices": display.MAX_DISPLAY_VERTICES + 1}, 422),
                            ({"layer": "initial"}, 422), ({"strands": 0}, 422)):
         assert client.get(f"/v1/jobs/{job_id}/display", headers=AUTH, params=params).status_code == status
 

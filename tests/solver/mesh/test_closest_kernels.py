@@ -1,15 +1,15 @@
-"""The mesh kernels are registered for the warm-up (solver/jit.py) and their warmers run."""
+"""The mesh kernels are registered for the warm-up (solver/kernels.py) and their warmers run."""
 
 import numpy as np
 
-from hairport.solver import jit
+from hairport.solver import kernels
 from hairport.solver.mesh import closest_kernels
 
 
 def test_the_mesh_kernel_modules_are_registered_and_warm_up():
     mesh_modules = {"hairport.solver.mesh.bvh_build", "hairport.solver.mesh.closest_kernels", "hairport.solver.mesh.distance_grid"}
-    assert mesh_modules <= set(jit.KERNEL_MODULES)
-    seconds = jit.warm_up().seconds
+    assert mesh_modules <= {module.__name__ for module in kernels.MODULES}
+    seconds = kernels.warm_up().seconds
     assert mesh_modules <= set(seconds) and all(value >= 0 for value in seconds.values())
 
 

@@ -1,0 +1,52 @@
+"""Hairline curve documents and the dashboard's scene (solver/documents.py)."""
+
+import numpy as np
+import pytest
+
+from hairport.solver import display, documents, pipeline
+from hairport.solver.model.frame import InputFrame
+from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+
+@pytest.fixture(scope="module")
+def female():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="module")
+def fringe(female):
+    return generate_groom(female, "fringe", 150, 24, seed=3)
+
+
+def test_the_display_scene_holds_the_result_its_inside_flags_and_the_hairlines(female, fringe):
+    male = build_character(PRESETS["heavy-male"])
+    adaptable = pipeline.preprocess(female, fringe)
+    result = pipeline.retarget(adaptable, male, pipeline.RetargetOptions(method="root-translate"))
+    scene = documents.display_scene(adaptable, result, male)
+    inside = np.unpackbits(scene["inside"], count=fringe.n_particles).astype(bool)
+    np.testing.assert_array_equal(inside, pipeline.penetrating_mask(result.hair, male))
+    assert inside.sum() == result.metrics["penetrating_particles"] > 0  # the baseline leaves hair inside
+    np.testing.assert_allclose(scene["points"], result.hair.points, atol=1e-6)
+    np.testing.assert_allclose(scene["body_vertices"], male.vertices, atol=1e-6)
+    current = documents.hairline_document(adaptable, male)
+    np.testing.assert_allclose(scene["hairline_points"], current["points"], atol=1e-6)
+    np.testing.assert_array_equal(scene["hairline_turning"], current["turning_points"])
+    widows = documents.hairline_document(adaptable, male, "widows-peak")
+    np.testing.assert_allclose(scene[display.scene_preset_array("widows-peak")], widows["points"], atol=1e-6)
+    assert display.scene_meta(scene) == {"groom_units": "m", "hairline_error": None}
+    # the preset moves the hairline's middle, keeps its ends
+    middle = len(current["points"]) // 2
+    assert np.linalg.norm(np.subtract(widows["points"][middle], current["points"][middle])) > 1e-3
+    np.testing.assert_allclose(widows["points"][0], current["points"][0], atol=1e-6)
+
+
+def test_a_curve_document_is_written_in_the_grooms_units_and_axes():
+    frame = InputFrame("mm", "z", "-y")
+    points = np.array([[0.1, 1.6, 0.05], [0.0, 1.7, 0.09], [-0.1, 1.6, 0.05]])
+    document = {"units": "m", "points": points.tolist(), "turning_points": [1]}
+    written = documents.curve_document_in_frame(frame, document)
+    assert written["units"] == "mm" and written["turning_points"] == [1]
+    assert np.allclose(written["points"], frame.axes_out(points) * 1000.0, atol=1e-4)
+    # at the canonical document's precision: 0.1 micrometre is 1e-4 mm
+    assert all(round(value, 4) == value for point in written["points"] for value in point)
