@@ -3,8 +3,8 @@
 The API creates records, the worker updates them (state, stage, progress, outputs); both go
 through these models, so the record layout is written once. Records are JSON documents in the
 shared storage (:mod:`hairport.storage`) under their kind (``characters``, ``hairstyles``,
-``artifacts``, ``preprocessing``, ``jobs``, ``idempotency``); :class:`Records` reads and writes
-them typed.
+``artifacts``, ``preprocessing``, ``jobs``, ``idempotency``, and the workers' caches ``bodies`` and
+``wraps``); :class:`Records` reads and writes them typed.
 
 Job states: ``queued`` -> ``running`` -> ``succeeded`` | ``failed`` | ``cancelled``. A running
 job whose heartbeat stopped (its worker died) becomes ``stale`` and is queued again; it goes
@@ -163,6 +163,20 @@ class BodyRecord(Record):
     suffix: str = ".npy"
     faces: int
     seconds: float = Field(description="what building it took")
+    created_at: float
+
+
+class WrapRecord(Record):
+    """A source body wrapped onto a target of another topology, kept for every job and worker: keyed by the wrap's
+    content key (:func:`hairport.solver.wrap_key`: both bodies, the region the groom reaches, the wrap's options),
+    the wrapped vertices and the wrap's report stored as one ``.npz`` blob."""
+
+    KIND: ClassVar[str] = "wraps"
+    key: str
+    sha256: str
+    suffix: str = ".npz"
+    vertices: int = Field(description="the source's vertex count (the wrapped vertices' rows)")
+    seconds: float = Field(description="what the wrap took")
     created_at: float
 
 

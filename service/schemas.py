@@ -36,6 +36,7 @@ MAX_CURVE_POINTS = 10_000
 _RETARGET = solver.RetargetOptions()
 _PREPROCESS = solver.PreprocessOptions()
 _HAIRLINE = solver.HairlineEdit(preset=solver_options.HAIRLINE_PRESETS[0])
+_WRAP_AUTO, _WRAP_ALWAYS, _WRAP_OFF = solver_options.WRAP_MODES
 
 
 
@@ -148,6 +149,10 @@ class RetargetOptionsIn(BaseModel):
     step_tolerance: float = ranged("step_tolerance", _RETARGET.step_tolerance)
     energy_tolerance: float = ranged("energy_tolerance", _RETARGET.energy_tolerance)
     qp_backend: Literal[solver_options.QP_BACKENDS] = _RETARGET.qp_backend
+    wrap: Literal[solver_options.WRAP_MODES] = Field(_RETARGET.wrap, description=(
+        f"a target whose mesh topology (vertex count, faces) is not the source's: {_WRAP_AUTO} wraps the source "
+        f"body onto it first; {_WRAP_ALWAYS} wraps a target of the source's topology too; {_WRAP_OFF} fails the job "
+        "with topology_mismatch"))
 
 
 class HairlineCurveIn(BaseModel):

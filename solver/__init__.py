@@ -1,4 +1,4 @@
-"""hairport's numerical core: retarget a strand hairstyle to another body of the same topology.
+"""hairport's numerical core: retarget a strand hairstyle to another body, of the same topology or wrapped.
 
 This module is the solver's public face. The command line, the worker and the service import the
 names below from here, and otherwise only the solver's named public modules, each by its name:
@@ -45,6 +45,7 @@ from hairport.solver.model.progress import ProgressFn, no_progress
 from hairport.solver.model.units import UNITS
 from hairport.solver.options import PreprocessOptions, RetargetOptions
 from hairport.solver.pipeline import RetargetResult, penetrating_mask, preprocess, retarget
+from hairport.solver.wrapping import WrappedTarget, needs_wrap, wrap_key, wrap_target
 
 __all__ = [
     "ARTIFACT_EXTENSION", "ARTIFACT_FORMAT_VERSION", "AUTO", "AXIS_CHOICES", "AdaptableHairstyle", "Cancelled",
@@ -54,5 +55,6 @@ __all__ = [
     "check_memory", "collision_faces", "edit_in_canonical", "flagged_guides", "format_for_path", "fsync_folder",
     "hair_in_frame", "hairline_edit", "hairline_edit_from_request", "load_adaptable", "no_progress", "parse_axis",
     "penetrating_mask", "preprocess", "read_character", "read_hair", "read_hair_report", "recorded_hair_units",
-    "resolve_skeleton_path", "retarget", "save_adaptable", "with_guide_flags", "write_hair",
+    "resolve_skeleton_path", "retarget", "save_adaptable", "with_guide_flags", "write_hair", "WrappedTarget",
+    "needs_wrap", "wrap_key", "wrap_target",
 ]

@@ -27,7 +27,6 @@ from hairport.solver.adaptation.multiscale import (
 )
 from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.solve import solve_strands
-from hairport.solver.body.target import prepare_target
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.model.character import Character
@@ -57,6 +56,9 @@ def solve_fine_chunk(
 
     Parameters
     ----------
+    target : Character
+        The body the hair touches: for a target of another topology the target itself, not its wrap
+        (the fine level needs only its collision surface).
     inputs : FineInputs
         The retarget's :attr:`FineLevel.inputs` (its adapted guides).
     first, stop : int
@@ -75,7 +77,7 @@ def solve_fine_chunk(
     if not 0 <= first < stop <= len(fine.strands):
         raise InputError(f"strands {first}..{stop} are not a run of the {len(fine.strands)} normal strands",
                          code="bad_fine_chunk")
-    target = prepare_target(adaptable, target)
+    # only the body the hair touches: the target itself, of the source's topology or wrapped
     body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
     grid = DistanceGrid.build(body, region=grid_region(inputs.initial))
     problem, start = chunk_problem(adaptable.hair, adaptable.multiscale.guides, adaptable.multiscale.fine_neighbours,

@@ -70,10 +70,12 @@ def curve_document_in_frame(frame: InputFrame, document: dict) -> dict:
 def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> dict[str, np.ndarray]:
     """What the dashboard draws of a retarget (:func:`~hairport.solver.display.scene_arrays`): the result, its
     particles inside the body, the target, and the target's current front hairline with every preset's edit of
-    it (left out, with the reason in ``meta``, when the groom has no front hairline to find)."""
+    it (left out, with the reason in ``meta``, when the groom has no front hairline to find). The hairline of a
+    target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`), the body drawn is the target."""
     inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
     try:
-        documents = hairline_documents(adaptable, target, (None, *HAIRLINE_PRESETS))
+        shape = target if result.wrapped is None else result.wrapped.shape
+        documents = hairline_documents(adaptable, shape, (None, *HAIRLINE_PRESETS))
         hairline, hairline_error = documents.pop(None), None
     except InputError as error:
         documents, hairline, hairline_error = {}, {"points": [], "turning_points": []}, error.problem

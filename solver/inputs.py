@@ -12,12 +12,16 @@ Units, in order: given (the command line's ``--units`` / ``--hair-units``, the A
 hairport ``.npz`` records them), else inferred (:mod:`hairport.solver.body.scale`): a groom
 and a body that both lack units share the unit in which their sizes are plausible; one that
 lacks them takes the unit in which its roots sit on the other; a target that lacks them
-takes the unit in which it has the source's size (same topology). A groom that does not sit
-on its body in the chosen units is refused (``units_mismatch``, naming the units in which it
-would; ``hair_off_body`` when none would).
+takes the unit in which it has the source's size (same topology) or in which it holds the
+source's head (another topology, :mod:`hairport.solver.body.target_frame`). A groom that
+does not sit on its body in the chosen units is refused (``units_mismatch``, naming the
+units in which it would; ``hair_off_body`` when none would); so is a target whose size
+(same topology) or head (another topology) says it is in other units than those stated.
 
 Axes: given, else inferred (:mod:`hairport.solver.body.orientation`) for the source and its
-groom (which share them), and for a target by fitting it to the source (same topology).
+groom (which share them), and for a target by fitting it to the source: vertex by vertex
+(same topology), or by placing the source's head on it (another topology; the retarget then
+wraps the source body onto it, :mod:`hairport.solver.wrapping`).
 
 :func:`canonical_source` also measures the input section of the report: the groom against
 its own body (particles inside it, roots off its surface), the units and axes and how they
@@ -47,12 +51,13 @@ from hairport.solver.body.scale import (
     units_from_sizes,
 )
 from hairport.solver.body.skinning import derive_skin_weights
+from hairport.solver.body.target_frame import CONFIDENT_RATIO, HEAD_SCALES, FrameFit, fit_target_frame
 from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character, check_same_topology
 from hairport.solver.model.degenerate import degenerate_report, require_no_stray_strands
-from hairport.solver.model.errors import InputError
+from hairport.solver.model.errors import InputError, TopologyMismatch
 from hairport.solver.model.frame import AUTO, InputFrame, character_axes_in, hair_axes_in, hair_axes_out, parse_axis
 from hairport.solver.model.hair import Hair
 from hairport.solver.model.units import METERS_PER_UNIT
@@ -65,6 +70,13 @@ ROOT_OFF_SURFACE_MM = 1.0
 #: source's by more than this factor, in the units it states, is refused: characters of one
 #: topology differ by less (MakeHuman child -> heavy male: 1.4)
 PLAUSIBLE_SIZE_FACTOR = 3.0
+#: a target of another topology whose head the source's fits closer than this (m, mean distance, at the best of
+#: its tried sizes) in its stated units is read in them without trying others: the MakeHuman heads fit their
+#: true frame at 3.5-7.4 mm remeshed to 20k vertices, 7.7 (body) and 8.8 mm (head) at 5k; shapes that are no head
+#: at 12-21 mm (:mod:`~hairport.solver.body.target_frame`)
+HEAD_FIT_M = 0.010
+#: how the frame of a target of another topology is found, in the input report
+OTHER_TOPOLOGY_HOW = "fitted to the source's head (another topology)"
 
 
 @dataclass(frozen=True)
@@ -351,39 +363,66 @@ def canonical_target(
     up: str | None = None,
     front: str | None = None,
 ) -> tuple[Character, dict]:
-    """Bring a target character into hairport's frame, next to a canonical source of its topology.
+    """Bring a target character into hairport's frame, next to a canonical source.
+
+    Of the source's topology, it takes the units in which it has the source's size and the axes
+    that fit it to the source vertex by vertex; of another topology, the frame in which it holds
+    the source's head (:func:`~hairport.solver.body.target_frame.fit_target_frame`). What is given
+    is kept either way.
 
     Parameters
     ----------
     source : Character
         The source, canonical frame (e.g. ``adaptable.source``).
     target : Character
-        In meters when ``units`` is given, else in the file's own units.
+        In meters when ``units`` is given, else in the file's own units; any topology.
     units : str, optional
-        The units the target was read in (given or stated by the file); None to take the
-        unit in which it has the source's size.
+        The units the target was read in (given or stated by the file); None to infer them.
     up, front : str, optional
-        Its up and front axes, or None to fit it to the source.
+        Its up and front axes, or None to fit them.
 
     Returns
     -------
     target : Character
         Canonical frame.
     report : dict
-        ``units``, ``up``, ``front``, how each was found, the size ratio to the source and
-        the bounding box in the file's coordinates (JSON-ready).
+        ``units``, ``up``, ``front``, how each was found and how confidently, ``topology``
+        (``same`` or ``other``), the size ratio to the source, the bounding box in the file's
+        coordinates and, for another topology, ``head_fit_mm`` (JSON-ready).
 
     Raises
     ------
-    TopologyMismatch
     InputError
-        ``units_mismatch`` when the target, in the units it states, is more than
-        :data:`PLAUSIBLE_SIZE_FACTOR` times larger or smaller than the source.
+        ``units_mismatch`` when the stated units contradict the target: of the source's
+        topology, it is more than :data:`PLAUSIBLE_SIZE_FACTOR` times larger or smaller than
+        the source; of another, the source's head fits it clearly closer in other units
+        (:func:`_check_stated_units`). ``bad_axis`` for axes that are not perpendicular.
     """
     units = auto_or(units)
-    check_same_topology(source, target)
+    given_up = None if auto_or(up) is None else parse_axis(up, "up axis")
+    given_front = None if auto_or(front) is None else parse_axis(front, "front axis")
+    try:
+        check_same_topology(source, target)
+    except TopologyMismatch:
+        frame, scale, found = _other_topology_frame(source, target, units, given_up, given_front)
+    else:
+        frame, scale, found = _same_topology_frame(source, target, units, given_up, given_front)
+    canonical = character_axes_in(frame, target, scale)
     source_size = _size(source.vertices)
-    raw_size = _size(target.vertices)
+    ratio = _size(target.vertices) * scale / source_size if source_size > 0 else 1.0
+    file_scale = 1.0 if units is None else METERS_PER_UNIT[frame.units]  # loaded units per file unit
+    report = {"units": frame.units, "units_how": found.pop("units_how"), "up": frame.up, "front": frame.front,
+              **found, "size_ratio_to_source": round(ratio, 4),
+              "bounding_box": _bbox(target.vertices / file_scale, frame.units)}
+    return canonical, report
+
+
+def _same_topology_frame(source: Character, target: Character, units: str | None, up: str | None,
+                         front: str | None) -> tuple[InputFrame, float, dict]:
+    """The frame of a target of the source's topology, meters per loaded unit, and how they were found: the units
+    in which it has the source's size (``units_mismatch`` when stated ones are implausible), the axes that fit it
+    to the source vertex by vertex (Kabsch)."""
+    source_size, raw_size = _size(source.vertices), _size(target.vertices)
     if units is None:
         target_units = units_from_ratio(source_size / raw_size) if raw_size > 0 else "m"
         scale, units_how = METERS_PER_UNIT[target_units], "inferred: the source's size"
@@ -395,20 +434,61 @@ def canonical_target(
         raise InputError(
             f"the target is {ratio:.3g} times the size of the source (same topology) with its units {target_units}; "
             f"it looks like it is in {likely} - give its units as {likely}", target.name, "units_mismatch")
-    given_up = None if auto_or(up) is None else parse_axis(up, "up axis")
-    given_front = None if auto_or(front) is None else parse_axis(front, "front axis")
-    if given_up is not None and given_front is not None:
-        frame, axes_how, confidence = InputFrame(target_units, given_up, given_front), "given", 1.0
+    if up is not None and front is not None:
+        frame, axes_how, confidence = InputFrame(target_units, up, front), "given", 1.0
     else:
         fitted_up, fitted_front, confidence = relative_axes(source.vertices, target.vertices)
-        frame = InputFrame(target_units, given_up or fitted_up, given_front or fitted_front)
+        frame = InputFrame(target_units, up or fitted_up, front or fitted_front)
         axes_how = "fitted to the source (same topology)"
-    canonical = character_axes_in(frame, target, scale)
-    report = {"units": target_units, "units_how": units_how, "up": frame.up, "front": frame.front,
-              "axes_how": axes_how, "axes_confidence": round(confidence, 3), "size_ratio_to_source": round(ratio, 4),
-              "bounding_box": _bbox(target.vertices / (1.0 if units is None else METERS_PER_UNIT[target_units]),
-                                    target_units)}
-    return canonical, report
+    return frame, scale, {"units_how": units_how, "axes_how": axes_how, "axes_confidence": round(confidence, 3),
+                          "topology": "same"}
+
+
+def _other_topology_frame(source: Character, target: Character, units: str | None, up: str | None,
+                          front: str | None) -> tuple[InputFrame, float, dict]:
+    """The frame of a target of another topology, meters per loaded unit, and how they were found: what is given,
+    the rest from the frame in which the source's head fits it best (in the file's own coordinates, so that stated
+    units are checked against the others: :func:`_check_stated_units`)."""
+    in_file = target if units is None else Character(target.vertices / METERS_PER_UNIT[units], target.faces,
+                                                      name=target.name)
+    fit = fit_target_frame(source, in_file, units, up, front)
+    if units is not None and fit.score_m > HEAD_FIT_M:
+        _check_stated_units(source, in_file, units, up, front, fit)
+    scale = 1.0 if units is not None else METERS_PER_UNIT[fit.frame.units]
+    axes_given = up is not None and front is not None
+    return fit.frame, scale, {
+        "units_how": "given or stated by the file" if units is not None else OTHER_TOPOLOGY_HOW,
+        "axes_how": "given" if axes_given else OTHER_TOPOLOGY_HOW,
+        "axes_confidence": 1.0 if axes_given else round(fit.confidence, 3),
+        "topology": "other", "head_fit_mm": round(1e3 * fit.score_m, 2)}
+
+
+def _check_stated_units(source: Character, in_file: Character, units: str, up: str | None, front: str | None,
+                        stated: FrameFit) -> None:
+    """Refuse a target of another topology whose head says it is in other units than those stated.
+
+    Called when the source's head, at any of its tried sizes, fits the target read in its stated units no closer
+    than :data:`HEAD_FIT_M`: the head is then fitted in every unit, and when another fits it at least
+    :data:`~hairport.solver.body.target_frame.CONFIDENT_RATIO` times closer, the stated units are refused
+    (``units_mismatch``, naming that unit). A target that is no head in any unit is left to the wrap
+    (``wrap_failed``).
+
+    Parameters
+    ----------
+    in_file : Character
+        The target in its file's coordinates.
+    stated : FrameFit
+        The fit in the stated units.
+    """
+    best = fit_target_frame(source, in_file, None, up, front)
+    if best.frame.units == units or stated.score_m < CONFIDENT_RATIO * best.score_m:
+        return
+    likely = best.frame.units
+    raise InputError(
+        f"the target's head is not a head's size in its units {units}: the source's head, at {min(HEAD_SCALES):g}-"
+        f"{max(HEAD_SCALES):g} times its size, fits it {1e3 * stated.score_m:.3g} mm off on average read in {units} and {1e3 * best.score_m:.3g} "
+        f"mm read in {likely} (another topology); it looks like it is in {likely} - give its units as {likely}",
+        in_file.name, "units_mismatch")
 
 
 def _size(vertices: np.ndarray) -> float:

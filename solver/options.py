@@ -35,6 +35,10 @@ SOLVER_METHODS = ("multiscale", "global")
 METHODS = SOLVER_METHODS + BASELINE_METHODS
 #: the named edits of the front hairline (``hairline.preset``)
 HAIRLINE_PRESETS = PRESETS
+#: when a retarget wraps the source body onto the target (:mod:`hairport.solver.wrapping`): ``auto`` when the
+#: target's topology is not the source's; ``always``, a same-topology target too; ``off`` never (another
+#: topology is then ``topology_mismatch``)
+WRAP_MODES = ("auto", "always", "off")
 
 
 #: the solvers stop a strand (or the coupled guides) once an iteration lowers Eq. 1 by less
@@ -148,6 +152,7 @@ class RetargetOptions:
     particles evenly spaced along their strands (:mod:`~hairport.solver.adaptation.problem.spacing`); 0 solves
     the paper's Eq. 1 exactly. ``carry`` (m) lets the anchored strands take back their source shape
     before the solve (:mod:`~hairport.solver.transfer.carry`); 0 is the paper's initial transfer.
+    ``wrap`` (:data:`WRAP_MODES`) says when the source body is wrapped onto the target first.
     """
 
     method: str = "multiscale"
@@ -164,8 +169,12 @@ class RetargetOptions:
     chunk_particles: int = DEFAULT_CHUNK_PARTICLES
     qp_backend: str = "active-set"
     hairline: HairlineEdit | None = None
+    wrap: str = WRAP_MODES[0]
 
     def validate(self) -> None:
+        if self.wrap not in WRAP_MODES:
+            raise InputError(f"unknown wrap mode {self.wrap!r}; expected one of {', '.join(WRAP_MODES)}",
+                             code="bad_option")
         if self.method not in SOLVER_METHODS:
             try:
                 parse_method(self.method)

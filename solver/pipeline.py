@@ -51,6 +51,7 @@ from hairport.solver.options import OPTION_RANGES, SOLVER_METHODS, PreprocessOpt
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
 from hairport.solver.transfer.carry import carry_shapes
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
+from hairport.solver.wrapping import WrappedTarget, needs_wrap, onto_body, wrap_target
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
@@ -70,6 +71,8 @@ class RetargetResult:
     relocation: Relocation | None = None
     #: (N,) bool: the particles inside the target body (the metrics' penetration test)
     inside: np.ndarray | None = None
+    #: the wrap of the source body onto a target of another topology (None: the target's own topology)
+    wrapped: WrappedTarget | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -169,6 +172,7 @@ def retarget(
     target_input: dict | None = None,
     fine_runner: FineRunner = solve_here,
     collision_surface: np.ndarray | None = None,
+    wrapped: WrappedTarget | None = None,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -177,7 +181,8 @@ def retarget(
     adaptable : AdaptableHairstyle
         From :func:`preprocess`.
     target : Character
-        Same topology as the source; a skeleton is transferred when it has none.
+        Canonical frame. Of the source's topology (a skeleton is transferred when it has none), or of
+        another, onto which the source body is wrapped first (``options.wrap``, :mod:`~hairport.solver.wrapping`).
     options : RetargetOptions
     progress : callable(stage, fraction, message), optional
     should_stop : callable() -> bool, optional
@@ -191,25 +196,29 @@ def retarget(
     collision_surface : (F,) bool, optional
         The target's :func:`~hairport.solver.mesh.collision.collision_faces`, kept from an earlier
         build (a per-target cache); built here when omitted.
+    wrapped : WrappedTarget, optional
+        The wrap of this source onto this target from an earlier retarget (:attr:`RetargetResult.wrapped`,
+        a cache keyed by :func:`~hairport.solver.wrapping.wrap_key`); wrapped here when needed and omitted.
     """
     options.validate()
     progress = progress or no_progress
     hair = adaptable.hair
     timings: dict[str, float] = {}
-    with timed(timings, "prepare"):
-        progress("prepare", 0.0, "checking the target")
-        target = prepare_target(adaptable, target)
-        target_query = MeshQuery(target.vertices, target.faces)
-        body = collision_query(target.vertices, target.faces, target.name, separating=collision_surface)
+    bodies = target_bodies(adaptable, target, options, timings, progress, collision_surface, wrapped)
+    target, contact, target_query, contact_query, body, wrapped = bodies
     with timed(timings, "initial_transfer"):
         progress("initial_transfer", 0.05, "initial transfer")
         initial, unsmooth = initial_transfer(adaptable, target, options.eps_s, target_query, options.carry)
 
     roots = root_targets(target, adaptable.anchors.face[hair.roots], adaptable.anchors.barycentric[hair.roots])
+    if wrapped is not None:
+        initial, roots = onto_body(hair, initial, roots, contact_query)
     start = gamma = relocation = None
     if options.hairline is not None:
         progress("hairline", 0.07, f"relocating the roots for the hairline edit {options.hairline.describe()}")
         relocation, start, gamma = relocate_hairline(adaptable, target, initial, roots, options.hairline)
+        if wrapped is not None:
+            start, relocation.roots = onto_body(hair, start, relocation.roots, contact_query)
         roots = relocation.roots
         timings["hairline"] = relocation.report["seconds"]
 
@@ -224,8 +233,12 @@ def retarget(
         with timed(timings, "baseline"):
             progress("baseline", 0.1, f"baseline {options.method}")
             base, claims_outside = parse_method(options.method)
-            points = retarget_baseline(base, adaptable.source, target, hair, pushout=claims_outside,
-                                       clearance=options.eps_c, target_query=body).points
+            # on a wrap, the baseline places the hair on the wrapped shape; the penetration check below then pushes
+            # it out of the target itself
+            points = retarget_baseline(base, adaptable.source, target, hair, pushout=claims_outside and wrapped is None,
+                                       clearance=options.eps_c, target_query=body if wrapped is None else None).points
+            if wrapped is not None:
+                points, _ = onto_body(hair, points, points[hair.roots], contact_query)
             # a collapsed strand stays on its root, as with the solvers (on a copy: a baseline may share arrays)
             points = hair.place_at_roots(np.array(points, dtype=np.float64))
 
@@ -233,12 +246,12 @@ def retarget(
     if claims_outside:
         with timed(timings, "penetration_check"):
             progress("penetration_check", 0.94, "checking that no particle is inside the body")
-            points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, target.name)
+            points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, contact.name)
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
         body_distance = penetration(points, hair.at_root, body, options.eps_c)
-        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, target_query, options.eps_c,
+        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
                                     weights, body=body, penetration_stats=body_distance)
         inside = np.zeros(hair.n_particles, dtype=bool)
         inside[~hair.at_root] = body_distance["distance"] < 0.0
@@ -247,6 +260,8 @@ def retarget(
             metrics["penetration_resolved"] = resolved
         if relocation is not None:
             metrics["hairline"] = relocation.report
+        if wrapped is not None:
+            metrics["wrap"] = wrapped.report
         metrics["smoothed_particles"] = int(unsmooth.sum())
         metrics["anchoring"] = adaptable.options.anchoring
         metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
@@ -254,8 +269,43 @@ def retarget(
             metrics["input"] = {**adaptable.input_report, **({"target": target_input} if target_input else {})}
     progress("done", 1.0, "done")
     return RetargetResult(
-        hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside
+        hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
+        wrapped,
     )
+
+
+def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,
+                  timings: dict[str, float], progress: ProgressFn, collision_surface: np.ndarray | None,
+                  wrapped: WrappedTarget | None) -> tuple:
+    """The two meshes a retarget uses: the one of the source's topology that gives the correspondence (the target
+    itself, or the source body wrapped onto it) and the one the hair touches (the target itself).
+
+    Returns
+    -------
+    shape : Character
+        Prepared (:func:`~hairport.solver.body.target.prepare_target`).
+    contact : Character
+    shape_query, contact_query : MeshQuery
+    body : MeshQuery
+        The contact's collision surface.
+    wrapped : WrappedTarget or None
+    """
+    contact = target
+    if needs_wrap(adaptable.source, target, options.wrap):
+        if wrapped is None:
+            with timed(timings, "wrap"):
+                progress("wrap", 0.0, f"wrapping the source body onto the target ({target.n_vertices:,} vertices)")
+                wrapped = wrap_target(adaptable, target)
+        target = wrapped.shape
+    else:
+        wrapped = None
+    with timed(timings, "prepare"):
+        progress("prepare", 0.02, "checking the target")
+        target = prepare_target(adaptable, target)
+        target_query = MeshQuery(target.vertices, target.faces)
+        body = collision_query(contact.vertices, contact.faces, contact.name, separating=collision_surface)
+        contact_query = target_query if wrapped is None else MeshQuery(contact.vertices, contact.faces)
+    return target, contact, target_query, contact_query, body, wrapped
 
 
 def adapt_shape(

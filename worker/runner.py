@@ -38,10 +38,11 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
-from hairport.solver import display, documents
+from hairport.solver import display, distributed, documents
+from hairport.solver import options as solver_options
 from hairport.storage import Blob, retention_seconds
 
-from . import bodies
+from . import bodies, wraps
 from .fine import FineDispatch, SpreadFineLevel
 from .loading import error_info, job_inputs, read_source
 from .runs import TRANSIENT_ERRORS, Heartbeat, OwnRun, run_gone, start_run
@@ -217,9 +218,20 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
     options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
                                      hairline=solver.edit_in_canonical(frame, edit))
     surface, cache_timings = bodies.collision_surface(repository, settings, target)
-    result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop,
-                             target_input=target_input, fine_runner=fine_runner, collision_surface=surface)
-    result.timings.update(cache_timings)
+    wrapped, wrap_timings = wraps.cached_wrap(repository, settings, adaptable, target, options.wrap, progress)
+    if solver.needs_wrap(adaptable.source, target, options.wrap):
+        # the fine level's chunks, on other workers, read the target as one of the source's topology
+        # (distributed.solve_fine_chunk): a wrapped target's fine level is solved in this run
+        fine_runner = distributed.solve_here
+    try:
+        result = solver.retarget(adaptable, target, options, progress=progress, should_stop=progress.should_stop,
+                                 target_input=target_input, fine_runner=fine_runner, collision_surface=surface,
+                                 wrapped=wrapped)
+    except solver.InputError as error:
+        raise explained(error, options.wrap, target_input) from None
+    if wrapped is None:
+        wrap_timings.update(wraps.keep(repository, settings, result.wrapped))
+    result.timings.update(cache_timings, **wrap_timings)
     progress("storing", 0.99, "writing outputs")
     outputs = {}
     report = {**result.report(), "job": {"id": job.id, "hairstyle_id": job.hairstyle_id,
@@ -237,6 +249,22 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
         path = display.save_scene(work / "scene.npz", documents.display_scene(adaptable, result, target))
         outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
     return outputs, result
+
+
+def explained(error: solver.InputError, mode: str, found: dict) -> solver.InputError:
+    """A job's refusal of its target in the API's terms: a ``topology_mismatch`` under ``options.wrap`` off says
+    that the default would have wrapped it; a ``wrap_failed`` names the axes the target was read in when they
+    were fitted (``found``: ``canonical_target``'s report), the likeliest cause. Other errors as they are."""
+    off, auto = solver_options.WRAP_MODES[2], solver_options.WRAP_MODES[0]
+    if error.code == "topology_mismatch" and mode == off:
+        return solver.InputError(f"{error.problem}; options.wrap {off} keeps to the source's topology (wrap {auto} "
+                                 "wraps the source body onto this target)", error.source, error.code)
+    if error.code == "wrap_failed" and found.get("axes_how") not in (None, "given"):
+        # first: a job's message is cut at MAX_DETAIL_CHARS
+        return solver.InputError(f"the target was read with up {found['up']} and front {found['front']} (fitted; "
+                                 f"give the character's up_axis and front_axis if those are wrong): {error.problem}",
+                                 error.source, error.code)
+    return error
 
 
 def _jsonable(document: dict) -> dict:

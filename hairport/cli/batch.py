@@ -1,5 +1,9 @@
 """``hairport batch``: every groom onto every target character on this machine, one folder per pair and a
-summary table of each pair's metrics (what ``POST /v1/batches`` does through the service)."""
+summary table of each pair's metrics (what ``POST /v1/batches`` does through the service).
+
+A target of another topology than a groom's source is wrapped once per wrap key (both bodies and the part of
+the source the groom's hair reaches, :func:`hairport.solver.wrap_key`) and the wrap handed to every pair with that key: a pair's
+result is the one ``hairport retarget`` gives it alone, whatever else the batch holds."""
 
 from __future__ import annotations
 
@@ -9,7 +13,7 @@ import io
 import sys
 import time
 import traceback
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from hairport import solver
@@ -18,12 +22,27 @@ from hairport.settings import get_settings
 from hairport.solver import InputError
 from hairport.solver import options as solver_options
 
-from .common import EXIT_BAD_INPUT, add_units, axes, load_source, mesh_limits, mesh_units, option_help, option_type
+from .common import (
+    EXIT_BAD_INPUT,
+    add_units,
+    add_wrap,
+    axes,
+    load_source,
+    mesh_limits,
+    mesh_units,
+    option_help,
+    option_type,
+    target_refusals,
+)
 from .solve import _DEFAULTS, add_hairline_arguments, hairline_edit
 
 #: the summary's columns: the pair, its outcome, then the metrics every retarget reports
 SUMMARY_COLUMNS = ("groom", "target", "folder", "status", "error", "seconds", "particles", "penetrating_particles",
-                   "mean_segment_angle_rad", "mean_bend_error_rad", "interstrand_error_m", "root_to_target_max")
+                   "mean_segment_angle_rad", "mean_bend_error_rad", "interstrand_error_m", "root_to_target_max",
+                   "wrap")
+#: the summary's ``wrap`` column: the pair's target was wrapped for it, or an earlier pair's wrap was reused
+#: (empty: the target has the groom's topology)
+WRAPPED, REUSED = "wrapped", "reused"
 #: width of the progress bar (characters)
 BAR_WIDTH = 30
 
@@ -35,7 +54,8 @@ def add_batch(sub) -> None:
     p.add_argument("--groom", nargs=2, action="append", default=[], metavar=("SOURCE", "HAIR"),
                    help="a source character mesh and its hair file, preprocessed first (repeat for more grooms)")
     p.add_argument("--targets", nargs="+", required=True, metavar="MESH",
-                   help="target character meshes, same topology as the sources (skeleton sidecars are found)")
+                   help="target character meshes, of the sources' topology or of another (see --wrap; skeleton "
+                        "sidecars are found)")
     p.add_argument("--out", required=True, help="folder to write <groom>__<target>/ and summary.csv/json into")
     p.add_argument("--format", default="npz", choices=solver.HAIR_FORMATS, help="format of each result (default npz)")
     p.add_argument("--guides", type=option_type("guides"), default=None,
@@ -53,6 +73,7 @@ def add_batch(sub) -> None:
                                                  "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
+    add_wrap(p)
     add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=cmd_batch)
@@ -64,13 +85,32 @@ class Groom:
     adaptable: solver.AdaptableHairstyle
 
 
+@dataclass
+class Known:
+    """What the batch found once and every later pair reuses: each target read next to each source body (by the
+    target's column and the source's :func:`hairport.solver.body_key`), and each wrap and each refused wrap (by
+    its key)."""
+
+    targets: dict[tuple[int, str], tuple[solver.Character, dict]] = field(default_factory=dict)
+    wraps: dict[str, solver.WrappedTarget] = field(default_factory=dict)
+    refused: dict[str, InputError] = field(default_factory=dict)
+
+    def target(self, source: solver.Character, column: int, target: solver.Character, units: str | None,
+               args: argparse.Namespace) -> tuple[solver.Character, dict]:
+        """``canonical_target`` of the pair (for another topology the frame fit takes ~0.2-1 s)."""
+        key = (column, solver.body_key(source.vertices, source.faces))
+        if key not in self.targets:
+            self.targets[key] = solver.canonical_target(source, target, units=units, **axes(args))
+        return self.targets[key]
+
+
 def cmd_batch(args: argparse.Namespace) -> int:
     settings = get_settings()
     if not args.adaptable and not args.groom:
         raise InputError("give at least one groom: --adaptable FILE.hpa or --groom SOURCE HAIR", code="bad_option")
     options = solver.RetargetOptions(method=args.method, max_iterations=args.max_iterations,
                                      energy_tolerance=args.energy_tolerance, spacing=args.spacing, carry=args.carry,
-                                     hairline=hairline_edit(args))
+                                     hairline=hairline_edit(args), wrap=args.wrap)
     options.validate()
     out = Path(args.out)
     bar = ProgressBar(len(args.targets) * (len(args.adaptable) + len(args.groom)), args.quiet)
@@ -79,13 +119,14 @@ def cmd_batch(args: argparse.Namespace) -> int:
                                                        **mesh_limits(settings))) for path in args.targets]
     folders = _folder_names([groom.name for groom in grooms], [name for name, _ in targets])
     rows = []
+    known = Known()
     # target by target: each body's query structures are built once and reused by every groom (the
     # in-process cache of the last bodies)
     for (target_name, (target, units)), column in zip(targets, range(len(targets))):
         for groom, row in zip(grooms, range(len(grooms))):
             folder = out / folders[row][column]
             bar.start(f"{groom.name} x {target_name}")
-            rows.append(_retarget_pair(groom, target_name, target, units, options, args, folder))
+            rows.append(_retarget_pair(groom, (column, target_name), target, units, options, args, folder, known))
             bar.finish(rows[-1]["status"] == "ok")
     rows.sort(key=lambda row: (row["groom"], row["target"]))
     with OutputSet() as outputs:
@@ -117,17 +158,31 @@ def _load_grooms(args: argparse.Namespace, settings, bar: ProgressBar) -> list[G
     return grooms
 
 
-def _retarget_pair(groom: Groom, target_name: str, target: solver.Character, units: str | None,
-                   options: solver.RetargetOptions, args: argparse.Namespace, folder: Path) -> dict:
-    """One pair: its folder written whole (result and report), or its error; the summary row."""
-    row = {column: None for column in SUMMARY_COLUMNS}
+def _retarget_pair(groom: Groom, target_at: tuple[int, str], target: solver.Character, units: str | None,
+                   options: solver.RetargetOptions, args: argparse.Namespace, folder: Path, known: Known) -> dict:
+    """One pair (``target_at``: the target's column and name): its folder written whole (result and report), or
+    its error; the summary row. ``known`` gives the pair the target already read next to its source and an earlier
+    pair's wrap of the same bodies and reach, and keeps the pair's own."""
+    (column, target_name), row = target_at, dict.fromkeys(SUMMARY_COLUMNS)
     row.update(groom=groom.name, target=target_name, folder=folder.name, particles=groom.adaptable.hair.n_particles)
     began = time.perf_counter()
     try:
         adaptable, frame = groom.adaptable, groom.adaptable.frame
-        canonical, found = solver.canonical_target(adaptable.source, target, units=units, **axes(args))
+        canonical, found = known.target(adaptable.source, column, target, units, args)
         pair_options = replace(options, hairline=solver.edit_in_canonical(frame, options.hairline))
-        result = solver.retarget(adaptable, canonical, pair_options, target_input=found)
+        key = solver.wrap_key(adaptable, canonical) if solver.needs_wrap(adaptable.source, canonical, options.wrap) else None
+        if key in known.refused:  # the same wrap failed for an earlier pair
+            raise known.refused[key]
+        wrapped = known.wraps.get(key)
+        try:
+            with target_refusals(options.wrap, canonical, found):
+                result = solver.retarget(adaptable, canonical, pair_options, target_input=found, wrapped=wrapped)
+        except InputError as error:
+            if key is not None and error.code == "wrap_failed":
+                known.refused[key] = error
+            raise
+        if result.wrapped is not None:
+            known.wraps[result.wrapped.key] = result.wrapped
         report = {**result.report(), "pair": {"groom": groom.name, "target": target_name}}
         with OutputSet() as outputs:
             add_result(outputs, adaptable, result, canonical, {args.format: folder / f"result.{args.format}"},
@@ -135,6 +190,7 @@ def _retarget_pair(groom: Groom, target_name: str, target: solver.Character, uni
             outputs.commit()
         metrics = result.metrics
         row.update(status="ok", **{name: metrics[name] for name in SUMMARY_COLUMNS if name in metrics})
+        row["wrap"] = None if result.wrapped is None else WRAPPED if wrapped is None else REUSED
     except InputError as error:
         row.update(status="failed", error=str(error))
     except Exception as error:  # noqa: BLE001 - one pair's crash is reported; the other pairs still run

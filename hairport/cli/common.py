@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager
 
 from hairport import solver
 from hairport.solver import InputError
@@ -130,6 +131,35 @@ def axes(args: argparse.Namespace) -> dict:
     return {"up": args.up_axis, "front": args.front_axis}
 
 
+def add_wrap(p: argparse.ArgumentParser) -> None:
+    """``--wrap``: when the source body is wrapped onto the target (:data:`hairport.solver.options.WRAP_MODES`)."""
+    auto, always, off = solver_options.WRAP_MODES
+    p.add_argument("--wrap", default=solver.RetargetOptions.wrap, choices=solver_options.WRAP_MODES,
+                   help=f"a target whose mesh topology (vertex count, faces) is not the source's: {auto} (default) "
+                        f"wraps the source body onto it first; {always} wraps a target of the source's topology "
+                        f"too; {off} refuses another topology (topology_mismatch)")
+
+
+@contextmanager
+def target_refusals(mode: str, target: solver.Character, found: dict | None = None):
+    """A target's refusals that depend on how it was read, in the command line's terms: a ``topology_mismatch``
+    under ``--wrap off`` says that the default would have wrapped it; a ``wrap_failed`` names its file and the
+    axes it was read in (``found``: ``canonical_target``'s report), the likeliest cause."""
+    try:
+        yield
+    except InputError as error:
+        if error.code == "topology_mismatch" and mode == solver_options.WRAP_MODES[2]:
+            raise InputError(f"{error.problem}; --wrap {mode} keeps to the source's topology (--wrap "
+                             f"{solver_options.WRAP_MODES[0]} wraps the source body onto this target)", error.source,
+                             error.code) from None
+        if error.code == "wrap_failed":
+            read = "" if found is None or found["axes_how"] == "given" else (
+                f" It was read with up {found['up']} and front {found['front']} ({found['axes_how']}): give "
+                "--up-axis and --front-axis if those are wrong.")
+            raise InputError(f"{error.problem}{read}", target.name, error.code) from None
+        raise
+
+
 def load_target(args: argparse.Namespace, settings, adaptable: solver.AdaptableHairstyle,
                 progress=None) -> tuple[solver.Character, dict]:
     """The target of --target in hairport's frame (next to the adaptable hairstyle's source), and what was found."""
@@ -137,11 +167,26 @@ def load_target(args: argparse.Namespace, settings, adaptable: solver.AdaptableH
                                           units=mesh_units(args, args.target, args.target_skeleton),
                                           **mesh_limits(settings))
     target, found = solver.canonical_target(adaptable.source, target, units=units, **axes(args))
-    if progress is not None and (found["units_how"] != "given or stated by the file" or found["up"] != "+y"
-                                 or found["front"] != "+z"):
-        progress("input", 0.0, f"target: units {found['units']} ({found['units_how']}); up {found['up']}, "
-                               f"front {found['front']} ({found['axes_how']})")
+    if progress is not None:
+        note = target_note(target, found)
+        if note:
+            progress("input", 0.0, note)
     return target, found
+
+
+def target_note(target: solver.Character, found: dict) -> str | None:
+    """What reading the target found (``canonical_target``'s report), in one line; None when it holds no news
+    (its own topology, in the units it states and hairport's axes)."""
+    frame = f"units {found['units']} ({found['units_how']}); up {found['up']}, front {found['front']}"
+    if found["topology"] == "other":
+        if found["units_how"] == found["axes_how"]:  # both fitted
+            frame = f"units {found['units']}, up {found['up']}, front {found['front']}"
+        return (f"target: another topology than the source's ({target.n_vertices:,} vertices): {frame} "
+                f"({found['axes_how']}: {found['head_fit_mm']:g} mm off on average, confidence "
+                f"{found['axes_confidence']:g})")
+    if found["units_how"] != "given or stated by the file" or (found["up"], found["front"]) != ("+y", "+z"):
+        return f"target: {frame} ({found['axes_how']})"
+    return None
 
 
 def load_source(args: argparse.Namespace, settings, progress) -> solver.SourceInputs:

@@ -16,12 +16,14 @@ from .common import (
     adaptable_from_args,
     add_source_arguments,
     add_units,
+    add_wrap,
     check_source_arguments,
     load_source,
     load_target,
     option_help,
     option_type,
     preprocess_options,
+    target_refusals,
 )
 
 _DEFAULTS = solver.RetargetOptions()
@@ -40,7 +42,8 @@ def add_retarget(sub) -> None:
     p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
     p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
     add_source_arguments(p, required=False)
-    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--target", required=True,
+                   help="target character mesh: of the source's topology, or of another (see --wrap)")
     p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
     p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
     p.add_argument("--method", default=_DEFAULTS.method,
@@ -65,6 +68,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--workers", type=option_type("workers"), default=None, help=option_help("workers", "default: 1, this process on its threads"))
     p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver_options.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
+    add_wrap(p)
     add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_retarget)
@@ -89,11 +93,13 @@ def add_hairline(sub) -> None:
     p = sub.add_parser("hairline", help="write a target's current front hairline (or a preset's edit) as curve JSON")
     p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
     add_source_arguments(p, required=False)
-    p.add_argument("--target", required=True, help="target character mesh, same topology")
+    p.add_argument("--target", required=True,
+                   help="target character mesh: of the source's topology, or of another (see --wrap)")
     p.add_argument("--target-skeleton", help="skeleton JSON of the target")
     p.add_argument("--preset", metavar="PRESET[:AMOUNT]", help="write this preset's edit instead of the current hairline")
     p.add_argument("--out", required=True, help="curve JSON to write")
     add_units(p)
+    add_wrap(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_hairline)
 
@@ -135,14 +141,15 @@ def cmd_retarget(args: argparse.Namespace) -> int:
                                      eps_c=args.eps_c,
                                      max_iterations=args.max_iterations, energy_tolerance=args.energy_tolerance,
                                      workers=args.workers,
-                                     qp_backend=args.qp_backend, hairline=hairline_edit(args))
+                                     qp_backend=args.qp_backend, hairline=hairline_edit(args), wrap=args.wrap)
     options.validate()
     adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)
     inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
     target, target_input = load_target(args, settings, adaptable, progress)
     # a drawn hairline is in the groom's axes, like every output
     options = replace(options, hairline=solver.edit_in_canonical(adaptable.frame, options.hairline))
-    result = solver.retarget(adaptable, target, options, progress=progress, target_input=target_input)
+    with target_refusals(options.wrap, target, target_input):
+        result = solver.retarget(adaptable, target, options, progress=progress, target_input=target_input)
     hair = adaptable.hair
     report = result.report()
     report["timings_s"] = {"preprocess": preprocess_seconds, **report["timings_s"]}
@@ -158,6 +165,8 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     print(f"penetrating particles {m['penetrating_particles']}, mean segment angle "
           f"{m['mean_segment_angle_rad']:.4f} rad, inter-strand error {m['interstrand_error_m']:.2e} m, "
           f"max root error {m['root_to_target_max']:.1e} m")
+    if "wrap" in m:
+        print(wrap_line(m["wrap"]))
     if "hairline" in m:
         h = m["hairline"]
         print(f"hairline {h['edit']} ({h['method']}): {h['roots_moved']} roots moved (largest "
@@ -166,14 +175,27 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     return 0
 
 
+def wrap_line(report: dict) -> str:
+    """One line of a wrap's report (the metrics' ``wrap``, meters)."""
+    residual = report["residual_m"]
+    return (f"wrapped the source body onto the target: residual mean {1e3 * residual['mean']:.2f} mm, p95 "
+            f"{1e3 * residual['p95']:.2f} mm over {report['fitted_vertices']:,} source vertices, coverage "
+            f"{report['coverage']:.0%}, {report['iterations']} iterations, {report['seconds']:.1f} s")
+
+
 def cmd_hairline(args: argparse.Namespace) -> int:
     settings = get_settings()
     progress = StageProgress(args.quiet)
     adaptable, _ = adaptable_from_args(args, settings, progress)
-    target, _ = load_target(args, settings, adaptable, progress)
-    # written in the groom's axes and units, as the result of a retarget (and read back so)
-    document = documents.curve_document_in_frame(adaptable.frame, documents.hairline_document(adaptable, target,
-                                                                                          args.preset))
+    target, found = load_target(args, settings, adaptable, progress)
+    with target_refusals(args.wrap, target, found):
+        if solver.needs_wrap(adaptable.source, target, args.wrap):
+            # the hairline lies on the source's scalp: on another topology, on the source body wrapped onto it
+            progress("wrap", 0.0, f"wrapping the source body onto the target ({target.n_vertices:,} vertices)")
+            target = solver.wrap_target(adaptable, target).shape
+        # written in the groom's axes and units, as the result of a retarget (and read back so)
+        document = documents.curve_document_in_frame(adaptable.frame, documents.hairline_document(
+            adaptable, target, args.preset))
     with OutputSet() as outputs:
         outputs.add_json(args.out, document)
         outputs.commit()

@@ -388,13 +388,25 @@ def test_bad_target_fails_its_job_and_the_worker_lives_on(service, files, upload
     other_id = upload_character(client, files, "other").json()["id"]
     bad = client.post("/v1/retargets", headers=AUTH, json={"hairstyle_id": uploaded["hairstyle"],
                                                            "target_character_ids": [other_id, uploaded["target"]],
-                                                           "options": {"max_iterations": 3}}).json()["jobs"]
+                                                           "options": {"max_iterations": 3, "wrap": "off"}}).json()["jobs"]
     failed = wait_for(client, f"/v1/jobs/{bad[0]['id']}", lambda b: b["state"] in ("succeeded", "failed"))
     assert failed["state"] == "failed" and failed["error"]["code"] == "topology_mismatch"
     assert "topology" in failed["error"]["message"] and "/blobs/" not in failed["error"]["message"]
+    assert "options.wrap off keeps to the source's topology" in failed["error"]["message"]
     assert_problem(client.get(f"/v1/jobs/{bad[0]['id']}/result", headers=AUTH), 409, "job_not_succeeded")
     fine = wait_for(client, f"/v1/jobs/{bad[1]['id']}", lambda b: b["state"] in ("succeeded", "failed"))
     assert fine["state"] == "succeeded"
+    # by default the source body is wrapped onto it (its axes stated: the toy's head looks alike both ways)
+    response = client.post("/v1/characters", headers=AUTH, data={"up_axis": "y", "front_axis": "z"}, files={
+        "mesh": ("other.obj", (d / "other.obj").read_bytes()),
+        "skeleton": ("other.skeleton.json", (d / "other.skeleton.json").read_bytes())})
+    wrapped = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": uploaded["hairstyle"], "target_character_ids": [response.json()["id"]],
+        "options": {"max_iterations": 3}}).json()["jobs"][0]
+    done = wait_for(client, f"/v1/jobs/{wrapped['id']}", lambda b: b["state"] in ("succeeded", "failed"))
+    assert done["state"] == "succeeded", done
+    assert done["metrics"]["penetrating_particles"] == 0 and done["metrics"]["wrap"]["residual_m"]["mean"] < 1e-3
+    assert done["timings"]["wrap"] > 0 and done["metrics"]["input"]["target"]["topology"] == "other"
 
 
 def _slow_job(client, uploaded):

@@ -29,6 +29,9 @@ from hairport.solver import display
 
 from .routers.uploads import write_inputs
 
+#: integration, not unit: every operation fuzzed against its contract: minutes, not a unit's seconds
+pytestmark = pytest.mark.integration
+
 KEY = "fuzz-key"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 #: examples per operation and phase: the whole run takes about a minute on 2 cores

@@ -14,12 +14,14 @@ def test_choices_come_from_their_definitions():
     assert get_args(schemas.HairlinePresetName) == options.HAIRLINE_PRESETS
     assert get_args(schemas.JobState) == JOB_STATES
     assert get_args(schemas.RetargetOptionsIn.model_fields["qp_backend"].annotation) == options.QP_BACKENDS
+    assert get_args(schemas.RetargetOptionsIn.model_fields["wrap"].annotation) == options.WRAP_MODES
 
 
 def test_defaults_are_the_solver_defaults():
     options = schemas.RetargetOptionsIn()
     defaults = solver.RetargetOptions()
-    for name in ("method", "alpha", "beta", "eps_c", "eps_s", "max_iterations", "step_tolerance", "qp_backend"):
+    for name in ("method", "alpha", "beta", "eps_c", "eps_s", "max_iterations", "step_tolerance", "qp_backend",
+                 "wrap"):
         assert getattr(options, name) == getattr(defaults, name), name
     hairline = schemas.HairlineIn(preset="round")
     assert (hairline.amount, hairline.method, hairline.parameterization) == (1.0, "membrane", "harmonic")

@@ -25,6 +25,9 @@ from hairport.service.validation import (
 )
 from hairport.settings import Settings
 
+#: integration, not unit: the pool's child processes, started, killed and replaced
+pytestmark = pytest.mark.integration
+
 #: strands of the groom large enough to need more than the small budget (two points each: 1.2 x 10^6
 #: particles, 14 MB as a .data file, ~100 MB to validate)
 LARGE_STRANDS = 600_000

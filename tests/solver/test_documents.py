@@ -50,3 +50,17 @@ def test_a_curve_document_is_written_in_the_grooms_units_and_axes():
     assert np.allclose(written["points"], frame.axes_out(points) * 1000.0, atol=1e-4)
     # at the canonical document's precision: 0.1 micrometre is 1e-4 mm
     assert all(round(value, 4) == value for point in written["points"] for value in point)
+
+
+def test_the_scene_of_a_target_of_another_topology_draws_it_with_the_hairline_found_on_its_wrap(female, fringe):
+    from hairport.solver.synthetic.remesh import remeshed_character
+
+    target = remeshed_character(build_character(PRESETS["heavy-male"]), 5000, seed=5)
+    adaptable = pipeline.preprocess(female, fringe)
+    result = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method="root-translate+pushout"))
+    scene = documents.display_scene(adaptable, result, target)
+    np.testing.assert_allclose(scene["body_vertices"], target.vertices, atol=1e-6)
+    assert display.scene_meta(scene)["hairline_error"] is None
+    current = documents.hairline_document(adaptable, result.wrapped.shape)
+    np.testing.assert_allclose(scene["hairline_points"], current["points"], atol=1e-6)
+    assert len(current["points"]) > 10

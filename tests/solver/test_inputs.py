@@ -7,6 +7,8 @@ import pytest
 from hairport.solver.hairline.curve import HairlineCurve
 from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.inputs import (
+    HEAD_FIT_M,
+    OTHER_TOPOLOGY_HOW,
     ROOT_OFF_SURFACE_MM,
     canonical_source,
     canonical_target,
@@ -15,9 +17,11 @@ from hairport.solver.inputs import (
     measure_groom,
 )
 from hairport.solver.model.character import Character
-from hairport.solver.model.errors import InputError, TopologyMismatch
+from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
 from hairport.solver.synthetic.groom import generate_groom
+from hairport.solver.synthetic.makehuman import PRESETS, build_character
+from hairport.solver.synthetic.remesh import head_cut, neck_height, remeshed_character
 from tests.solver.frames import character_in, hair_in
 
 N_STRANDS = 120
@@ -128,11 +132,59 @@ def test_a_target_takes_the_sources_units_and_axes_unless_it_states_them(toy_a, 
     given, found = canonical_target(toy_a, character_in(InputFrame(up="x", front="z"), toy_b), units="m", up="x",
                                     front="z")
     assert np.array_equal(given.vertices, toy_b.vertices) and found["axes_how"] == "given"
+    assert found["topology"] == "same" and "head_fit_mm" not in found
     with pytest.raises(InputError) as error:
         canonical_target(toy_a, character_in(InputFrame("cm"), toy_b), units="m")
     assert error.value.code == "units_mismatch" and "looks like it is in cm" in str(error.value)
-    with pytest.raises(TopologyMismatch):
-        canonical_target(toy_a, Character(toy_b.vertices[:-1], toy_b.faces[:100]))
+
+
+@pytest.fixture(scope="module")
+def female():
+    return build_character(PRESETS["average-female"])
+
+
+@pytest.fixture(scope="module")
+def male_and_head():
+    """The heavy male remeshed to 5,000 vertices (another topology than the female's) and his head cut at the
+    neck (canonical, meters)."""
+    male = build_character(PRESETS["heavy-male"])
+    body = remeshed_character(male, 5000, seed=2)
+    return body, head_cut(body, neck_height(male))[0]
+
+
+@pytest.mark.parametrize("part", [0, 1], ids=["body", "head"])
+def test_a_target_of_another_topology_takes_the_frame_its_head_fits(female, male_and_head, part):
+    target = male_and_head[part]
+    frame = InputFrame("mm", "z", "-y")
+    canonical, found = canonical_target(female, character_in(frame, target))
+    assert np.abs(canonical.vertices - target.vertices).max() < 1e-12
+    assert (found["units"], found["up"], found["front"], found["topology"]) == ("mm", "+z", "-y", "other")
+    assert found["units_how"] == found["axes_how"] == OTHER_TOPOLOGY_HOW
+    assert 0.0 < found["axes_confidence"] < 1.0 and found["head_fit_mm"] < 1e3 * HEAD_FIT_M
+    # a head alone is a fraction of the full-body source: no size check between topologies
+    assert (found["size_ratio_to_source"] < 0.3) == (part == 1)
+    assert found["bounding_box"]["units"] == "mm"
+    assert np.allclose(found["bounding_box"]["max"], character_in(frame, target).vertices.max(axis=0), atol=1e-6)
+
+
+def test_what_is_given_for_another_topology_is_kept_and_wrong_units_are_refused(female, male_and_head):
+    head = male_and_head[1]
+    frame = InputFrame("cm", "-x", "y")
+    in_meters = character_in(InputFrame("m", "-x", "y"), head)  # read in its stated units: meters
+    canonical, found = canonical_target(female, in_meters, units="cm")
+    assert np.abs(canonical.vertices - head.vertices).max() < 1e-12
+    assert (found["units"], found["units_how"], found["axes_how"]) == ("cm", "given or stated by the file",
+                                                                       OTHER_TOPOLOGY_HOW)
+    assert np.allclose(found["bounding_box"]["max"], character_in(frame, head).vertices.max(axis=0), atol=1e-9)
+    given, found = canonical_target(female, in_meters, units="cm", up="-x", front="y")
+    assert np.array_equal(given.vertices, canonical.vertices)
+    assert (found["axes_how"], found["axes_confidence"]) == ("given", 1.0)
+    # a file in millimetres said to be in centimetres: its head is ten times a head's size
+    in_file = character_in(InputFrame("mm", "-x", "y"), head)
+    with pytest.raises(InputError) as error:
+        canonical_target(female, Character(in_file.vertices * 0.01, in_file.faces, name="head.obj"), units="cm")
+    assert error.value.code == "units_mismatch" and error.value.source == "head.obj"
+    assert "not a head's size in its units cm" in str(error.value) and "give its units as mm" in str(error.value)
 
 
 def test_a_hairline_curve_drawn_in_the_grooms_axes_comes_to_hairports_frame():

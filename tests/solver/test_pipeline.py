@@ -80,10 +80,14 @@ def test_a_hairline_edit_without_rigs_takes_the_head_frame_from_the_mesh_and_lan
     assert abs(bare.metrics["hairline"]["mean_travel_m"] - travel) < 0.1 * travel
 
 
-def test_wrong_topology_is_refused_by_name(female, fringe):
+def test_another_topology_without_the_wrap_is_refused_by_name_and_a_body_of_another_kind_by_the_wrap(female, fringe):
     adaptable = pipeline.preprocess(female, fringe)
     with pytest.raises(TopologyMismatch, match="topology differs"):
+        pipeline.retarget(adaptable, toy_character(), pipeline.RetargetOptions(wrap="off"))
+    # the toy character's head is an ellipsoid: the female head does not reach its shape
+    with pytest.raises(InputError) as error:
         pipeline.retarget(adaptable, toy_character())
+    assert error.value.code == "wrap_failed"
 
 
 def test_unknown_method_lists_the_valid_ones(female, fringe):

@@ -74,11 +74,11 @@ def add_hairstyle(repository, character, hair, path, letter) -> HairstyleRecord:
     return record
 
 
-def add_job(world, target="target", hairstyle="hairstyle", **fields) -> JobRecord:
+def add_job(world, target="target", hairstyle="hairstyle", options=None, **fields) -> JobRecord:
     repository, ids = world["repository"], world["ids"]
     style = ids[hairstyle]
     job = JobRecord(id=f"{np.random.default_rng().integers(1 << 62):032x}", owner=OWNER, hairstyle_id=style.id,
-                    target_character_id=ids[target].id, options={"max_iterations": 5},
+                    target_character_id=ids[target].id, options={"max_iterations": 5, **(options or {})},
                     preprocess_options=style.options, artifact_key=style.artifact_key, output_format="ply",
                     created_at=now(), updated_at=now(), **fields)
     repository.create_job(job)
@@ -153,13 +153,14 @@ def test_a_finished_job_is_not_run_again(world):
     assert repository.job(job.id).state == "failed" and repository.job(job.id).attempts == 0
 
 
-def test_a_wrong_topology_fails_the_job_with_its_code(world):
+def test_a_wrong_topology_with_the_wrap_off_fails_the_job_with_its_code(world):
     repository = world["repository"]
-    job = add_job(world, target="other")
+    job = add_job(world, target="other", options={"wrap": "off"})
     runner.run_retarget(repository, world["settings"], job.id, "w1")
     failed = repository.job(job.id)
     assert failed.state == "failed" and failed.error.code == "topology_mismatch" and failed.outputs is None
     assert "/blobs/" not in failed.error.message
+    assert "options.wrap off keeps to the source's topology (wrap auto wraps" in failed.error.message
 
 
 def test_a_body_that_traps_hair_fails_the_job_with_penetration_remaining(world, tmp_path):

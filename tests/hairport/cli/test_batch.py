@@ -1,6 +1,6 @@
 """``hairport batch``: three grooms x four toy characters give twelve folders and a summary; each pair equals
-``hairport retarget`` of that pair; a target of another topology fails its pairs only; bad arguments write
-nothing."""
+``hairport retarget`` of that pair; targets of another topology are wrapped once per wrap key (and, with the
+wrap off or a target that cannot be wrapped, fail their pairs only); bad arguments write nothing."""
 
 from __future__ import annotations
 
@@ -57,19 +57,48 @@ def test_a_3_by_4_grid_gives_12_folders_a_summary_and_the_single_pair_results(wo
     np.testing.assert_array_equal(read_hair(single).points, read_hair(out / "curly__bare" / "result.ply").points)
 
 
-def test_a_target_of_another_topology_fails_its_pairs_only(world, out, tmp_path, capsys):
+def test_a_target_of_another_topology_with_the_wrap_off_fails_its_pairs_only(world, out, tmp_path, capsys):
     d = world["dir"]
     target = world["target"]
     write_obj(tmp_path / "broken.obj", target.vertices, target.faces[:-3], "three faces short")
     code, stdout, err = run(capsys, ["batch", "--groom", str(d / "source.obj"), str(d / "hair.data"),
                                      "--targets", str(d / "target.obj"), str(tmp_path / "broken.obj"),
-                                     "--out", str(out), *OPTIONS])
+                                     "--out", str(out), "--wrap", "off", *OPTIONS])
     assert code == 2 and "1 of 2 pairs retargeted" in stdout
-    assert "hair x broken" in err and "topology" in err
+    assert "hair x broken" in err and "topology" in err and "--wrap off" in err
     rows = {row["target"]: row for row in csv.DictReader((out / "summary.csv").open())}
     assert rows["target"]["status"] == "ok" and rows["broken"]["status"] == "failed"
     assert "faces" in rows["broken"]["error"] or "topology" in rows["broken"]["error"]
     assert not (out / "hair__broken").exists() and (out / "hair__target" / "result.ply").is_file()
+
+
+def test_targets_of_another_topology_are_wrapped_once_per_wrap_and_a_sphere_fails_alone(remeshed_world, out,
+                                                                                       tmp_path, capsys):
+    """Two artifacts of one groom (20 and 10 guides: the same bodies and reach, so one wrap key) onto the remeshed
+    male, his head in mm with Z up, and a sphere: each target is wrapped for the first groom and the wrap reused
+    for the second, each result is the one ``hairport retarget`` gives the pair alone; the sphere's pairs fail
+    with the wrap's refusal, the other pairs do not."""
+    d = remeshed_world["dir"]
+    code, stdout, err = run(capsys, [
+        "batch", "--adaptable", str(d / "short20.hpa"), str(d / "short10.hpa"), "--targets", str(d / "male.obj"),
+        str(d / "head.obj"), str(d / "sphere.obj"), "--out", str(out), "--max-iterations", "5", "--quiet"])
+    assert code == 2 and "4 of 6 pairs retargeted" in stdout
+    rows = {(row["groom"], row["target"]): row for row in csv.DictReader((out / "summary.csv").open())}
+    for target in ("male", "head"):
+        assert (rows["short20", target]["wrap"], rows["short10", target]["wrap"]) == ("wrapped", "reused")
+        assert rows["short20", target]["penetrating_particles"] == rows["short10", target]["penetrating_particles"] == "0"
+        # a reused wrap costs nothing: the second groom's pair takes a fraction of the first's
+        assert float(rows["short10", target]["seconds"]) < 0.6 * float(rows["short20", target]["seconds"])
+    for groom in ("short20", "short10"):
+        assert rows[groom, "sphere"]["status"] == "failed" and "could not be wrapped" in rows[groom, "sphere"]["error"]
+        assert f"{groom} x sphere: " in err and not (out / f"{groom}__sphere").exists()
+    report = json.loads((out / "short10__head" / "report.json").read_text())
+    assert report["metrics"]["wrap"] == json.loads((out / "short20__head" / "report.json").read_text())["metrics"]["wrap"]
+    assert "wrap" not in report["timings_s"] and report["metrics"]["input"]["target"]["units"] == "mm"
+    single = tmp_path / "single.npz"
+    assert cli.main(["retarget", "--adaptable", str(d / "short10.hpa"), "--target", str(d / "head.obj"),
+                     "--out", str(single), "--max-iterations", "5", "--quiet"]) == 0
+    np.testing.assert_array_equal(read_hair(single).points, read_hair(out / "short10__head" / "result.npz").points)
 
 
 def test_bad_arguments_write_nothing(world, out, capsys):

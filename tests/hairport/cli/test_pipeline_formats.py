@@ -19,6 +19,9 @@ from tests.hairport.cli.helpers import run
 from tests.solver.io.character.usd_samples import Y_UP_TO_Z_UP, write_scene
 from tests.solver.io.hair.abc_samples import UNIFORM, VERTEX, general_properties, write_groom
 
+#: integration, not unit: USD and Alembic files through the command line: sandboxed child processes
+pytestmark = pytest.mark.integration
+
 METHOD = "root-translate+pushout"  # the files are under test here, not the solver
 #: stage coordinates are float32 centimetres: ~1e-7 relative, a few micrometres on a body
 STAGE_TOLERANCE_M = 2e-5

@@ -123,18 +123,19 @@ def test_nan_coordinate_in_hair(capsys, world, out, tmp_path):
     assert_nothing_written(out)
 
 
-def test_target_of_another_toy_resolution(capsys, world, out, tmp_path, monkeypatch):
+def test_target_of_another_toy_resolution_with_the_wrap_off(capsys, world, out, tmp_path, monkeypatch):
     monkeypatch.setattr(toy, "TOY_RINGS", toy.TOY_RINGS // 2)
     coarse = toy.toy_character(name="coarse")
     monkeypatch.undo()
     write_character(coarse, tmp_path / "coarse.obj", tmp_path / "coarse.skeleton.json")
-    code, _, err = run(capsys, retarget_args(world, out, target=tmp_path / "coarse.obj"))
+    code, _, err = run(capsys, retarget_args(world, out, target=tmp_path / "coarse.obj", extra=["--wrap", "off"]))
     assert_input_error(code, err, "coarse.obj", "topology differs", "3842 vertices",
-                       f"the target has {coarse.n_vertices}")
+                       f"the target has {coarse.n_vertices}", "--wrap off keeps to the source's topology",
+                       "--wrap auto wraps the source body onto this target")
     assert_nothing_written(out)
 
 
-def test_target_icosphere_with_sidecar(capsys, world, out, tmp_path):
+def test_target_icosphere_with_sidecar_and_the_wrap_off(capsys, world, out, tmp_path):
     import trimesh
 
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
@@ -145,7 +146,7 @@ def test_target_icosphere_with_sidecar(capsys, world, out, tmp_path):
     document = json.loads((world["dir"] / "source.skeleton.json").read_text())
     document["weights"] = {}  # the source's weights index vertices the sphere does not have
     (tmp_path / "sphere.skeleton.json").write_text(json.dumps(document))
-    code, _, err = run(capsys, retarget_args(world, out, target=mesh))
+    code, _, err = run(capsys, retarget_args(world, out, target=mesh, extra=["--wrap", "off"]))
     assert_input_error(code, err, "sphere.obj", "topology differs", f"the target has {len(sphere.vertices)}")
     assert_nothing_written(out)
 
@@ -620,3 +621,84 @@ def test_a_body_that_traps_hair_exits_2_with_one_line_and_writes_nothing(capsys,
     assert_input_error(code, "\n".join(line), "hair particles", "still inside after pushing them out",
                        "no penetration-free result")
     assert_nothing_written(out)
+
+
+def wrap_args(world, out: Path, target: str, *extra: str) -> list[str]:
+    return ["retarget", "--adaptable", str(world["adaptable"]), "--target", str(world["dir"] / target),
+            "--out", str(out / "result.npz"), "--report", str(out / "report.json"), "--max-iterations", "8",
+            "--workers", "1", "--quiet", *extra]
+
+
+def test_a_remeshed_body_is_wrapped_and_the_hair_sits_on_it(capsys, remeshed_world, out):
+    code, stdout, err = run(capsys, wrap_args(remeshed_world, out, "male.obj", "--preview", str(out / "p.png")))
+    assert code == 0, err
+    assert "wrapped the source body onto the target: residual mean" in stdout
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["penetrating_particles"] == 0 and metrics["root_to_surface_max"] < 1e-6
+    wrap = metrics["wrap"]
+    assert wrap["residual_m"]["mean"] < 1e-3 and wrap["coverage"] > 0.95 and 0 < wrap["seconds"] < 30
+    target = metrics["input"]["target"]
+    assert (target["topology"], target["units"], target["up"], target["front"]) == ("other", "m", "+y", "+z")
+    assert target["units_how"] == target["axes_how"] == "fitted to the source's head (another topology)"
+    male = remeshed_world["male"]
+    result = read_hair(out / "result.npz")
+    roots = MeshQuery(male.vertices, male.faces).signed_distance(result.points[result.is_root]).distance
+    assert np.abs(roots).max() < 1e-6
+    # a target of the source's topology (here the source itself) is wrapped only when asked
+    for mode, wrapped in (("auto", False), ("always", True)):
+        code, _, err = run(capsys, wrap_args(remeshed_world, out, "female.obj", "--wrap", mode))
+        assert code == 0, err
+        metrics = json.loads((out / "report.json").read_text())["metrics"]
+        assert ("wrap" in metrics) == wrapped and metrics["input"]["target"]["topology"] == "same"
+    assert metrics["wrap"]["residual_m"]["mean"] < 1e-3
+
+
+def test_a_head_cut_at_the_neck_in_millimetres_with_z_up_is_found_and_wrapped(capsys, remeshed_world, out):
+    code, stdout, err = run(capsys, wrap_args(remeshed_world, out, "head.obj"))
+    assert code == 0, err
+    report = json.loads((out / "report.json").read_text())
+    metrics, target = report["metrics"], report["metrics"]["input"]["target"]
+    assert metrics["penetrating_particles"] == 0 and metrics["root_to_surface_max"] < 1e-6
+    assert metrics["wrap"]["residual_m"]["mean"] < 1e-3 and report["timings_s"]["wrap"] > 0
+    assert (target["units"], target["up"], target["front"]) == ("mm", "+z", "-y")
+    assert target["head_fit_mm"] < 10 and target["size_ratio_to_source"] < 0.3
+    # the result is in the groom's frame (meters, Y up): its roots on the head, read in the head file's frame
+    head = remeshed_world["head"]
+    result = read_hair(out / "result.npz")
+    roots = MeshQuery(head.vertices, head.faces).signed_distance(result.points[result.is_root]).distance
+    assert np.abs(roots).max() < 1e-6
+    # stated in meters, the head is a hundredth of a head: refused, naming the units it is in
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "head.obj", "--units", "m"))
+    assert_input_error(code, err, "head.obj", "not a head's size in its units m", "give its units as mm")
+
+
+def test_another_topology_with_the_wrap_off_is_a_topology_mismatch(capsys, remeshed_world, out):
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "male.obj", "--wrap", "off"))
+    assert_input_error(code, err, "male.obj", "topology differs", "the target has 5000",
+                       "--wrap off keeps to the source's topology")
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "male.obj", "--wrap", "sometimes"))
+    assert_input_error(code, err, "--wrap", "sometimes")
+    assert_nothing_written(out)
+
+
+def test_a_sphere_cannot_be_wrapped(capsys, remeshed_world, out):
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "sphere.obj"))
+    assert_input_error(code, err, "sphere.obj", "could not be wrapped", "residual", "--up-axis")
+    assert_nothing_written(out)
+
+
+def test_the_hairline_of_another_topology_is_read_on_the_wrapped_body(capsys, remeshed_world, out, tmp_path):
+    curve = tmp_path / "current.json"
+    base = ["hairline", "--adaptable", str(remeshed_world["adaptable"]), "--target",
+            str(remeshed_world["dir"] / "male.obj"), "--out", str(curve), "--quiet"]
+    code, _, err = run(capsys, base)
+    assert code == 0, err
+    document = json.loads(curve.read_text())
+    male = remeshed_world["male"]
+    distance = MeshQuery(male.vertices, male.faces).signed_distance(np.array(document["points"])).distance
+    assert len(document["points"]) > 20 and np.abs(distance).max() < 5e-3  # the wrap's residual, on the scalp
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "male.obj", "--hairline-curve", str(curve)))
+    assert code == 0, err
+    assert json.loads((out / "report.json").read_text())["metrics"]["hairline"]["max_travel_m"] < 1e-6
+    code, _, err = run(capsys, [*base, "--wrap", "off"])
+    assert_input_error(code, err, "topology differs", "--wrap off")

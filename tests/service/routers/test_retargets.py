@@ -55,6 +55,7 @@ def test_idempotency(client, ids):
     ({"options": {"method": "teleport"}}, "unknown_method"),
     ({"options": {"beta": -1}}, "bad_option"),
     ({"options": {"max_iterations": 0}}, "bad_option"),
+    ({"options": {"wrap": "sometimes"}}, "invalid_request"),
     ({"options": {"method": "rbf-warp"}, "hairline": {"preset": "round"}}, "bad_option"),
     ({"hairline": {"preset": "round", "amount": 2}}, "invalid_request"),
     ({"target_character_ids": ["0" * 32]}, "not_found"),
@@ -64,6 +65,19 @@ def test_refusals_at_the_door(client, ids, change, code):
     response = client.post("/v1/retargets", headers=AUTH, json=request)
     assert response.json()["code"] == code and response.status_code in (404, 422)
     assert waiting(client, RETARGET_QUEUE) == 0 and client.get("/v1/jobs", headers=AUTH).json()["total"] == 0
+
+
+def test_the_wrap_mode_is_taken_and_kept_on_the_job(client, ids):
+    response = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]], "options": {"wrap": "off"}})
+    assert response.status_code == 202 and response.json()["jobs"][0]["options"]["wrap"] == "off"
+    default = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]]}).json()
+    assert default["jobs"][0]["options"]["wrap"] == "auto"
+    refused = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]], "options": {"wrap": "never"}})
+    assert (refused.status_code, refused.json()["code"]) == (422, "invalid_request")
+    assert "options.wrap" in refused.json()["detail"] and "'auto', 'always' or 'off'" in refused.json()["detail"]
 
 
 def test_too_many_targets(client, ids, settings):

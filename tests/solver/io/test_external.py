@@ -24,6 +24,9 @@ from hairport.solver.synthetic import toy
 from tests.solver.io.character.usd_samples import write_scene
 from tests.solver.io.hair.samples import helix_hair
 
+#: integration, not unit: every stage is read in a sandboxed child process
+pytestmark = pytest.mark.integration
+
 #: the server's groom sits here (meters): a coordinate no upload of these tests holds
 SECRET_SHIFT = 4.25
 ALLOWED = ReadLimits(allow_external_files=True)

@@ -13,6 +13,9 @@ from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
 from tests.solver.io.character.usd_samples import Y_UP_TO_Z_UP, write_scene
 
+#: integration, not unit: every USD read runs in a sandboxed child process
+pytestmark = pytest.mark.integration
+
 
 def expect(code: str, path, **kwargs) -> InputError:
     with pytest.raises(InputError) as caught:

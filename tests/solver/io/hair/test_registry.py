@@ -306,6 +306,7 @@ SANDBOXED_FORMATS = ("usd", "usda", "usdc", "abc")
 SANDBOXED_MUTATIONS = 25
 
 
+@pytest.mark.integration  # a sandboxed child process per damaged USD or Alembic file
 @pytest.mark.parametrize("fmt, ascii", WRITE_VARIANTS)
 def test_damaged_files_give_input_errors(fmt, ascii):
     rng = np.random.default_rng(sum(map(ord, fmt)) + ascii)

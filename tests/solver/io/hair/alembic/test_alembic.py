@@ -11,6 +11,9 @@ from hairport.solver.model.hair import Hair, HairAttribute
 from tests.solver.io.hair.abc_samples import CONSTANT, UNIFORM, VERTEX, general_properties, write_groom
 from tests.solver.io.hair.samples import expect_error, helix_hair, mutate
 
+#: integration, not unit: every Alembic read runs in a sandboxed child process
+pytestmark = pytest.mark.integration
+
 POINTS = np.array([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1, 0, 0], [1, 0, 1.5]], dtype=np.float32)
 
 

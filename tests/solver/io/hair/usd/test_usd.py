@@ -10,6 +10,9 @@ from hairport.solver.io.hair import ReadLimits, read_hair_bytes_report, read_hai
 from hairport.solver.model.hair import Hair, HairAttribute
 from tests.solver.io.hair.samples import expect_error, helix_hair
 
+#: integration, not unit: every USD read runs in a sandboxed child process
+pytestmark = pytest.mark.integration
+
 USD_FORMATS = ("usda", "usdc", "usd")
 
 
