@@ -1,22 +1,10 @@
 """Hairline curve documents and the dashboard's scene (solver/documents.py)."""
 
 import numpy as np
-import pytest
 
 from hairport.solver import display, documents, pipeline
 from hairport.solver.model.frame import InputFrame
-from hairport.solver.synthetic.groom import generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
-
-
-@pytest.fixture(scope="module")
-def female():
-    return build_character(PRESETS["average-female"])
-
-
-@pytest.fixture(scope="module")
-def fringe(female):
-    return generate_groom(female, "fringe", 150, 24, seed=3)
 
 
 def test_the_display_scene_holds_the_result_its_inside_flags_and_the_hairlines(female, fringe):

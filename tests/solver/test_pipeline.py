@@ -17,16 +17,6 @@ from tests.solver.depth_cases import TOY_CHEST_Y_M, chest_cut, keep_faces, sunk,
 from tests.solver.synthetic.toy_fixtures import PRESET_B
 
 
-@pytest.fixture(scope="module")
-def female():
-    return build_character(PRESETS["average-female"])
-
-
-@pytest.fixture(scope="module")
-def fringe(female):
-    return generate_groom(female, "fringe", 150, 24, seed=3)
-
-
 def test_reflexive_retarget_is_exact(female, fringe):
     """A -> A (paper Table 2: 7.85e-8 m, 3.75e-6 rad)."""
     result = pipeline.retarget(pipeline.preprocess(female, fringe), female)
