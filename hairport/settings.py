@@ -55,8 +55,9 @@ class Settings(BaseSettings):
         "Particles per chunk of a job's multi-scale fine level sent to the fine queue; a fine level no larger "
         "than this is solved in the job's own run, without chunk tasks."))
     target_cache: bool = Field(True, description=(
-        "Keep each target body's collision surface in the storage for every job and worker (false: every worker "
-        "process builds it once per body)."))
+        "Keep each target body's collision surface, and the source body wrapped onto each target of another "
+        "topology, in the storage for every job and worker (false: every worker process builds the surface once "
+        "per body, and every job wraps)."))
     max_fine_chunks: int = Field(32, ge=1, description=(
         "Most chunks one job's fine level is split into (larger chunks beyond that)."))
     max_targets_per_request: int = Field(64, description="Largest target_character_ids list of one retarget request.")
