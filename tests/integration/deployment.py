@@ -7,9 +7,11 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import httpx
 import pytest
 
 KEY, OTHER_KEY = "test-key-1", "test-key-2"
@@ -60,6 +62,22 @@ def spawn_server(env: dict, port: int, log_folder: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "hairport.cli", "serve", "--port", str(port)], env=env,
                             stdout=subprocess.DEVNULL, stderr=open(log_folder / "serve.log", "wb"),
                             start_new_session=True)
+
+
+def wait_ready(base: str, server: subprocess.Popen, worker: subprocess.Popen, log_folder: Path, worker_name: str,
+               seconds: float) -> None:
+    """Wait until ``base/readyz`` answers 200; fail with the log of a process that died, or after ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while True:
+        try:
+            if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
+                return
+        except httpx.HTTPError:
+            pass
+        assert server.poll() is None, (log_folder / "serve.log").read_text()[-2000:]
+        assert worker.poll() is None, (log_folder / f"{worker_name}.log").read_text()[-2000:]
+        assert time.monotonic() < deadline, "the server and its worker were not ready"
+        time.sleep(0.5)
 
 
 def stop(process: subprocess.Popen, grace_seconds: float = 20) -> None:

@@ -24,7 +24,7 @@ from tests.integration.browser import (
     pixels,
     rows_near,
 )
-from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
+from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop, wait_ready
 from tests.solver.frames import character_in, faces_only, hair_in, head_faces
 
 SHOTS = ARTIFACTS / "dashboard"
@@ -79,18 +79,8 @@ def deployment(tmp_path_factory, redis_url):
     server = spawn_server(env, port, storage)
     worker = spawn_worker("dashboard", env, storage)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + READY_SECONDS
     try:
-        while True:
-            try:
-                if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            assert server.poll() is None, (storage / "serve.log").read_text()[-2000:]
-            assert worker.poll() is None, (storage / "dashboard.log").read_text()[-2000:]
-            assert time.monotonic() < deadline, "the server and its worker were not ready"
-            time.sleep(0.5)
+        wait_ready(base, server, worker, storage, "dashboard", READY_SECONDS)
         yield {"base": base, "api": httpx.Client(base_url=base, headers={"X-API-Key": KEY}, timeout=30)}
     finally:
         stop(worker)

@@ -15,7 +15,7 @@ import pytest
 
 from tests.conftest import free_port
 from tests.integration.browser import chromium
-from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop
+from tests.integration.deployment import KEY, service_env, spawn_server, spawn_worker, stop, wait_ready
 
 from .test_service_api import files  # noqa: F401 - the toy characters and groom
 
@@ -43,18 +43,8 @@ def deployment(tmp_path_factory, redis_url, files):  # noqa: F811 - the fixture 
     server = spawn_server(env, port, storage)
     worker = spawn_worker("headers", env, storage)
     base = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + READY_SECONDS
     try:
-        while True:
-            try:
-                if httpx.get(f"{base}/readyz", timeout=2).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            assert server.poll() is None, (storage / "serve.log").read_text()[-2000:]
-            assert worker.poll() is None, (storage / "headers.log").read_text()[-2000:]
-            assert time.monotonic() < deadline, "the server and its worker were not ready"
-            time.sleep(0.5)
+        wait_ready(base, server, worker, storage, "headers", READY_SECONDS)
         api = httpx.Client(base_url=base, headers={"X-API-Key": KEY}, timeout=60)
         yield {"base": base, "port": port, "api": api, "storage": storage, "ids": made(api, files)}
     finally:
