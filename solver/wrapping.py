@@ -23,6 +23,7 @@ from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.mesh.collision import body_key
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character
+from hairport.solver.model.degenerate import strand_lengths
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
 from hairport.solver.options import WRAP_MODES
@@ -66,10 +67,7 @@ def needs_wrap(source: Character, target: Character, mode: str) -> bool:
 
 def reach_region(source: Character, hair: Hair) -> np.ndarray:
     """(V,) bool: the source vertices the hair touches or can reach (within its longest strand's length)."""
-    segments = np.linalg.norm(np.diff(hair.points, axis=0), axis=1)
-    segments[hair.offsets[1:-1] - 1] = 0.0  # no segment between one strand's tip and the next's root
-    lengths = np.add.reduceat(np.append(segments, 0.0), hair.offsets[:-1]) if hair.n_strands else np.zeros(0)
-    reach = float(lengths.max(initial=0.0)) + REACH_MARGIN_M
+    reach = float(strand_lengths(hair.points, hair.offsets).max(initial=0.0)) + REACH_MARGIN_M
     return hair_region(source.vertices, source.faces, hair.points, reach)
 
 
