@@ -250,6 +250,8 @@ class JobRecord(Record, RunInfo):
     target_character_id: str
     options: dict
     hairline: dict | None = None
+    #: the request's landmarks (each mesh's file coordinates), for the wrap
+    landmarks: dict | None = None
     preprocess_options: PreprocessSettings
     artifact_key: str
     output_format: str

@@ -108,8 +108,9 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
     404: ("no such resource for this key: what another key created is not found either", ("not_found",)),
     405: ("the path does not take this method (`Allow` lists those it takes)", ("method_not_allowed",)),
     409: ("the job has not succeeded (yet): it has no outputs; or the batch has jobs that have not ended; or the "
-          "job ran before hairport saved what the dashboard draws, or its groom has no front hairline",
-          ("job_not_succeeded", "batch_not_finished", "no_scene", "no_hairline")),
+          "job ran before hairport saved what the dashboard draws, or its groom has no front hairline, or "
+          "(`layer=wrapped`) its target was not wrapped",
+          ("job_not_succeeded", "batch_not_finished", "no_scene", "no_hairline", "no_wrap")),
     410: ("the output was removed by the retention policy", ("gone",)),
     413: ("the body, an upload, a count in it or its estimated memory is above this deployment's limits",
           ("upload_too_large", "too_large", "over_memory_budget")),
@@ -121,7 +122,7 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
                         "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
                         "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair",
-                        "external_reference", "stray_strands")),
+                        "external_reference", "stray_strands", "bad_landmarks")),
     500: ("an unexpected error (a defect, not the request's fault): the body's `request_id`, also in the "
           "`X-Request-ID` header, names the server's log entry and its traceback", ("internal",)),
     503: ("the task queue is unavailable, or every upload validation process stayed busy: nothing was started "

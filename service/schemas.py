@@ -6,9 +6,9 @@ units, methods, presets, options, job states), so the API cannot drift from what
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints
 
 from hairport import solver
 from hairport.records import (
@@ -179,6 +179,20 @@ class HairlineIn(BaseModel):
     parameterization: Literal[solver_options.PARAMETERIZATIONS] = _HAIRLINE.parameterization
 
 
+LandmarkName = Annotated[str, StringConstraints(min_length=1, max_length=solver_options.MAX_LANDMARK_NAME_CHARS)]
+LandmarkPoint = Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=3, max_length=3)]
+LandmarkSide = Annotated[dict[LandmarkName, LandmarkPoint], Field(min_length=1, max_length=solver_options.MAX_LANDMARKS)]
+
+
+class LandmarksIn(BaseModel):
+    """The same named points on the source body and on the target (crown, nose tip, chin, ear tops, nape), each
+    in its own file's coordinates (units and axes), to help the wrap of a target of another topology."""
+
+    model_config = ConfigDict(extra="forbid")
+    source: LandmarkSide = Field(description="points on the hairstyle's source body: {name: [x, y, z]}")
+    target: LandmarkSide = Field(description="the same names on the target character: {name: [x, y, z]}")
+
+
 class RetargetIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -186,6 +200,8 @@ class RetargetIn(BaseModel):
     target_character_ids: list[str] = Field(min_length=1)
     options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
     hairline: HairlineIn | None = None
+    landmarks: LandmarksIn | None = Field(None, description=(
+        "help the wrap of a target of another topology (one target per request: the points are on it)"))
     output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
     flag_guides: bool = Field(False, description=f"write the guides the solve used as the per-strand attribute "
                                                  f"{solver_options.GUIDE_FLAG} (1 guide, 0 other: Unreal's convention) in "
@@ -194,8 +210,8 @@ class RetargetIn(BaseModel):
 
 #: the strand layers a job draws: its result, and the groom on its source character
 StrandLayer = Literal["result", "source"]
-#: the bodies a job draws
-BodyLayer = Literal["target", "source"]
+#: the bodies a job draws (wrapped: the source body wrapped onto a target of another topology)
+BodyLayer = Literal["target", "source", "wrapped"]
 DISPLAY_DESCRIPTION = (
     "`application/vnd.hairport.display`: the ASCII magic `HPD1`, a little-endian uint32 header length, a JSON "
     "header (`arrays`: name, dtype, shape, offset from the end of the header), then the arrays, 8-byte aligned. "
@@ -248,6 +264,7 @@ class JobOut(BaseModel):
     output_format: HairFormat
     options: dict
     hairline: dict | None = Field(None, description="the hairline edit asked for (a preset or a drawn curve)")
+    landmarks: dict | None = Field(None, description="the landmarks given to help the wrap")
     flag_guides: bool = False
     cancel_requested: bool = Field(False, description="the job was asked to cancel (DELETE): a queued one is cancelled "
                                                       "at once, a running one stops at its solver's next iteration")

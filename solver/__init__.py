@@ -41,11 +41,19 @@ from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import FILE_MODE, TEMP_SUFFIX, atomic_write_bytes, fsync_folder
 from hairport.solver.model.frame import AUTO, AXIS_CHOICES, parse_axis
 from hairport.solver.model.hair import Hair
+from hairport.solver.model.landmarks import LandmarkPairs, read_landmarks
 from hairport.solver.model.progress import ProgressFn, no_progress
 from hairport.solver.model.units import UNITS
 from hairport.solver.options import PreprocessOptions, RetargetOptions
 from hairport.solver.pipeline import RetargetResult, penetrating_mask, preprocess, retarget
-from hairport.solver.wrapping import WrappedTarget, needs_wrap, wrap_key, wrap_target
+from hairport.solver.wrapping import (
+    WrappedTarget,
+    landmarks_in_canonical,
+    needs_wrap,
+    require_a_wrap_for,
+    wrap_key,
+    wrap_target,
+)
 
 __all__ = [
     "ARTIFACT_EXTENSION", "ARTIFACT_FORMAT_VERSION", "AUTO", "AXIS_CHOICES", "AdaptableHairstyle", "Cancelled",
@@ -56,5 +64,6 @@ __all__ = [
     "hair_in_frame", "hairline_edit", "hairline_edit_from_request", "load_adaptable", "no_progress", "parse_axis",
     "penetrating_mask", "preprocess", "read_character", "read_hair", "read_hair_report", "recorded_hair_units",
     "resolve_skeleton_path", "retarget", "save_adaptable", "with_guide_flags", "write_hair", "WrappedTarget",
-    "needs_wrap", "wrap_key", "wrap_target",
+    "needs_wrap", "wrap_key", "wrap_target", "LandmarkPairs", "read_landmarks", "landmarks_in_canonical",
+    "require_a_wrap_for",
 ]

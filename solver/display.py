@@ -5,10 +5,12 @@ A job's run saves its *scene* once (:func:`scene_arrays`, :func:`save_scene`): t
 result in hairport's frame (meters, +Y up, face toward +Z) as float32, which particles are inside the
 body (bit-packed), the strands' colours, the target's current front hairline and each preset's edit of
 it, and the rotation that takes hairport's frame to the groom file's axes (a drawn hairline is sent in
-the groom's axes, as ``hairport hairline`` writes it). A request then draws a *decimation* of it
-(:func:`plan_display`, :func:`decimate`): an evenly spread subset of strands, each with every
-``stride``-th particle and always its root and tip, so that a 10^6-particle groom arrives as a few
-megabytes and draws at an interactive frame rate (the budget: ``bench/dashboard.py``).
+the groom's axes, as ``hairport hairline`` writes it). A wrapped target (another topology, or ``options.wrap``
+always) adds the source body wrapped onto it (:data:`WRAPPED_ARRAYS`; a scene without them had no wrap, as one
+without ``color`` has no colours). A request then draws a *decimation* of it (:func:`plan_display`,
+:func:`decimate`): an evenly spread subset of strands, each with every ``stride``-th particle and always its
+root and tip, so that a 10^6-particle groom arrives as a few megabytes and draws at an interactive frame rate
+(the budget: ``bench/dashboard.py``).
 
 The wire format (:func:`encode`, ``application/vnd.hairport.display``) is one JSON header and raw
 little-endian arrays: the ASCII magic ``HPD1``, the header's byte length (uint32), the header
@@ -41,9 +43,11 @@ MAX_DISPLAY_VERTICES = 2_000_000
 MIN_AUTO_STRANDS = 2_000
 #: largest point stride a request may ask for
 MAX_STRIDE = 1_000
-#: the arrays every scene holds (and the optional ``color``)
+#: the arrays every scene holds (and the optional ``color``, presets' hairlines and :data:`WRAPPED_ARRAYS`)
 SCENE_ARRAYS = ("points", "offsets", "inside", "body_vertices", "body_faces", "groom_rotation",
                 "hairline_points", "hairline_turning")
+#: the optional wrapped body of a target of another topology: the source's mesh in the target's shape
+WRAPPED_ARRAYS = ("wrapped_vertices", "wrapped_faces")
 PRESET_ARRAY = "preset_{}"
 ALIGNMENT = 8
 _WIRE_DTYPES = {np.dtype(np.float32): "float32", np.dtype(np.uint32): "uint32", np.dtype(np.uint8): "uint8",
@@ -183,7 +187,8 @@ def colors_u8(color: np.ndarray | None) -> np.ndarray | None:
 
 def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, color: np.ndarray | None,
                  body_vertices: np.ndarray, body_faces: np.ndarray, groom_rotation: np.ndarray,
-                 hairline: dict, presets: dict[str, dict]) -> dict[str, np.ndarray]:
+                 hairline: dict, presets: dict[str, dict],
+                 wrapped: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """A job's scene, in hairport's frame.
 
     Parameters
@@ -201,6 +206,9 @@ def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, co
     hairline, presets : dict
         The target's current front hairline and each preset's edit of it (curve documents in meters:
         ``points``, ``turning_points``), as :func:`~hairport.solver.documents.hairline_document` gives them.
+    wrapped : ((W, 3) float64, (G, 3) int) or None
+        The source body wrapped onto a target of another topology (its vertices in the target's shape, the
+        source's faces), kept as :data:`WRAPPED_ARRAYS`; None when the target was not wrapped.
     """
     arrays = {
         "points": np.asarray(points, dtype=np.float32), "offsets": np.asarray(offsets, dtype=np.int64),
@@ -215,6 +223,10 @@ def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, co
         arrays["color"] = colors_u8(color)
     for name, document in presets.items():
         arrays[scene_preset_array(name)] = np.asarray(document["points"], dtype=np.float32).reshape(-1, 3)
+    if wrapped is not None:
+        vertices, faces = wrapped
+        arrays.update(zip(WRAPPED_ARRAYS, (np.asarray(vertices, dtype=np.float32),
+                                           np.asarray(faces, dtype=np.uint32)), strict=True))
     return arrays
 
 
@@ -264,6 +276,11 @@ def body_payload(vertices: np.ndarray, faces: np.ndarray, layer: str, **header) 
 def scene_preset_array(preset: str) -> str:
     """The name of the scene array holding ``preset``'s edit of the hairline."""
     return PRESET_ARRAY.format(preset)
+
+
+def scene_has_wrap(scene: dict[str, np.ndarray]) -> bool:
+    """Whether the scene keeps a wrapped body (its target was of another topology, or wrapped on request)."""
+    return all(name in scene for name in WRAPPED_ARRAYS)
 
 
 def scene_meta(scene: dict[str, np.ndarray]) -> dict:

@@ -71,7 +71,8 @@ def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target:
     """What the dashboard draws of a retarget (:func:`~hairport.solver.display.scene_arrays`): the result, its
     particles inside the body, the target, and the target's current front hairline with every preset's edit of
     it (left out, with the reason in ``meta``, when the groom has no front hairline to find). The hairline of a
-    target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`), the body drawn is the target."""
+    target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`), the body drawn is the target;
+    the wrapped body is kept beside it (``wrapped_vertices``, ``wrapped_faces``) to be drawn over it."""
     inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
     try:
         shape = target if result.wrapped is None else result.wrapped.shape
@@ -79,8 +80,9 @@ def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target:
         hairline, hairline_error = documents.pop(None), None
     except InputError as error:
         documents, hairline, hairline_error = {}, {"points": [], "turning_points": []}, error.problem
+    wrapped = None if result.wrapped is None else (result.wrapped.shape.vertices, result.wrapped.shape.faces)
     arrays = scene_arrays(result.hair.points, result.hair.offsets, inside, result.hair.color, target.vertices,
-                          target.faces, adaptable.frame.rotation, hairline, documents)
+                          target.faces, adaptable.frame.rotation, hairline, documents, wrapped)
     meta = {"groom_units": adaptable.frame.units, "hairline_error": hairline_error}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
     return arrays

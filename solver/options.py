@@ -25,6 +25,9 @@ from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.hairline.presets import PRESETS
 from hairport.solver.mesh.parameterization import PARAMETERIZATIONS as PARAMETERIZATIONS
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.landmarks import BAD_LANDMARKS, LandmarkPairs
+from hairport.solver.model.landmarks import MAX_LANDMARK_NAME_CHARS as MAX_LANDMARK_NAME_CHARS
+from hairport.solver.model.landmarks import MAX_LANDMARKS as MAX_LANDMARKS
 from hairport.solver.transfer.anchors import ANCHOR_AUTO, ANCHOR_SIGMA, ANCHORINGS
 from hairport.solver.transfer.anchors import ANCHOR_BY_BONES as ANCHOR_BY_BONES
 from hairport.solver.transfer.carry import CARRY_LENGTH_M
@@ -152,7 +155,8 @@ class RetargetOptions:
     particles evenly spaced along their strands (:mod:`~hairport.solver.adaptation.problem.spacing`); 0 solves
     the paper's Eq. 1 exactly. ``carry`` (m) lets the anchored strands take back their source shape
     before the solve (:mod:`~hairport.solver.transfer.carry`); 0 is the paper's initial transfer.
-    ``wrap`` (:data:`WRAP_MODES`) says when the source body is wrapped onto the target first.
+    ``wrap`` (:data:`WRAP_MODES`) says when the source body is wrapped onto the target first; ``landmarks``
+    (canonical frame, :meth:`~hairport.solver.model.landmarks.LandmarkPairs.in_canonical`) help that wrap.
     """
 
     method: str = "multiscale"
@@ -170,11 +174,15 @@ class RetargetOptions:
     qp_backend: str = "active-set"
     hairline: HairlineEdit | None = None
     wrap: str = WRAP_MODES[0]
+    landmarks: LandmarkPairs | None = None
 
     def validate(self) -> None:
         if self.wrap not in WRAP_MODES:
             raise InputError(f"unknown wrap mode {self.wrap!r}; expected one of {', '.join(WRAP_MODES)}",
                              code="bad_option")
+        if self.landmarks is not None and self.wrap == WRAP_MODES[2]:
+            raise InputError(f"landmarks steer the wrap, and the wrap mode {self.wrap} never wraps", "landmarks",
+                             BAD_LANDMARKS)
         if self.method not in SOLVER_METHODS:
             try:
                 parse_method(self.method)

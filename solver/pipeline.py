@@ -51,7 +51,7 @@ from hairport.solver.options import OPTION_RANGES, SOLVER_METHODS, PreprocessOpt
 from hairport.solver.transfer.anchors import compute_anchors, place_anchors, resolve_anchoring, root_targets
 from hairport.solver.transfer.carry import carry_shapes
 from hairport.solver.transfer.smoothing import SMOOTHING_EPS, smooth_strands
-from hairport.solver.wrapping import WrappedTarget, needs_wrap, onto_body, wrap_target
+from hairport.solver.wrapping import WrappedTarget, needs_wrap, onto_body, require_a_wrap_for, wrap_target
 
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
@@ -295,9 +295,10 @@ def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: Ret
         if wrapped is None:
             with timed(timings, "wrap"):
                 progress("wrap", 0.0, f"wrapping the source body onto the target ({target.n_vertices:,} vertices)")
-                wrapped = wrap_target(adaptable, target)
+                wrapped = wrap_target(adaptable, target, landmarks=options.landmarks)
         target = wrapped.shape
     else:
+        require_a_wrap_for(options.landmarks, False, options.wrap)
         wrapped = None
     with timed(timings, "prepare"):
         progress("prepare", 0.02, "checking the target")

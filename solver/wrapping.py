@@ -25,13 +25,18 @@ from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import strand_lengths
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import InputFrame
 from hairport.solver.model.hair import Hair
+from hairport.solver.model.landmarks import BAD_LANDMARKS, LandmarkPairs
 from hairport.solver.options import WRAP_MODES
 from hairport.solver.wrap import WrapOptions, WrapResult, hair_region, wrap_body
 
 WRAP_AUTO, WRAP_ALWAYS, WRAP_OFF = WRAP_MODES
 #: the fitted region: source vertices within the longest strand's length of a hair particle, plus this margin (m)
 REACH_MARGIN_M = 0.02
+#: a landmark farther than this (m) from its mesh's surface is refused: it was given in other coordinates
+#: than the mesh's file (units, axes), or on another mesh
+LANDMARK_OFF_SURFACE_M = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,38 +70,99 @@ def needs_wrap(source: Character, target: Character, mode: str) -> bool:
     return mode == WRAP_ALWAYS or (mode == WRAP_AUTO and not is_same_topology(source, target))
 
 
+def require_a_wrap_for(landmarks: LandmarkPairs | None, wrapping: bool, mode: str) -> None:
+    """Refuse landmarks for a target that is not wrapped (``wrapping``: :func:`needs_wrap` under ``mode``):
+    they would change nothing.
+
+    Raises
+    ------
+    InputError
+        ``bad_landmarks``.
+    """
+    if landmarks is not None and not wrapping:
+        raise InputError(f"the target has the source's mesh topology and is not wrapped (wrap {mode}); landmarks "
+                         f"steer a wrap: give wrap {WRAP_ALWAYS} to wrap it anyway", "landmarks", BAD_LANDMARKS)
+
+
 def reach_region(source: Character, hair: Hair) -> np.ndarray:
     """(V,) bool: the source vertices the hair touches or can reach (within its longest strand's length)."""
     reach = float(strand_lengths(hair.points, hair.offsets).max(initial=0.0)) + REACH_MARGIN_M
     return hair_region(source.vertices, source.faces, hair.points, reach)
 
 
-def content_key(source: Character, region: np.ndarray, target: Character, options: WrapOptions) -> str:
-    """The content digest of a wrap: both bodies, the fitted region and the options (32 hex characters)."""
+def content_key(source: Character, region: np.ndarray, target: Character, options: WrapOptions,
+                landmarks: LandmarkPairs | None = None) -> str:
+    """The content digest of a wrap: both bodies, the fitted region, the options and the landmarks (32 hex
+    characters)."""
     parts = (body_key(source.vertices, source.faces), body_key(target.vertices, target.faces),
-             hashlib.blake2b(np.packbits(region).tobytes(), digest_size=8).hexdigest(), repr(asdict(options)))
+             hashlib.blake2b(np.packbits(region).tobytes(), digest_size=8).hexdigest(), repr(asdict(options)),
+             "" if landmarks is None else landmarks.digest())
     return hashlib.blake2b("|".join(parts).encode(), digest_size=16).hexdigest()
 
 
-def wrap_key(adaptable: AdaptableHairstyle, target: Character, options: WrapOptions = WrapOptions()) -> str:
+def wrap_key(adaptable: AdaptableHairstyle, target: Character, options: WrapOptions = WrapOptions(),
+             landmarks: LandmarkPairs | None = None) -> str:
     """The key of the wrap a retarget of ``adaptable`` onto ``target`` (canonical frame) makes: the
     :attr:`WrappedTarget.key` of :func:`wrap_target`, known before wrapping (a cache's key)."""
-    return content_key(adaptable.source, reach_region(adaptable.source, adaptable.hair), target, options)
+    return content_key(adaptable.source, reach_region(adaptable.source, adaptable.hair), target, options, landmarks)
 
 
-def wrap_target(adaptable: AdaptableHairstyle, target: Character, options: WrapOptions = WrapOptions()) -> WrappedTarget:
+def wrap_target(adaptable: AdaptableHairstyle, target: Character, options: WrapOptions = WrapOptions(),
+                landmarks: LandmarkPairs | None = None) -> WrappedTarget:
     """Wrap the source body of ``adaptable`` onto ``target`` (canonical frame), over the region its hair reaches.
+
+    Parameters
+    ----------
+    landmarks : LandmarkPairs, optional
+        Canonical frame; those on the fitted region steer the wrap, the others are reported unused.
 
     Raises
     ------
     InputError
-        ``wrap_failed`` when the wrapped body does not reach the target's shape (the residual is in the message).
+        ``wrap_failed`` when the wrapped body does not reach the target's shape (the residual is in the message);
+        ``bad_landmarks`` for a landmark off its mesh (:func:`check_landmarks`).
     """
     source = adaptable.source
     region = reach_region(source, adaptable.hair)
-    result = wrap_body(source.vertices, source.faces, target.vertices, target.faces, region=region, options=options)
+    pairs = None
+    if landmarks is not None:
+        check_landmarks(landmarks, source, target)
+        pairs = landmarks.pairs()
+    result = wrap_body(source.vertices, source.faces, target.vertices, target.faces, region=region, landmarks=pairs,
+                       options=options)
     shape = Character(result.vertices, source.faces, name=f"{target.name or 'target'} (wrapped)")
-    return WrappedTarget(shape, content_key(source, region, target, options), wrap_report(result))
+    report = wrap_report(result)
+    if landmarks is not None:
+        report["landmarks_unused"] = [name for name in landmarks.names if name not in result.landmark_errors]
+    return WrappedTarget(shape, content_key(source, region, target, options, landmarks), report)
+
+
+def check_landmarks(landmarks: LandmarkPairs, source: Character, target: Character) -> None:
+    """Refuse landmarks off their mesh: each must lie within :data:`LANDMARK_OFF_SURFACE_M` of its body (canonical
+    frame), or it was given in other coordinates than the mesh's file.
+
+    Raises
+    ------
+    InputError
+        ``bad_landmarks`` naming the farthest landmark and its distance.
+    """
+    for side, body, points in (("source", source, landmarks.source), ("target", target, landmarks.target)):
+        distance = np.abs(MeshQuery(body.vertices, body.faces).signed_distance(points).distance)
+        worst = int(np.argmax(distance))
+        if distance[worst] > LANDMARK_OFF_SURFACE_M:
+            raise InputError(
+                f"landmark {landmarks.names[worst]!r} lies {distance[worst] * 100:.1f} cm from the {side} body "
+                f"(at most {LANDMARK_OFF_SURFACE_M * 100:g} cm); give each mesh's points in its own file's "
+                "coordinates (its units and axes)", "landmarks", BAD_LANDMARKS)
+
+
+def landmarks_in_canonical(landmarks: LandmarkPairs, adaptable: AdaptableHairstyle, target_input: dict) -> LandmarkPairs:
+    """Landmarks given in each mesh's file coordinates, in hairport's frame: the source's in the groom's axes and
+    the source body's units (the hairstyle's input report; meters for a hairstyle made in hairport's frame), the
+    target's in the frame :func:`~hairport.solver.inputs.canonical_target` found (``target_input``: its report)."""
+    source_units = adaptable.input_report.get("units", {}).get("source", adaptable.frame.units)
+    target_frame = InputFrame(target_input["units"], target_input["up"], target_input["front"])
+    return landmarks.in_canonical(adaptable.frame, source_units, target_frame)
 
 
 def wrap_report(result: WrapResult) -> dict:

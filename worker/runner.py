@@ -215,10 +215,13 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
     adaptable, target, target_input = job_inputs(repository, settings, job, artifact)
     frame = adaptable.frame  # a drawn hairline is read in the groom's units and axes, as the result is written
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
+    landmarks = None if job.landmarks is None else solver.landmarks_in_canonical(
+        solver.LandmarkPairs.from_document(job.landmarks), adaptable, target_input)
     options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
-                                     hairline=solver.edit_in_canonical(frame, edit))
+                                     hairline=solver.edit_in_canonical(frame, edit), landmarks=landmarks)
     surface, cache_timings = bodies.collision_surface(repository, settings, target)
-    wrapped, wrap_timings = wraps.cached_wrap(repository, settings, adaptable, target, options.wrap, progress)
+    wrapped, wrap_timings = wraps.cached_wrap(repository, settings, adaptable, target, options.wrap, progress,
+                                              landmarks)
     if solver.needs_wrap(adaptable.source, target, options.wrap):
         # the fine level's chunks, on other workers, read the target as one of the source's topology
         # (distributed.solve_fine_chunk): a wrapped target's fine level is solved in this run

@@ -35,8 +35,8 @@ WRAP_STAGE = "wrap"
 
 
 def cached_wrap(repository: Repository, settings: Settings, adaptable: solver.AdaptableHairstyle,
-                target: solver.Character, mode: str,
-                progress: solver.ProgressFn = solver.no_progress) -> tuple[solver.WrappedTarget | None, dict[str, float]]:
+                target: solver.Character, mode: str, progress: solver.ProgressFn = solver.no_progress,
+                landmarks: solver.LandmarkPairs | None = None) -> tuple[solver.WrappedTarget | None, dict[str, float]]:
     """The wrap a retarget of ``adaptable`` onto ``target`` needs, from the cache, and the seconds reading it took
     under :data:`LOADED`; None (the retarget wraps) when it needs none, the cache is off or holds no usable one.
 
@@ -46,11 +46,13 @@ def cached_wrap(repository: Repository, settings: Settings, adaptable: solver.Ad
         Canonical frame.
     mode : str
         The retarget's ``options.wrap``.
+    landmarks : LandmarkPairs, optional
+        The retarget's ``options.landmarks`` (canonical frame): part of the wrap's key.
     """
     if not settings.target_cache or not solver.needs_wrap(adaptable.source, target, mode):
         return None, {}
     began = time.perf_counter()
-    key = solver.wrap_key(adaptable, target)
+    key = solver.wrap_key(adaptable, target, landmarks=landmarks)
     record = repository.get(WrapRecord, key)
     blob = None if record is None else repository.storage.blob(record.sha256, record.suffix)
     if blob is None:

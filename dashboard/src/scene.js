@@ -5,20 +5,37 @@ import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 export const INSIDE_RGB = [230, 20, 20];
 export const LAYER_RGB = { result: [112, 74, 38], source: [70, 110, 170], compare: [40, 150, 90] };
 const BODY_COLOR = 0xd9c7b8;
+/** The wrapped body's wireframe over the target: a colour apart from skin and both strand layers. */
+export const WRAP_COLOR = 0x2060d0;
+const WRAP_OPACITY = 0.45;
 const SRGB_TO_LINEAR = Float32Array.from({ length: 256 }, (_, value) => {
   const c = value / 255;  // the sRGB transfer function, inverted
   return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
 });
 
-/** A body's three.js mesh from a display payload (vertices, faces). */
-export function bodyMesh({ arrays }, color = BODY_COLOR) {
+function bodyGeometry(arrays) {
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute("position", new THREE.BufferAttribute(arrays.vertices, 3));
   geometry.setIndex(new THREE.BufferAttribute(arrays.faces, 1));
   geometry.computeVertexNormals();
   geometry.computeBoundingBox();
   geometry.computeBoundingSphere();
-  return new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({ color, roughness: 0.8, side: THREE.DoubleSide }));
+  return geometry;
+}
+
+/** A body's three.js mesh from a display payload (vertices, faces). Its depth is pushed back a little (polygon
+ * offset), so a wireframe lying on its surface (the wrapped body, within a millimetre of it) is drawn over it
+ * rather than flickering in and out; lines and strands do not take polygon offset, so they keep their place. */
+export function bodyMesh({ arrays }, color = BODY_COLOR) {
+  return new THREE.Mesh(bodyGeometry(arrays), new THREE.MeshStandardMaterial({ color, roughness: 0.8,
+    side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 2 }));
+}
+
+/** The wrapped body (the source's mesh in the target's shape) as a translucent wireframe to lay over the target:
+ * where its edges vanish it lies under the target's surface. */
+export function wrapOverlay({ arrays }) {
+  return new THREE.Mesh(bodyGeometry(arrays), new THREE.MeshBasicMaterial({
+    color: WRAP_COLOR, wireframe: true, transparent: true, opacity: WRAP_OPACITY, depthWrite: false }));
 }
 
 /** Strands' line segments from a display payload: file colours when present, else the layer's; inside in red.

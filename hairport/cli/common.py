@@ -140,6 +140,22 @@ def add_wrap(p: argparse.ArgumentParser) -> None:
                         f"too; {off} refuses another topology (topology_mismatch)")
 
 
+def add_landmarks(p: argparse.ArgumentParser) -> None:
+    """``--landmarks FILE``: named points on the source and the target that help the wrap."""
+    p.add_argument("--landmarks", metavar="FILE.json",
+                   help='help the wrap of a hard target: the same named points on each mesh, each in its own file\'s '
+                        'coordinates: {"source": {"nose_tip": [x, y, z], "chin": [...]}, "target": {"nose_tip": [...], '
+                        '"chin": [...]}} (crown, nose tip, chin, ear tops, nape: three or more also place the start)')
+
+
+def landmarks_from_args(args: argparse.Namespace, adaptable: solver.AdaptableHairstyle,
+                        target_input: dict) -> solver.LandmarkPairs | None:
+    """The ``--landmarks`` file's pairs in hairport's frame (None without the option)."""
+    if not getattr(args, "landmarks", None):
+        return None
+    return solver.landmarks_in_canonical(solver.read_landmarks(args.landmarks), adaptable, target_input)
+
+
 @contextmanager
 def target_refusals(mode: str, target: solver.Character, found: dict | None = None):
     """A target's refusals that depend on how it was read, in the command line's terms: a ``topology_mismatch``

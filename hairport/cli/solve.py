@@ -14,10 +14,12 @@ from hairport.solver import options as solver_options
 from .common import (
     StageProgress,
     adaptable_from_args,
+    add_landmarks,
     add_source_arguments,
     add_units,
     add_wrap,
     check_source_arguments,
+    landmarks_from_args,
     load_source,
     load_target,
     option_help,
@@ -69,6 +71,7 @@ def add_retarget(sub) -> None:
     p.add_argument("--qp-backend", default=_DEFAULTS.qp_backend, choices=solver_options.QP_BACKENDS,
                    help=f"solver of the coupled QPs (default {_DEFAULTS.qp_backend})")
     add_wrap(p)
+    add_landmarks(p)
     add_hairline_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_retarget)
@@ -100,6 +103,7 @@ def add_hairline(sub) -> None:
     p.add_argument("--out", required=True, help="curve JSON to write")
     add_units(p)
     add_wrap(p)
+    add_landmarks(p)
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(run=cmd_hairline)
 
@@ -146,8 +150,10 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)
     inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
     target, target_input = load_target(args, settings, adaptable, progress)
-    # a drawn hairline is in the groom's axes, like every output
-    options = replace(options, hairline=solver.edit_in_canonical(adaptable.frame, options.hairline))
+    # a drawn hairline is in the groom's axes, like every output; landmarks in each mesh's own
+    options = replace(options, hairline=solver.edit_in_canonical(adaptable.frame, options.hairline),
+                      landmarks=landmarks_from_args(args, adaptable, target_input))
+    options.validate()
     with target_refusals(options.wrap, target, target_input):
         result = solver.retarget(adaptable, target, options, progress=progress, target_input=target_input)
     hair = adaptable.hair
@@ -188,11 +194,15 @@ def cmd_hairline(args: argparse.Namespace) -> int:
     progress = StageProgress(args.quiet)
     adaptable, _ = adaptable_from_args(args, settings, progress)
     target, found = load_target(args, settings, adaptable, progress)
+    landmarks = landmarks_from_args(args, adaptable, found)
+    solver.RetargetOptions(wrap=args.wrap, landmarks=landmarks).validate()
     with target_refusals(args.wrap, target, found):
         if solver.needs_wrap(adaptable.source, target, args.wrap):
             # the hairline lies on the source's scalp: on another topology, on the source body wrapped onto it
             progress("wrap", 0.0, f"wrapping the source body onto the target ({target.n_vertices:,} vertices)")
-            target = solver.wrap_target(adaptable, target).shape
+            target = solver.wrap_target(adaptable, target, landmarks=landmarks).shape
+        else:
+            solver.require_a_wrap_for(landmarks, False, args.wrap)
         # written in the groom's axes and units, as the result of a retarget (and read back so)
         document = documents.curve_document_in_frame(adaptable.frame, documents.hairline_document(
             adaptable, target, args.preset))

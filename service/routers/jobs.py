@@ -93,9 +93,11 @@ def get_display(
                     media_type=wire.MEDIA_TYPE)
 
 
-@router.get("/{job_id}/body", summary="The target (as solved) or source body, for drawing", response_class=Response,
-            responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
-def get_body(repository: RepositoryDep, job: OwnedJob, layer: BodyLayer = "target"):
+@router.get("/{job_id}/body", summary="The target (as solved), source or wrapped body, for drawing",
+            response_class=Response, responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
+def get_body(repository: RepositoryDep, job: OwnedJob, layer: Annotated[BodyLayer, Query(description=(
+        "target: the target body as solved; source: the source character's body; wrapped: the source body wrapped "
+        "onto a target of another mesh topology (409 no_wrap when the job's target was not wrapped)"))] = "target"):
     return Response(display.body(repository, job, layer), media_type=wire.MEDIA_TYPE)
 
 

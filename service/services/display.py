@@ -77,12 +77,25 @@ def strands(repository: Repository, job: JobRecord, layer: str, strand_count: in
 
 
 def body(repository: Repository, job: JobRecord, layer: str) -> bytes:
-    """The job's target body (as solved, hairport's frame) or its source body."""
+    """The job's target body (as solved, hairport's frame), its source body, or the source body wrapped onto a
+    target of another topology (409 ``no_wrap`` for a job whose target was not wrapped)."""
     if layer == "target":
         arrays = _layer_arrays(repository, job, "result", ("body_vertices", "body_faces"))
+    elif layer == "wrapped":
+        arrays = _wrapped_arrays(repository, job)
     else:
         arrays = _layer_arrays(repository, job, "source", ())
     return display.body_payload(arrays["body_vertices"], arrays["body_faces"], layer, up=[0.0, 1.0, 0.0])
+
+
+def _wrapped_arrays(repository: Repository, job: JobRecord) -> dict[str, np.ndarray]:
+    """The scene's wrapped body, named as the other bodies are."""
+    scene = _layer_arrays(repository, job, "result", display.WRAPPED_ARRAYS)
+    if not display.scene_has_wrap(scene):
+        raise Problem(409, "no_wrap", f"the target of job {job.id} was not wrapped: it has the source's mesh "
+                                      "topology (or options.wrap was off), so the target body is the one drawn")
+    vertices, faces = (scene[name] for name in display.WRAPPED_ARRAYS)
+    return {"body_vertices": vertices, "body_faces": faces}
 
 
 def hairline(repository: Repository, job: JobRecord) -> dict:

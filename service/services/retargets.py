@@ -70,8 +70,11 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
     hairstyle: HairstyleRecord = owned(repository, HairstyleRecord, owner, request.hairstyle_id, "hairstyle")
     targets = [owned(repository, CharacterRecord, owner, target_id, "character")
                for target_id in request.target_character_ids]
+    if request.landmarks is not None and len(targets) > 1:
+        raise Problem(422, "bad_landmarks", f"landmarks name points on one target; this request has {len(targets)}: "
+                                            "send one request per target")
     planned = [plan_job(repository, settings, owner, hairstyle, target, request.options, body["hairline"],
-                        request.output_format, request.flag_guides) for target in targets]
+                        request.output_format, request.flag_guides, landmarks=body["landmarks"]) for target in targets]
     remember = None if replay_id is None else (replay_id, IdempotencyRecord(
         request=digest(body), jobs=[plan.job.id for plan in planned], created_at=now()))
     submit_jobs(repository, queue, settings, planned, remember)
@@ -80,7 +83,7 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
 
 def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: HairstyleRecord,
              target: CharacterRecord, options_in: RetargetOptionsIn, hairline: dict | None, output_format: str,
-             flag_guides: bool, batch_id: str | None = None) -> PlannedJob:
+             flag_guides: bool, batch_id: str | None = None, landmarks: dict | None = None) -> PlannedJob:
     """The job of one pair, its options checked (422 for what the solver would refuse, named after the field)."""
     options = options_in.model_dump()
     guides = options.pop("guides")  # a guide count asks for k-means guides, even of a hairstyle with flagged ones
@@ -88,6 +91,7 @@ def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: 
                                  guides=guides or hairstyle.options.guides, anchoring=hairstyle.options.anchoring,
                                  guides_from=None if guides else hairstyle.options.guides_from)
     check_options(options, variant, hairline)
+    check_landmarks(options, landmarks)
     try:
         solver.check_memory(hairstyle.particles, settings.memory_budget_bytes, k=variant.k)
     except solver.InputError as error:
@@ -96,7 +100,8 @@ def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: 
            else repository.variant_key(hairstyle, variant, solver.ARTIFACT_FORMAT_VERSION))
     job = JobRecord(
         id=new_job_id(), owner=owner, hairstyle_id=hairstyle.id, target_character_id=target.id, options=options,
-        hairline=hairline, preprocess_options=variant, artifact_key=key, output_format=output_format,
+        hairline=hairline, landmarks=landmarks, preprocess_options=variant, artifact_key=key,
+        output_format=output_format,
         flag_guides=flag_guides, created_at=now(), updated_at=now(), task_id=new_task_id(), enqueued_at=now(),
         batch_id=batch_id,
     )
@@ -143,3 +148,13 @@ def check_options(options: dict, variant: PreprocessSettings, hairline: dict | N
             solver.RetargetOptions(**options, hairline=solver.hairline_edit_from_request(hairline)).validate()
         except solver.InputError as error:
             raise input_problem(error, "hairline") from None
+
+
+def check_landmarks(options: dict, landmarks: dict | None) -> None:
+    """422 for landmarks the solver would refuse: names on one side only, or with the wrap off."""
+    if landmarks is None:
+        return
+    try:
+        solver.RetargetOptions(**options, landmarks=solver.LandmarkPairs.from_document(landmarks)).validate()
+    except solver.InputError as error:
+        raise input_problem(error, "landmarks") from None

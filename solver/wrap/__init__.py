@@ -21,6 +21,7 @@ Pure arrays in and out: no files, no caching.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -85,6 +86,7 @@ def wrap_body(source_vertices: np.ndarray, source_faces: np.ndarray, target_vert
     pairs = dict(landmarks or {})
     if not pairs and options.derive_landmarks:
         pairs = derived_landmarks(source.vertices, frames[0], target.vertices, frames[1])
+        options = replace(options, landmark_weights=options.derived_landmark_weights)
     head_ids, head_triangles, _ = region_mesh(source.faces, region & frames[0].head_vertices)
     start = start_similarity(source.vertices, (head_ids, head_triangles), frames, surface, pairs, options)
     moved = start.apply(source.vertices)

@@ -12,6 +12,7 @@ import httpx
 import numpy as np
 import pytest
 
+from hairport.solver.display import decode
 from hairport.solver.model.frame import InputFrame
 from tests.conftest import free_port
 from tests.integration.browser import (
@@ -214,6 +215,7 @@ def test_dashboard_end_to_end(deployment, inputs):
         page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
         stats = page.inner_text("#viewer-stats")
         assert f"{GROOM_STRANDS} of {GROOM_STRANDS} strands" in stats and "0 drawn inside" in stats
+        assert page.locator("input[name=show-wrapped]").count() == 0  # the same topology: nothing was wrapped
         both = viewer_pixels(page, "06-viewer")
         area = both.shape[0] * both.shape[1]
         set_checkbox(page, "result", False)
@@ -340,6 +342,84 @@ def test_a_running_job_is_cancelled_and_retried_from_its_page(deployment, inputs
         page.click("#cancel")  # and the worker is free again for the other tests
         page.wait_for_selector("#job [data-state=cancelled]", timeout=60_000)
         assert job_state(api, again) == "cancelled"
+        assert page.errors == []
+
+
+#: what the viewer's scene holds under the name "wrapped" (window.hairportViewer, dashboard/src/scene.js Viewer):
+#: [vertices, faces, wireframe, visible] of its mesh, or null
+WRAPPED_MESH = """() => {
+  const group = window.hairportViewer?.groups.get("wrapped");
+  let found = null;
+  group?.traverse((child) => {
+    if (child.isMesh) found = [child.geometry.attributes.position.count, child.geometry.index.count / 3,
+                               child.material.wireframe, group.visible];
+  });
+  return found;
+}"""
+
+
+def count_blue(image: np.ndarray) -> int:
+    """Pixels where blue leads red and green clearly (the wrap's wireframe; skin, hair and white do not)."""
+    red, green, blue = (image[..., channel].astype(np.int16) for channel in range(3))
+    return int(((blue > red + 40) & (blue > green + 20)).sum())
+
+
+def test_a_wrap_chosen_in_the_form_is_run_and_drawn_over_the_target(deployment, inputs):
+    """The form's wrap selector sends its mode: ``always`` wraps the source body onto a target of its own
+    topology too; the job page shows the wrap's residual and the viewer draws the wrapped mesh over the target."""
+    base, api = deployment["base"], deployment["api"]
+    source, hairstyle = upload_source(api, inputs)
+    with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
+        target = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+    with chromium() as page:
+        enter_key(page, base, KEY)
+        page.wait_for_selector("#key-state:text('key accepted')")
+        page.goto(f"{base}/ui/#/new")
+        page.wait_for_selector("#retarget-form")
+        assert page.input_value("select[name=wrap]") == "auto"
+        assert page.inner_text("#wrap-hint") == "targets of another mesh topology are wrapped: auto"
+        assert page.eval_on_selector_all("select[name=wrap] option", "options => options.map((o) => o.value)") == [
+            "auto", "always", "off"]
+        page.check(f"input[name=hairstyle][value='{hairstyle}']")
+        page.check(f"input[name=target][value='{target}']")
+        page.select_option("select[name=wrap]", "always")
+        shot(page, "20-new-wrap-always")
+        page.click("#retarget-form button[type=submit]")
+        page.wait_for_url(re.compile(r".*#/jobs/[0-9a-f]+$"))
+        job_id = page.url.rsplit("/", 1)[1]
+        assert api.get(f"/v1/jobs/{job_id}").json()["options"]["wrap"] == "always"
+        page.wait_for_selector("#job [data-state=succeeded]", timeout=JOB_SECONDS * 1000)
+        job = api.get(f"/v1/jobs/{job_id}").json()
+        residual = job["metrics"]["wrap"]["residual_m"]
+        assert job["metrics"]["input"]["target"]["topology"] == "same" and 0 < residual["mean"] < 2e-3
+        row = page.wait_for_selector("#wrap-residual").inner_text()
+        assert f"mean {1000 * residual['mean']:.2f} mm" in row and f"p95 {1000 * residual['p95']:.2f} mm" in row
+        shot(page, "21-job-wrap-residual")
+
+        # the wrapped layer is the source's mesh: its vertex and face counts, in the target's shape
+        header = decode(api.get(f"/v1/jobs/{job_id}/body", params={"layer": "wrapped"}).content)[0]
+        record = api.get(f"/v1/characters/{source}").json()
+        assert (header["layer"], header["vertices"], header["faces"]) == ("wrapped", record["vertices"],
+                                                                         record["faces"])
+
+        page.goto(f"{base}/ui/#/view/{job_id}")
+        page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
+        toggle = page.locator("input[name=show-wrapped]")
+        assert toggle.count() == 1 and not toggle.is_checked()
+        assert page.evaluate(WRAPPED_MESH) is None
+        set_checkbox(page, "result", False)  # the body alone, then the wireframe over it
+        plain = viewer_pixels(page, "22-viewer-target")
+        set_checkbox(page, "wrapped", True)
+        page.wait_for_selector("#viewer[data-wrapped=true]")
+        assert page.evaluate(WRAPPED_MESH) == [header["vertices"], header["faces"], True, True]
+        assert page.get_attribute("#viewer", "data-wrapped-vertices") == str(header["vertices"])
+        overlaid = viewer_pixels(page, "23-viewer-wrapped-over-target")
+        area = overlaid.shape[0] * overlaid.shape[1]
+        assert count_blue(plain) < 0.001 * area < 0.01 * area < count_blue(overlaid)
+        set_checkbox(page, "wrapped", False)
+        page.wait_for_selector("#viewer[data-wrapped=false]")
+        assert page.evaluate(WRAPPED_MESH)[3] is False
+        assert count_blue(viewer_pixels(page, "24-viewer-wrapped-hidden")) < 0.001 * area
         assert page.errors == []
 
 

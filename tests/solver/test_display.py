@@ -121,6 +121,26 @@ def test_scenes_save_and_load_by_member(tmp_path):
     assert error.value.code == "bad_scene"
 
 
+def test_a_scene_keeps_the_wrapped_body_only_when_given(tmp_path):
+    hairline = {"points": [[0.1, 1.6, 0.05], [0.0, 1.7, 0.1], [-0.1, 1.6, 0.05]], "turning_points": [0, 2]}
+    common = (np.zeros((4, 3)), np.array([0, 2, 4]), np.zeros(4, bool), None, np.eye(3), np.array([[0, 1, 2]]),
+              np.eye(3), hairline, {})
+    wrapped_vertices = np.arange(15, dtype=np.float64).reshape(5, 3) / 10
+    wrapped_faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]])
+    plain = display.save_scene(tmp_path / "plain.npz", display.scene_arrays(*common))
+    wrapped = display.save_scene(tmp_path / "wrapped.npz",
+                                 display.scene_arrays(*common, wrapped=(wrapped_vertices, wrapped_faces)))
+    assert not display.scene_has_wrap(display.load_scene(plain))
+    assert display.load_scene(plain, display.WRAPPED_ARRAYS) == {}
+    loaded = display.load_scene(wrapped, display.WRAPPED_ARRAYS)
+    assert display.scene_has_wrap(loaded) and set(loaded) == set(display.WRAPPED_ARRAYS)
+    assert loaded["wrapped_vertices"].dtype == np.float32 and loaded["wrapped_faces"].dtype == np.uint32
+    np.testing.assert_allclose(loaded["wrapped_vertices"], wrapped_vertices, atol=1e-7)
+    np.testing.assert_array_equal(loaded["wrapped_faces"], wrapped_faces)
+    # the body arrays are the target's, whether or not a wrap rides along
+    np.testing.assert_array_equal(display.load_scene(wrapped)["body_faces"], [[0, 1, 2]])
+
+
 def test_colours_are_clipped_and_nan_safe():
     np.testing.assert_array_equal(display.colors_u8(np.array([[0.0, 0.5, 1.0], [-1.0, 2.0, np.nan]])),
                                   [[0, 128, 255], [0, 255, 128]])

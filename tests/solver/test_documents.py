@@ -23,6 +23,8 @@ def test_the_display_scene_holds_the_result_its_inside_flags_and_the_hairlines(f
     widows = documents.hairline_document(adaptable, male, "widows-peak")
     np.testing.assert_allclose(scene[display.scene_preset_array("widows-peak")], widows["points"], atol=1e-6)
     assert display.scene_meta(scene) == {"groom_units": "m", "hairline_error": None}
+    assert result.wrapped is None and not display.scene_has_wrap(scene)  # same topology: nothing wrapped kept
+    assert not set(display.WRAPPED_ARRAYS) & set(scene)
     # the preset moves the hairline's middle, keeps its ends
     middle = len(current["points"]) // 2
     assert np.linalg.norm(np.subtract(widows["points"][middle], current["points"][middle])) > 1e-3
@@ -52,3 +54,9 @@ def test_the_scene_of_a_target_of_another_topology_draws_it_with_the_hairline_fo
     current = documents.hairline_document(adaptable, result.wrapped.shape)
     np.testing.assert_allclose(scene["hairline_points"], current["points"], atol=1e-6)
     assert len(current["points"]) > 10
+    # the wrapped body rides along: the source's faces in the wrap's shape, not the target's mesh
+    assert display.scene_has_wrap(scene)
+    assert scene["wrapped_vertices"].shape == (result.wrapped.shape.n_vertices, 3) == (female.n_vertices, 3)
+    assert scene["wrapped_faces"].shape == female.faces.shape and female.n_vertices != target.n_vertices
+    np.testing.assert_array_equal(scene["wrapped_faces"], female.faces)
+    np.testing.assert_allclose(scene["wrapped_vertices"], result.wrapped.shape.vertices, atol=1e-5)

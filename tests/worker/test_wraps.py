@@ -145,3 +145,28 @@ def test_a_target_that_cannot_be_wrapped_fails_the_job_with_wrap_failed(world, t
     assert failed.state == "failed" and failed.error.code == "wrap_failed" and failed.outputs is None
     assert "could not be wrapped" in failed.error.message and "give the character's up_axis" in failed.error.message
     assert "/blobs/" not in failed.error.message
+
+
+def test_a_jobs_landmarks_steer_its_wrap_which_is_kept_under_its_own_key(world):
+    repository, settings = world["repository"], world["settings"]
+    source, male = build_character(PRESETS["average-female"]), build_character(PRESETS["heavy-male"])
+    crown, ear = int(np.argmax(source.vertices[:, 1])), int(np.argmax(source.vertices[:, 0] * (source.vertices[:, 1] > 1.5)))
+    marks = {"source": {"crown": source.vertices[crown].tolist(), "ear": source.vertices[ear].tolist()},
+             "target": {"crown": male.vertices[crown].tolist(), "ear": male.vertices[ear].tolist()}}
+    job = add_job(world, target="male", landmarks=marks)
+    runner.run_retarget(repository, settings, job.id, "w@h")
+    done = repository.job(job.id)
+    assert done.state == "succeeded", done.error
+    wrap = done.metrics["wrap"]
+    assert set(wrap["landmark_errors_m"]) == {"crown", "ear"} and max(wrap["landmark_errors_m"].values()) < 1e-3
+    adaptable, target, found = job_inputs(repository, settings, done, repository.artifact(done.artifact_key))
+    landmarks = solver.landmarks_in_canonical(solver.LandmarkPairs.from_document(marks), adaptable, found)
+    key = solver.wrap_key(adaptable, target, landmarks=landmarks)
+    assert key != solver.wrap_key(adaptable, target) and repository.get(WrapRecord, key) is not None
+    # a landmark far off the target (given in millimetres) fails the job by name, with nothing written
+    far = {**marks, "target": {name: [1000.0 * v for v in point] for name, point in marks["target"].items()}}
+    job = add_job(world, target="male", landmarks=far)
+    runner.run_retarget(repository, settings, job.id, "w@h")
+    failed = repository.job(job.id)
+    assert failed.state == "failed" and failed.error.code == "bad_landmarks" and failed.outputs is None
+    assert "from the target body" in failed.error.message

@@ -19,7 +19,7 @@ const checked = (form, name) => [...form.querySelectorAll(`input[name=${name}]:c
 /** The request's options object: the numbers typed and the choices made. */
 export function optionsOf(form) {
   return { ...numbers(form.querySelector("fieldset.options")), method: form.elements.method.value,
-           qp_backend: form.elements.qp_backend.value };
+           qp_backend: form.elements.qp_backend.value, wrap: form.elements.wrap.value };
 }
 
 export function hairlineOf(form) {
@@ -35,6 +35,7 @@ export async function newPage(main, { query }) {
     .filter(([, spec]) => ["number", "integer"].includes((spec.anyOf?.find((item) => item.type !== "null") ?? spec).type))
     .map(([field]) => numberField(schema, OPTIONS, field));
   const method = component(schema, OPTIONS).properties.method;
+  const wrap = property(schema, OPTIONS, "wrap");
   const presets = property(schema, HAIRLINE, "preset").enum;
   const amount = property(schema, HAIRLINE, "amount");
   const amountLabel = h("output", { name: "amount_shown" }, amount.default);
@@ -46,6 +47,8 @@ export async function newPage(main, { query }) {
       h("label", { title: method.description }, "method", select("method", method.examples, method.default)),
       h("label", {}, "QP backend", select("qp_backend", component(schema, OPTIONS).properties.qp_backend.enum,
                                           component(schema, OPTIONS).properties.qp_backend.default)),
+      h("label", { title: wrap.description }, "wrap", select("wrap", wrap.enum, wrap.default),
+        h("span", { class: "hint", id: "wrap-hint" }, `targets of another mesh topology are wrapped: ${wrap.default}`)),
       numeric),
     h("fieldset", {}, h("legend", {}, "Hairline"),
       h("label", {}, "preset", select("hairline_preset", ["", ...presets], query.get("preset") ?? "", { "": "none" })),

@@ -35,9 +35,23 @@ export async function retry(job) {
   return created.jobs[0];
 }
 
+const MM_PER_M = 1000;
+
+/** The wrap's residual (metrics.wrap.residual_m, metres) in millimetres, or null for a job that wrapped nothing. */
+export function wrapResidual(metrics) {
+  const residual = metrics?.wrap?.residual_m;
+  if (!residual) return null;
+  const mm = (metres) => `${(MM_PER_M * metres).toFixed(2)} mm`;
+  return `mean ${mm(residual.mean)}, p95 ${mm(residual.p95)}`;
+}
+
 function metricRows(metrics) {
-  return Object.entries(metrics ?? {}).filter(([, value]) => typeof value !== "object")
+  const rows = Object.entries(metrics ?? {}).filter(([, value]) => typeof value !== "object")
     .map(([name, value]) => h("tr", {}, h("th", {}, name), h("td", {}, formatNumber(value))));
+  const residual = wrapResidual(metrics);
+  // the target had another mesh topology: the source body was wrapped onto it, this far from its surface
+  if (residual) rows.push(h("tr", { id: "wrap-residual" }, h("th", {}, "wrap residual"), h("td", {}, residual)));
+  return rows;
 }
 
 export async function jobPage(main, { params: [id], signal }) {

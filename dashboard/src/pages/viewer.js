@@ -2,8 +2,8 @@
 // same pair (a baseline) overlaid for comparison; particles inside the body drawn red.
 import { decodeDisplay, get, openapi, post } from "../api.js";
 import { fill, formatNumber, guarded, h, poll, short, showMessage } from "../ui.js";
-import { LAYER_RGB, THREE, Viewer, bodyMesh, strandLines } from "../scene.js";
-import { ENDED } from "./jobs.js";
+import { LAYER_RGB, THREE, Viewer, bodyMesh, strandLines, wrapOverlay } from "../scene.js";
+import { ENDED, wrapResidual } from "./jobs.js";
 import { component, select } from "./forms.js";
 
 /** Display budgets offered (vertices), with the API's default (bench/dashboard.py chose it). */
@@ -47,8 +47,14 @@ export async function viewerPage(main, { params: [id], query, signal }) {
   const toggles = Object.fromEntries(["body", "result", "source", "compare"].map((name) =>
     [name, h("input", { type: "checkbox", name: `show-${name}`, checked: name !== "source" })]));
   const sideBySide = h("input", { type: "checkbox", name: "side-by-side", checked: true });
+  // a target of another mesh topology: the source body wrapped onto it, drawn over it on demand
+  const residual = wrapResidual(job.metrics);
+  const showWrapped = residual ? h("input", { type: "checkbox", name: "show-wrapped", checked: false }) : null;
   const toolbar = h("div", { class: "toolbar" },
     ...Object.entries(toggles).map(([name, box]) => h("label", {}, box, ` ${name}`)),
+    showWrapped ? h("label", { title: `the source body wrapped onto this target, drawn over it as a wireframe ` +
+                                      `(residual ${residual})` },
+                    showWrapped, " wrapped mesh") : null,
     h("label", { title: "the source on its own body to the left, or its strands over the result" }, sideBySide,
       " source beside"),
     h("label", {}, "compare with ", compare),
@@ -139,6 +145,19 @@ export async function viewerPage(main, { params: [id], query, signal }) {
       else viewer.visible(name, box.checked);
     }));
   }
+  let wrappedLoaded = false;
+  async function toggleWrapped() {
+    if (showWrapped.checked && !wrappedLoaded) {
+      const wrapped = await body(id, "wrapped");
+      viewer.set("wrapped", wrapOverlay(wrapped));
+      wrappedLoaded = true;
+      container.dataset.wrappedVertices = String(wrapped.header.vertices);
+    }
+    viewer.visible("wrapped", showWrapped.checked);
+    container.dataset.wrapped = String(showWrapped.checked);
+  }
+
+  showWrapped?.addEventListener("change", () => guarded(toggleWrapped));
   compare.addEventListener("change", () => guarded(loadCompare));
   sideBySide.addEventListener("change", () => guarded(load));
   budget.addEventListener("change", () => guarded(load));

@@ -672,6 +672,65 @@ def test_a_head_cut_at_the_neck_in_millimetres_with_z_up_is_found_and_wrapped(ca
     assert_input_error(code, err, "head.obj", "not a head's size in its units m", "give its units as mm")
 
 
+def test_a_head_exported_by_trimesh_as_ply_in_millimetres_with_z_up_is_wrapped(capsys, remeshed_world, out, tmp_path):
+    import trimesh
+
+    head, frame = remeshed_world["head"], remeshed_world["head_frame"]
+    in_file = frame.axes_out(head.vertices) / frame.scale  # millimetres, Z up, the face toward -Y
+    trimesh.Trimesh(in_file, head.faces, process=False).export(tmp_path / "head.ply")
+    args = wrap_args(remeshed_world, out, "male.obj")
+    args[args.index("--target") + 1] = str(tmp_path / "head.ply")
+    code, stdout, err = run(capsys, args)
+    assert code == 0, err
+    metrics = json.loads((out / "report.json").read_text())["metrics"]
+    assert metrics["penetrating_particles"] == 0 and metrics["root_to_surface_max"] < 1e-6
+    assert metrics["wrap"]["residual_m"]["mean"] < 1e-3 and "wrapped the source body" in stdout
+    target = metrics["input"]["target"]
+    assert (target["topology"], target["units"], target["up"], target["front"]) == ("other", "mm", "+z", "-y")
+
+
+def head_landmarks(head_frame: InputFrame, target_vertices_in_meters=None) -> dict:
+    """Crown, nape and the widest points of the average female's head (meters, Y up: the source file's frame)
+    and of the heavy male's at the same vertices, in the head file's frame (millimetres, Z up, the face toward
+    -Y), or in meters when ``target_vertices_in_meters`` is the heavy male's body itself."""
+    from hairport.solver.body.head_frame import head_frame as frame_of
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+    female, male = build_character(PRESETS["average-female"]), build_character(PRESETS["heavy-male"])
+    frame = frame_of(female)
+    head = np.flatnonzero(frame.head_vertices)
+    up, front, side = frame.local(female.vertices[head]).T
+    ids = {"crown": head[np.argmax(up)], "nape": head[np.argmin(front)], "left_ear_top": head[np.argmax(side)],
+           "right_ear_top": head[np.argmin(side)]}
+    target = male.vertices if target_vertices_in_meters is not None else head_frame.axes_out(male.vertices) / head_frame.scale
+    return {"source": {name: female.vertices[i].tolist() for name, i in ids.items()},
+            "target": {name: target[i].tolist() for name, i in ids.items()}}
+
+
+def test_landmarks_in_each_files_frame_help_the_wrap_and_bad_ones_are_refused(capsys, remeshed_world, out, tmp_path):
+    marks = tmp_path / "marks.json"
+    marks.write_text(json.dumps(head_landmarks(remeshed_world["head_frame"])))
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "head.obj", "--landmarks", str(marks)))
+    assert code == 0, err
+    wrap = json.loads((out / "report.json").read_text())["metrics"]["wrap"]
+    # each landmark held to its target
+    assert set(wrap["landmark_errors_m"]) == {"crown", "nape", "left_ear_top", "right_ear_top"}
+    assert max(wrap["landmark_errors_m"].values()) < 5e-4 and wrap["landmarks_unused"] == []
+    for written in out.iterdir():
+        written.unlink()
+    # the target's points given in meters, not in the head file's millimetres and axes
+    marks.write_text(json.dumps(head_landmarks(remeshed_world["head_frame"], target_vertices_in_meters=True)))
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "head.obj", "--landmarks", str(marks)))
+    assert_input_error(code, err, "landmarks", "from the target body", "in its own file's coordinates")
+    # a target of the source's topology is not wrapped: landmarks would change nothing
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "female.obj", "--landmarks", str(marks)))
+    assert_input_error(code, err, "landmarks", "is not wrapped", "wrap always")
+    marks.write_text('{"source": {"crown": [0, 1.7, 0]}}')
+    code, _, err = run(capsys, wrap_args(remeshed_world, out, "head.obj", "--landmarks", str(marks)))
+    assert_input_error(code, err, "marks.json", '"source" and "target"')
+    assert_nothing_written(out)
+
+
 def test_another_topology_with_the_wrap_off_is_a_topology_mismatch(capsys, remeshed_world, out):
     code, _, err = run(capsys, wrap_args(remeshed_world, out, "male.obj", "--wrap", "off"))
     assert_input_error(code, err, "male.obj", "topology differs", "the target has 5000",

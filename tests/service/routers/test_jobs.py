@@ -120,9 +120,10 @@ def test_a_result_in_millimetres_converts_in_millimetres(client, tmp_path):
 Z_UP = InputFrame(units="cm", up="+z", front="-y")
 
 
-def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=True) -> str:
-    """A succeeded job whose outputs hold a scene (a 3-strand result, 2 particles inside, a hairline) and whose
-    artifact is a real preprocessed groom on an icosphere head."""
+def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=True, wrapped=None) -> str:
+    """A succeeded job whose outputs hold a scene (a 3-strand result, 2 particles inside, a hairline, and the
+    ``wrapped`` body (vertices, faces) when given) and whose artifact is a real preprocessed groom on an icosphere
+    head."""
     from hairport.records import ArtifactRecord
     from hairport.solver import pipeline
     from tests.solver.hair_shapes import outward_strands, sphere_character
@@ -137,7 +138,8 @@ def succeeded_with_scene(client, tmp_path, hairline_error=None, with_artifact=Tr
     hairline = {"points": [[0.05, 0.0, 0.0], [0.0, 0.02, 0.05], [-0.05, 0.0, 0.0]], "turning_points": [0, 2]}
     scene = display.scene_arrays(result.points, result.offsets, inside, None, head.vertices, head.faces,
                                 Z_UP.rotation, hairline if hairline_error is None else
-                                {"points": [], "turning_points": []}, {} if hairline_error else {"round": hairline})
+                                {"points": [], "turning_points": []}, {} if hairline_error else {"round": hairline},
+                                wrapped)
     scene["meta"] = np.frombuffer(json.dumps({"groom_units": "cm", "hairline_error": hairline_error}).encode(), np.uint8)
     display.save_scene(tmp_path / "scene.npz", scene)
     blob = repository.storage.save_file(tmp_path / "scene.npz", ".npz")
@@ -180,6 +182,27 @@ def test_a_job_draws_its_bodies_and_hands_out_its_hairlines(client, tmp_path):
     assert hairline["points"][1] == [0.0, 0.02, 0.05] and hairline["turning_points"] == [0, 2]
     assert set(hairline["presets"]) == {"round"} and hairline["groom_units"] == "cm"
     assert hairline["groom_rotation"] == Z_UP.rotation.tolist()
+
+
+def test_a_wrapped_job_draws_its_wrapped_body_and_another_answers_no_wrap(client, tmp_path):
+    import trimesh
+
+    # the source's mesh in another shape: a coarser icosphere than the 642-vertex target head
+    coarse = trimesh.creation.icosphere(2, radius=0.09)
+    wrapped = succeeded_with_scene(client, tmp_path, wrapped=(np.asarray(coarse.vertices), coarse.faces))
+    response = client.get(f"/v1/jobs/{wrapped}/body", headers=AUTH, params={"layer": "wrapped"})
+    assert response.status_code == 200 and response.headers["content-type"] == display.MEDIA_TYPE
+    header, arrays = solver_display.decode(response.content)
+    assert (header["layer"], header["vertices"], header["faces"]) == ("wrapped", 162, 320)
+    np.testing.assert_allclose(arrays["vertices"], coarse.vertices, atol=1e-6)
+    np.testing.assert_array_equal(arrays["faces"], coarse.faces)
+    target = solver_display.decode(client.get(f"/v1/jobs/{wrapped}/body", headers=AUTH).content)[0]
+    assert (target["layer"], target["vertices"]) == ("target", 642)
+    unwrapped = succeeded_with_scene(client, tmp_path, with_artifact=False)  # its scene has no wrapped body
+    response = client.get(f"/v1/jobs/{unwrapped}/body", headers=AUTH, params={"layer": "wrapped"})
+    assert response.status_code == 409 and response.headers["content-type"] == "application/problem+json"
+    assert response.json()["code"] == "no_wrap" and "not wrapped" in response.json()["detail"]
+    assert client.get(f"/v1/jobs/{unwrapped}/body", headers=AUTH, params={"layer": "wrap"}).status_code == 422
 
 
 def test_display_answers_name_what_is_missing(client, tmp_path):

@@ -80,6 +80,36 @@ def test_the_wrap_mode_is_taken_and_kept_on_the_job(client, ids):
     assert "options.wrap" in refused.json()["detail"] and "'auto', 'always' or 'off'" in refused.json()["detail"]
 
 
+MARKS = {"source": {"crown": [0.0, 1.7, 0.0], "chin": [0.0, 1.5, 0.1]},
+         "target": {"crown": [0.0, 1.8, 0.0], "chin": [0.0, 1.6, 0.1]}}
+
+
+@pytest.mark.parametrize("change, code, words", [
+    ({"landmarks": {**MARKS, "target": {"crown": [0.0, 1.8, 0.0]}}}, "bad_landmarks", "'chin' named on the source only"),
+    ({"landmarks": MARKS, "options": {"wrap": "off"}}, "bad_landmarks", "never wraps"),
+    ({"landmarks": MARKS, "target_character_ids": ["T", "T"]}, "bad_landmarks", "one target"),
+    ({"landmarks": {**MARKS, "source": {"crown": [0.0, 1.7]}}}, "invalid_request", "landmarks.source.crown"),
+    ({"landmarks": {**MARKS, "source": {"crown": [0.0, "nan", 0.0]}}}, "invalid_request", "landmarks.source.crown"),
+    ({"landmarks": {**MARKS, "source": {}}}, "invalid_request", "landmarks.source"),
+    ({"landmarks": {**MARKS, "source": {f"p{i}": [0.0, 0.0, 0.0] for i in range(33)}}}, "invalid_request",
+     "landmarks.source"),
+])
+def test_landmarks_are_checked_at_the_door(client, ids, change, code, words):
+    request = {"hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]], **change}
+    request["target_character_ids"] = [ids["target"] if t == "T" else t for t in request["target_character_ids"]]
+    response = client.post("/v1/retargets", headers=AUTH, json=request)
+    assert (response.status_code, response.json()["code"]) == (422, code) and words in response.json()["detail"]
+    assert waiting(client, RETARGET_QUEUE) == 0 and client.get("/v1/jobs", headers=AUTH).json()["total"] == 0
+
+
+def test_landmarks_are_kept_on_the_job(client, ids):
+    response = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]], "landmarks": MARKS})
+    assert response.status_code == 202 and response.json()["jobs"][0]["landmarks"] == MARKS
+    job = client.get(f"/v1/jobs/{response.json()['jobs'][0]['id']}", headers=AUTH).json()
+    assert job["landmarks"] == MARKS
+
+
 def test_too_many_targets(client, ids, settings):
     request = {"hairstyle_id": ids["hairstyle"], "target_character_ids": [ids["target"]] * 65}
     response = client.post("/v1/retargets", headers=AUTH, json=request)

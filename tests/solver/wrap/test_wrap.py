@@ -124,10 +124,13 @@ def test_landmarks_pull_their_points(makehuman):
     vertices, faces = remesh(truth.vertices, truth.faces, 5_000, seed=2)
     chosen = scalp[:: max(1, len(scalp) // 4)][:4]
     landmarks = {f"scalp {i}": (source.vertices[i], truth.vertices[i]) for i in chosen}
-    result = wrap_body(source.vertices, source.faces, vertices, faces, region, landmarks,
-                       WrapOptions(landmark_weights=(1.0, 0.5, 0.2, 0.1)))
+    result = wrap_body(source.vertices, source.faces, vertices, faces, region, landmarks)
     assert set(result.landmark_errors) == set(landmarks)
-    assert max(result.landmark_errors.values()) < 3 * MM
+    # held to the end (the default schedule), each lands on its target; released after three steps, they drift
+    assert max(result.landmark_errors.values()) < 0.5 * MM
+    released = wrap_body(source.vertices, source.faces, vertices, faces, region, landmarks,
+                         WrapOptions(landmark_weights=(1.0, 0.5, 0.2, 0.0)))
+    assert max(released.landmark_errors.values()) > 2 * MM
     assert result.start.scale == pytest.approx(1.0, abs=0.15)
 
 
