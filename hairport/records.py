@@ -227,13 +227,15 @@ class FineChunk(BaseModel):
     seconds: float | None = Field(None, description="from its claim to its points saved")
     solve_seconds: float | None = Field(None, description="its solve alone (the rest: loading and building its problem)")
     error: ErrorInfo | None = None
+    #: not named ``sha256``: no reference that keeps the blob (the orphan sweep takes it once the job has ended)
+    result: str | None = Field(None, description="digest of the blob of its points (.npz), once done")
 
 
 class FineRun(BaseModel):
     """A job's fine level spread over workers: its chunks, for the job run ``run_token``."""
 
     run_token: str
-    folder: str = Field(description="the run's scratch folder under the storage's work/ (inputs and results)")
+    inputs: str = Field(description="digest of the blob of the level's inputs (.npz)")
     chunks: list[FineChunk]
 
 

@@ -48,6 +48,7 @@ from hairport.records import (
 )
 from hairport.storage import LocalStorage
 from hairport.storage.index import Index, JobRow, OwnedRow, Row, SqliteIndex
+from hairport.storage.postgres import PostgresIndex
 
 R = TypeVar("R", bound=Record)
 
@@ -87,7 +88,14 @@ class Repository:
 
     def __init__(self, storage: LocalStorage, index: Index | None = None):
         self.storage = storage
-        self.index: Index = index or SqliteIndex(storage.root, self._index_rows, durable=storage.durable)
+        self.index: Index = index or self._default_index()
+
+    def _default_index(self) -> Index:
+        """The index next to the records: in their database, or a SQLite file in the storage folder."""
+        database = getattr(self.storage.records, "database", None)
+        if database is not None:
+            return PostgresIndex(database, self._index_rows)
+        return SqliteIndex(self.storage.root, self._index_rows, durable=self.storage.durable)
 
     # ---------------------------------------------------------------- any record
 

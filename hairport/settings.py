@@ -6,7 +6,7 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field, field_validator
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -36,6 +36,19 @@ class Settings(BaseSettings):
     storage_dir: Path = Field(default_factory=default_storage_dir, description=(
         "Uploads, artifacts, results and records (a volume shared by API and workers); made absolute at "
         "start-up. Default ~/.local/share/hairport (a laptop); a deployment sets it."))
+    storage_url: str | None = Field(None, description=(
+        "Where blobs live for every host: s3://bucket/prefix (AWS S3 or any S3-compatible server; credentials, "
+        "region and endpoint from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION, AWS_ENDPOINT_URL unless "
+        "the s3_* settings give them) or a folder; storage_dir is then this host's cache. Unset: storage_dir "
+        "holds everything."))
+    database_url: str | None = Field(None, description=(
+        "Where the records live: postgresql://user@host:port/name (every host shares it; the schema is made in "
+        "an empty database, `hairport db upgrade` moves an older one) or unset (or sqlite:) for the storage "
+        "folder's records and SQLite index (one host)."))
+    s3_endpoint_url: str | None = Field(None, description="The S3 endpoint (over AWS_ENDPOINT_URL).")
+    s3_region: str | None = Field(None, description="The S3 region (over AWS_REGION).")
+    s3_access_key_id: str | None = Field(None, description="The S3 access key id (over AWS_ACCESS_KEY_ID).")
+    s3_secret_access_key: SecretStr | None = Field(None, description="The S3 secret key (over AWS_SECRET_ACCESS_KEY).")
     api_keys: str = Field("", description="Comma-separated API keys; each key owns what it creates.")
     insecure_dev: bool = Field(False, description="Accept requests without a key (owner 'dev'); never in production.")
     max_upload_bytes: int = Field(512 * 1024**2, description="Largest accepted upload (bytes); larger gets 413.")
@@ -86,6 +99,13 @@ class Settings(BaseSettings):
     validation_timeout_seconds: float = Field(120.0, gt=0, description=(
         "Longest validation of one upload (s); past it its process is stopped and the upload refused "
         "(413 too_large)."))
+
+    def s3_overrides(self) -> dict:
+        """The ``s3_*`` settings that are set, as :class:`hairport.storage.s3.S3Objects` takes them."""
+        secret = None if self.s3_secret_access_key is None else self.s3_secret_access_key.get_secret_value()
+        given = {"endpoint_url": self.s3_endpoint_url, "region": self.s3_region,
+                 "access_key_id": self.s3_access_key_id, "secret_access_key": secret}
+        return {name: value for name, value in given.items() if value is not None}
 
     @field_validator("storage_dir")
     @classmethod

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 import redis
@@ -11,12 +12,14 @@ from fastapi.middleware.cors import CORSMiddleware
 from hairport import __version__
 from hairport.repository import Repository
 from hairport.settings import Settings, get_settings
-from hairport.storage import LocalStorage, deployment_id
+from hairport.storage import deployment_for, open_storage
 from hairport.worker.queue import TaskQueue, connect
 
 from . import contract, dashboard_ui, docs, errors, headers, validation
 from .auth import check_configuration
 from .routers import batches, characters, hairstyles, health, jobs, retargets
+
+log = logging.getLogger(__name__)
 
 DESCRIPTION = """Retarget strand hairstyles between characters of one mesh topology.
 
@@ -53,6 +56,19 @@ class ContentLengthLimit:
         await self.app(scope, receive, send)
 
 
+def with_storage_check(readiness: Callable[[], dict], storage) -> Callable[[], dict]:
+    """``readiness`` with ``storage``: whether the object store and the records' database answer (those the
+    storage has)."""
+    probes = storage.reachability()
+    if not probes:
+        return readiness
+
+    def checks() -> dict:
+        return {**readiness(), **{name: probe() for name, probe in probes.items()}}
+
+    return checks
+
+
 def redis_checks(redis_url: str, queue: TaskQueue) -> tuple[Callable[[], dict], Callable[[], dict]]:
     """Readiness (Redis answers, a worker of this deployment answers) and queue depths against a Redis broker."""
     client = redis.Redis.from_url(redis_url, socket_timeout=READY_TIMEOUT_SECONDS,
@@ -87,9 +103,9 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     app = FastAPI(title="hairport", version=__version__, description=DESCRIPTION, docs_url=None, redoc_url=None,
                   lifespan=validation.lifespan)
     app.state.settings = settings
-    app.state.storage = LocalStorage(settings.storage_dir)
+    app.state.storage = open_storage(settings)
     app.state.repository = Repository(app.state.storage)
-    app.state.deployment = deployment_id(settings.storage_dir)
+    app.state.deployment = deployment_for(settings)
     app.state.queue = queue or connect(settings.redis_url, settings.storage_dir)
     if app.state.queue.deployment != app.state.deployment:
         raise RuntimeError(f"the task queue is deployment {app.state.queue.deployment}'s, the storage "
@@ -97,7 +113,7 @@ def create_app(settings: Settings | None = None, readiness=None, queue_depths=No
     if readiness is None or queue_depths is None:
         redis_readiness, redis_depths = redis_checks(settings.redis_url, app.state.queue)
         readiness, queue_depths = readiness or redis_readiness, queue_depths or redis_depths
-    app.state.readiness = readiness
+    app.state.readiness = with_storage_check(readiness, app.state.storage)
     app.state.queue_depths = queue_depths
     errors.install(app)
     app.add_middleware(ContentLengthLimit, limit=settings.max_upload_bytes)

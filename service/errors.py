@@ -12,6 +12,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from hairport.messages import safe_detail
 from hairport.solver import options as solver_options
+from hairport.storage import StorageUnavailable
 
 from . import headers as response_headers
 
@@ -19,6 +20,8 @@ log = logging.getLogger(__name__)
 
 PROBLEM_TYPE_BASE = "https://hairport.dev/problems/"
 PROBLEM_MEDIA_TYPE = "application/problem+json"
+#: ``Retry-After`` (s) of a 503 ``storage_unavailable``: an object store's outage or a restart takes seconds
+STORAGE_RETRY_AFTER_SECONDS = 10
 
 
 class Problem(Exception):
@@ -62,6 +65,13 @@ def install(app: FastAPI) -> None:
         headers = {**response_headers.response_headers(request_id, PROBLEM_MEDIA_TYPE), "Connection": "close"}
         return problem_response(500, "internal", "an unexpected error; the server logged it under this problem's "
                                                  "request_id", request_id=request_id, headers=headers)
+
+    @app.exception_handler(StorageUnavailable)
+    async def _storage(request: Request, error: StorageUnavailable):
+        log.warning("storage unavailable: %s", error.reason)
+        return problem_response(503, "storage_unavailable", f"the storage is unavailable ({error.reason}); nothing "
+                                f"was kept, try again in {STORAGE_RETRY_AFTER_SECONDS} s",
+                                headers={"Retry-After": str(STORAGE_RETRY_AFTER_SECONDS)})
 
     @app.exception_handler(Problem)
     async def _problem(request: Request, error: Problem):
@@ -125,9 +135,9 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
                         "external_reference", "stray_strands", "bad_landmarks")),
     500: ("an unexpected error (a defect, not the request's fault): the body's `request_id`, also in the "
           "`X-Request-ID` header, names the server's log entry and its traceback", ("internal",)),
-    503: ("the task queue is unavailable, or every upload validation process stayed busy: nothing was started "
-          "or kept; retry after `Retry-After` seconds (or, at `/ui`, the dashboard was not built)",
-          ("queue_unavailable", "validation_busy", "dashboard_not_built")),
+    503: ("the task queue or the storage is unavailable, or every upload validation process stayed busy: nothing "
+          "was started or kept; retry after `Retry-After` seconds (or, at `/ui`, the dashboard was not built)",
+          ("queue_unavailable", "validation_busy", "dashboard_not_built", "storage_unavailable")),
 }
 #: the Problem schema in the OpenAPI document (service/contract.py puts it there)
 PROBLEM_SCHEMA_REF = "#/components/schemas/Problem"

@@ -207,5 +207,5 @@ def test_the_settings_table_lists_every_setting():
     from hairport.settings import Settings
 
     text = (ROOT / "docs" / "operations.md").read_text()
-    rows = set(re.findall(r"^\| `(HAIRPORT_[A-Z_]+)` \|", section(text, "Settings"), re.M))
+    rows = set(re.findall(r"^\| `(HAIRPORT_[A-Z0-9_]+)` \|", section(text, "Settings"), re.M))
     assert rows == {f"HAIRPORT_{name.upper()}" for name in Settings.model_fields}

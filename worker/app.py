@@ -20,7 +20,7 @@ from pathlib import Path
 from celery import Celery
 
 from hairport.settings import Settings, get_settings
-from hairport.storage import deployment_id, queue_name
+from hairport.storage import deployment_for, queue_name
 
 PREPROCESS_QUEUE = "preprocess"
 RETARGET_QUEUE = "retarget"
@@ -53,8 +53,8 @@ def queue_names(deployment: str) -> dict[str, str]:
 
 def make_celery(settings: Settings, broker_url: str | None = None, deployment: str | None = None) -> Celery:
     """A Celery app configured from ``settings`` (``broker_url`` overrides the Redis URL) for ``deployment``
-    (default: the id written in ``settings.storage_dir``, made there when it has none)."""
-    deployment = deployment or deployment_id(settings.storage_dir)
+    (default: the settings' own, :func:`hairport.storage.deployment_for`)."""
+    deployment = deployment or deployment_for(settings)
     names = queue_names(deployment)
     app = Celery("hairport", broker=broker_url or settings.redis_url, include=[TASKS_MODULE], set_as_current=False)
     timeout = settings.enqueue_timeout_seconds

@@ -4,12 +4,13 @@ The job's own run solves everything up to the guides (the coarse level), then ha
 fine level (Eq. 14: the normal strands, independent once the guides are adapted) to
 :class:`SpreadFineLevel`. When the level is larger than ``Settings.fine_chunk_particles``,
 it splits the normal strands into chunks of whole strands (:func:`plan_chunks`), saves the
-level's inputs (:class:`hairport.distributed.FineInputs`) in a scratch folder of the shared
-storage, lists the chunks in the job's record (``fine``) and sends one ``fine`` task per
-chunk. A worker's task claims its chunk under the job record's lock, rebuilds the chunk's
-problem from the artifact, the target and those inputs (the same rows as the job's run
-would have built, so the same numbers bit for bit), solves it and saves its points
-(:func:`run_fine_chunk`).
+level's inputs (:class:`hairport.distributed.FineInputs`) as a blob of the storage (on another
+host, read from the object store by its digest: no folder is shared), lists the chunks and
+that digest in the job's record (``fine``) and sends one ``fine`` task per chunk. A worker's
+task claims its chunk under the job record's lock, rebuilds the chunk's problem from the
+artifact, the target and those inputs (the same rows as the job's run would have built, so
+the same numbers bit for bit), solves it and saves its points as a blob whose digest the
+chunk records (:func:`run_fine_chunk`).
 
 The job's run does not idle meanwhile: it claims and solves the chunks no task has taken,
 and the chunks whose worker died (its process gone, or its heartbeat silent), so a killed
@@ -17,7 +18,8 @@ worker or a lost message costs that chunk only, and a job finishes even when no 
 is free. A chunk that fails fails the job once, with the chunk's reason. Cancelling the job
 stops its chunks at their next iteration and revokes those not started. When every chunk is
 done, the run assembles the points and goes on as a job solved in one process (penetration
-check, metrics, outputs), then removes the scratch folder.
+check, metrics, outputs). The inputs and the chunks' points are no record's outputs: the orphan
+sweep removes them once the job has ended (a running job keeps every blob saved since it began).
 
 If the job's run dies, its heartbeat stops, the sweeper queues the job again, and the new
 run starts its fine level afresh under its own token: the chunk tasks of the dead run find
@@ -30,7 +32,6 @@ import json
 import logging
 import math
 import os
-import shutil
 import time
 import traceback
 import uuid
@@ -68,9 +69,8 @@ log = logging.getLogger(__name__)
 CHUNK_POLL_SECONDS = 0.2
 #: a chunk writes its progress (and reads whether it should stop) at most this often (s)
 CHUNK_PROGRESS_SECONDS = 0.5
-#: the folder of every job's fine-level scratch under the storage's work/ folder
-FINE_FOLDER = "fine"
-INPUTS_FILE = "inputs.npz"
+#: the suffix of the fine level's blobs (its inputs, each chunk's points)
+FINE_SUFFIX = ".npz"
 
 
 @dataclass(frozen=True)
@@ -85,6 +85,10 @@ class ChunkFailed(Exception):
     """A chunk failed on something other than bad input (its error is the job's)."""
 
 
+class FineBlobGone(FileNotFoundError):
+    """A blob of the fine level is no longer in the storage."""
+
+
 def plan_chunks(counts: np.ndarray, chunk_particles: int, max_chunks: int) -> list[tuple[int, int]]:
     """Runs of whole normal strands, ``(first, stop)``, of about ``chunk_particles`` particles each (larger when
     that would make more than ``max_chunks``); ``counts : (R,) int`` particles per normal strand."""
@@ -93,41 +97,46 @@ def plan_chunks(counts: np.ndarray, chunk_particles: int, max_chunks: int) -> li
     return [(int(run[0]), int(run[-1]) + 1) for run in distributed.chunk_strands(np.asarray(counts), size)]
 
 
-def scratch_folder(repository: Repository, job_id: str, run_token: str | None = None) -> Path:
-    """The fine level's scratch folder of a job (of one of its runs with ``run_token``)."""
-    folder = repository.storage.work_root / FINE_FOLDER / job_id
-    return folder if run_token is None else folder / run_token
+def save_blob(repository: Repository, write: Callable[[Path], None]) -> str:
+    """The digest of a blob ``write(path)`` makes (in a scratch folder of this host, then moved into the storage)."""
+    storage = repository.storage
+    with storage.work_dir() as work:
+        path = work / f"fine{FINE_SUFFIX}"
+        write(path)
+        return storage.save_file(path, FINE_SUFFIX, move=True).sha256
 
 
-def chunk_file(folder: Path, index: int) -> Path:
-    return folder / f"chunk-{index}.npz"
+def fine_blob(repository: Repository, digest: str, what: str) -> Path:
+    """The local path of a fine-level blob (fetched from the object store when this host has none).
+
+    Raises
+    ------
+    FineBlobGone
+        When the storage no longer has it (the job ended and the sweep removed it).
+    """
+    blob = repository.storage.blob(digest, FINE_SUFFIX)
+    if blob is None:
+        raise FineBlobGone(f"the fine level's {what} ({digest[:12]}) are gone")
+    return blob.path
 
 
-def _save_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    partial = path.with_name(f".{path.name}.{uuid.uuid4().hex}.partial")
-    try:
-        write(partial)
-        os.replace(partial, path)
-    finally:
-        partial.unlink(missing_ok=True)
-
-
-def save_chunk_result(path: Path, points: np.ndarray, report: distributed.SolveReport) -> None:
-    """A chunk's points ``(n, 3) float64`` and its solver report, as one ``.npz`` (atomically)."""
+def save_chunk_result(repository: Repository, points: np.ndarray, report: distributed.SolveReport) -> str:
+    """A chunk's points ``(n, 3) float64`` and its solver report, as one ``.npz`` blob: its digest."""
     document = json.dumps(asdict(report), default=json_default)
 
-    def write(partial: Path) -> None:
-        with open(partial, "wb") as handle:
+    def write(path: Path) -> None:
+        with open(path, "wb") as handle:
             np.savez(handle, points=points, report=np.array(document))
 
-    _save_atomic(path, write)
+    return save_blob(repository, write)
 
 
-def load_chunk_result(path: Path, particles: int) -> tuple[np.ndarray, distributed.SolveReport]:
-    with np.load(path, allow_pickle=False) as archive:
+def load_chunk_result(repository: Repository, digest: str, particles: int) -> tuple[np.ndarray, distributed.SolveReport]:
+    """A chunk's points ``(particles, 3) float64`` and report from its blob."""
+    with np.load(fine_blob(repository, digest, "chunk points"), allow_pickle=False) as archive:
         points, document = np.asarray(archive["points"], dtype=np.float64), str(archive["report"])
     if points.shape != (particles, 3):
-        raise ChunkFailed(f"chunk result {path.name} holds {points.shape} points, not ({particles}, 3)")
+        raise ChunkFailed(f"chunk result {digest[:12]} holds {points.shape} points, not ({particles}, 3)")
     return points, distributed.SolveReport(**json.loads(document))
 
 
@@ -250,24 +259,25 @@ def run_fine_chunk(repository: Repository, settings: Settings, job_id: str, run_
             if artifact is None:
                 raise solver.InputError("the hairstyle's artifact is gone", code="gone")
             adaptable, target, _ = job_inputs(repository, settings, job, artifact)
-            folder = scratch_folder(repository, job_id, run_token)
-            inputs = distributed.FineInputs.load(folder / INPUTS_FILE, adaptable.hair, adaptable.multiscale.guides)
+            inputs = distributed.FineInputs.load(fine_blob(repository, job.fine.inputs, "inputs"), adaptable.hair,
+                                                 adaptable.multiscale.guides)
             options = solver.RetargetOptions(**job.options)
             surface, _ = bodies.collision_surface(repository, settings, target)
             points, report = distributed.solve_fine_chunk(adaptable, target, options, inputs, chunk.first_strand,
                                                      chunk.stop_strand, progress, progress.should_stop,
                                                      collision_surface=surface)
-            save_chunk_result(chunk_file(folder, index), points, report)
-        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began, solve_seconds=report.seconds)
+            result = save_chunk_result(repository, points, report)
+        claim.write(state=CHUNK_DONE, progress=1.0, seconds=time.perf_counter() - began, solve_seconds=report.seconds,
+                    result=result)
     except solver.Cancelled:
         return  # the job is being cancelled or another run took the chunk: it decides
     except TRANSIENT_ERRORS:
         claim.release()
         raise
-    except FileNotFoundError:
+    except FineBlobGone as error:
         if _current_chunk(repository.job(job_id), run_token, index) is None:
-            return  # the job's run ended and removed its scratch folder: nothing is lost
-        claim.write(state=CHUNK_FAILED, error=ErrorInfo(code="internal", message="the fine level's inputs are gone"))
+            return  # the job's run ended and its inputs were swept: nothing is lost
+        claim.write(state=CHUNK_FAILED, error=ErrorInfo(code="internal", message=str(error)))
     except Exception as error:  # noqa: BLE001 - the chunk fails with a reason, the job's run fails the job
         claim.write(state=CHUNK_FAILED, error=error_info(error, settings.task_soft_time_limit))
         if not isinstance(error, solver.InputError):
@@ -290,22 +300,14 @@ class SpreadFineLevel:
         plan = plan_chunks(counts, self.settings.fine_chunk_particles, self.settings.max_fine_chunks)
         if len(plan) < 2 or self.dispatch is None:
             return distributed.solve_here(level, progress, should_stop)
-        token = self.run.token
-        shutil.rmtree(scratch_folder(self.repository, self.job_id), ignore_errors=True)  # earlier, dead runs'
-        folder = scratch_folder(self.repository, self.job_id, token)
-        folder.mkdir(parents=True)
-        try:
-            return self._spread(level, plan, counts, folder, progress or solver.no_progress, should_stop)
-        finally:
-            shutil.rmtree(folder, ignore_errors=True)
+        return self._spread(level, plan, counts, progress or solver.no_progress, should_stop)
 
-    def _spread(self, level, plan, counts, folder, progress, should_stop):
+    def _spread(self, level, plan, counts, progress, should_stop):
         token = self.run.token
-        _save_atomic(folder / INPUTS_FILE, level.inputs.save)
+        inputs = save_blob(self.repository, level.inputs.save)
         chunks = [FineChunk(index=i, first_strand=first, stop_strand=stop, particles=int(counts[first:stop].sum()),
                             task_id=new_task_id()) for i, (first, stop) in enumerate(plan)]
-        relative = str(folder.relative_to(self.repository.storage.work_root))
-        if not self.run.write(fine=FineRun(run_token=token, folder=relative, chunks=chunks)):
+        if not self.run.write(fine=FineRun(run_token=token, inputs=inputs, chunks=chunks)):
             raise solver.Cancelled("the job's run was taken over")
         for chunk in reversed(chunks):  # the job's run takes chunks from the front, tasks from the back
             try:
@@ -328,7 +330,7 @@ class SpreadFineLevel:
                 raise _chunk_error(failed)
             for chunk in current:
                 if chunk.state == CHUNK_DONE and chunk.index not in results:
-                    results[chunk.index] = load_chunk_result(chunk_file(folder, chunk.index), chunk.particles)
+                    results[chunk.index] = load_chunk_result(self.repository, chunk.result, chunk.particles)
             done = sum(chunk.particles for chunk in current if chunk.index in results)
             running = sum(chunk.particles * chunk.progress for chunk in current
                           if chunk.state == CHUNK_RUNNING and chunk.index not in results)

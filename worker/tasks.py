@@ -18,7 +18,7 @@ from celery.signals import worker_process_init, worker_ready, worker_shutdown
 
 from hairport.repository import Repository
 from hairport.settings import get_settings
-from hairport.storage import LocalStorage, deployment_id, queue_name, retention_seconds
+from hairport.storage import deployment_for, open_storage, queue_name, retention_seconds
 
 from . import runner
 from .app import FINE_TASK, PREPROCESS_TASK, PURGE_TASK, RETARGET_TASK, ROUTES, configured_celery
@@ -41,13 +41,13 @@ JOB_TASK_OPTIONS = dict(bind=True, autoretry_for=runner.TRANSIENT_ERRORS, retry_
 
 def repository() -> Repository:
     """The records of the configured storage folder."""
-    return Repository(LocalStorage(get_settings().storage_dir))
+    return Repository(open_storage(get_settings()))
 
 
 @lru_cache(maxsize=1)
 def own_deployment() -> str:
-    """The deployment of this worker: the id written in its storage folder."""
-    return deployment_id(get_settings().storage_dir)
+    """The deployment of this worker (:func:`hairport.storage.deployment_for`)."""
+    return deployment_for(get_settings())
 
 
 def foreign(task, deployment: str | None) -> bool:
@@ -133,8 +133,13 @@ def _start_sweeper(sender=None, **_) -> None:
     sweeper = Sweeper(repository(), TaskQueue(app), get_settings())
     _sweepers[id(app)] = sweeper
     sweeper.start()
+    storage = sweeper.repository.storage
+    where = storage.root if storage.remote is None else f"{storage.remote.url} (cache {storage.root})"
     log.warning("hairport worker of deployment %s, storage %s: consuming %s", app.hairport_deployment,
-                get_settings().storage_dir, ", ".join(sorted(queue.name for queue in sender.task_consumer.queues)))
+                where, ", ".join(sorted(queue.name for queue in sender.task_consumer.queues)))
+    for name, answers in storage.reachability().items():
+        if not answers():  # the worker still starts: its tasks retry until the store or database answers again
+            log.error("hairport worker: the %s cannot be reached (see the warning above); its tasks wait for it", name)
 
 
 @worker_shutdown.connect

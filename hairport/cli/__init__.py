@@ -44,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     ops.add_warmup(sub)
     ops.add_purge(sub)
     ops.add_reindex(sub)
+    ops.add_db(sub)
+    ops.add_migrate(sub)
     ops.add_openapi(sub)
     solve.add_hairline(sub)
     convert.add_convert(sub)

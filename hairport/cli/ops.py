@@ -55,7 +55,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from hairport.repository import Repository
     from hairport.service.app import create_app
     from hairport.service.auth import check_configuration
-    from hairport.storage import LocalStorage
+    from hairport.storage import open_storage
     from hairport.worker.queue import Sweeper, TaskQueue
 
     settings = get_settings()
@@ -80,7 +80,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     else:
         app = create_app()
     # the API sweeps too: stale jobs are found when every worker host is gone
-    Sweeper(Repository(LocalStorage(settings.storage_dir)), app.state.queue, settings).start()
+    Sweeper(Repository(open_storage(settings)), app.state.queue, settings).start()
     print(f"hairport: deployment {app.state.deployment}, storage {settings.storage_dir}, broker "
           f"{app.state.queue.broker}", file=sys.stderr)
     uvicorn.run(app, host=args.host, port=args.port)
@@ -155,10 +155,10 @@ def add_purge(sub) -> None:
 
 def cmd_purge(args: argparse.Namespace) -> int:
     from hairport.repository import Repository
-    from hairport.storage import LocalStorage, retention_seconds
+    from hairport.storage import open_storage, retention_seconds
 
     settings = get_settings()
-    repository = Repository(LocalStorage(settings.storage_dir))
+    repository = Repository(open_storage(settings))
     removed = repository.purge(retention_seconds(settings.retention_days))
     orphans = repository.sweep_orphans(settings.orphan_grace_seconds)
     print(f"removed {removed} files older than {settings.retention_days:g} days and {orphans} stored files no record "
@@ -174,13 +174,77 @@ def add_reindex(sub) -> None:
 
 def cmd_reindex(args: argparse.Namespace) -> int:
     from hairport.repository import OWNED_KINDS, Repository
-    from hairport.storage import LocalStorage
+    from hairport.storage import open_storage
     from hairport.storage.index import JOBS
 
     settings = get_settings()
-    rows = Repository(LocalStorage(settings.storage_dir)).rebuild_index()
+    rows = Repository(open_storage(settings)).rebuild_index()
     kinds = ", ".join(f"{rows.get(kind, 0)} {kind}" for kind in (JOBS, *OWNED_KINDS))
     print(f"indexed {kinds} of {settings.storage_dir}")
+    return 0
+
+
+def add_db(sub) -> None:
+    p = sub.add_parser("db", help="the records' database (HAIRPORT_DATABASE_URL)")
+    dsub = p.add_subparsers(dest="db_command", required=True)
+    u = dsub.add_parser("upgrade", help="bring the database's schema to this hairport's version (records kept)")
+    u.set_defaults(run=cmd_db_upgrade)
+
+
+def cmd_db_upgrade(args: argparse.Namespace) -> int:
+    from hairport.storage import Database, SchemaMismatch, StorageUnavailable, upgrade
+
+    settings = get_settings()
+    if not settings.database_url or not settings.database_url.startswith(("postgresql://", "postgres://")):
+        print("hairport: error: HAIRPORT_DATABASE_URL names no PostgreSQL database (the records are in the storage "
+              "folder, which needs no upgrade)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    database = Database(settings.database_url)
+    try:
+        before, after = upgrade(database)
+    except (SchemaMismatch, StorageUnavailable) as error:
+        print(f"hairport: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    state = "already at" if before == after else f"upgraded from schema version {before} to"
+    print(f"{database.describe()}: {state} schema version {after}")
+    return 0
+
+
+def add_migrate(sub) -> None:
+    p = sub.add_parser("migrate", help="copy a one-host deployment (HAIRPORT_STORAGE_DIR's records and blobs) into "
+                                       "a database and an object store that several hosts share")
+    p.add_argument("--to-database", required=True, metavar="URL", help="postgresql://user@host:port/name")
+    p.add_argument("--to-storage", required=True, metavar="URL",
+                   help="s3://bucket/prefix (credentials, region, endpoint: AWS_* or HAIRPORT_S3_*)")
+    p.set_defaults(run=cmd_migrate)
+
+
+def cmd_migrate(args: argparse.Namespace) -> int:
+    from hairport.repository import Repository
+    from hairport.storage import LocalStorage, SchemaMismatch, StorageUnavailable, object_store_for_url, open_records
+    from hairport.storage.migrate import migrate
+
+    settings = get_settings()
+    if settings.database_url or settings.storage_url:
+        print("hairport: error: migrate copies a deployment whose records and blobs are in its storage folder; "
+              "unset HAIRPORT_DATABASE_URL and HAIRPORT_STORAGE_URL for it", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    source = LocalStorage(settings.storage_dir)
+    try:
+        with tempfile.TemporaryDirectory(prefix="hairport-migrate-") as cache:
+            target = LocalStorage(Path(cache), remote=object_store_for_url(args.to_storage, **settings.s3_overrides()),
+                                  records=open_records(args.to_database))
+            report = migrate(source, target, progress=lambda message: print(f"hairport: {message}", file=sys.stderr))
+            indexed = Repository(target).rebuild_index()
+    except (ValueError, SchemaMismatch, StorageUnavailable) as error:
+        print(f"hairport: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(f"copied {report.blobs_copied} blobs ({report.blobs_present} already there) and "
+          f"{sum(report.records.values())} records ({', '.join(f'{n} {k}' for k, n in sorted(report.records.items()))}) "
+          f"from {settings.storage_dir}; indexed {indexed}")
+    if report.missing_blobs:
+        print(f"hairport: warning: {len(report.missing_blobs)} blobs that records name were not in the folder either "
+              f"(first: {sorted(report.missing_blobs)[0]})", file=sys.stderr)
     return 0
 
 

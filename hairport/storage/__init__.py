@@ -40,11 +40,15 @@ killed before its record was written, the outputs of a run that lost its job.
 
 from __future__ import annotations
 
+import functools
+import logging
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from urllib.parse import urlparse
 
 from .blobs import UPLOAD_CHUNK_BYTES, Blob, BlobStore, UploadTooLarge, iter_upload
-from .deployment import DEPLOYMENT_FILE, deployment_id, queue_name
-from .documents import DocumentStore
+from .deployment import DEPLOYMENT_FILE, deployment_for, deployment_id, queue_name
+from .documents import FolderRecords, Written
 from .layout import (
     FILE_MODE,
     LOCK_SUFFIX,
@@ -58,16 +62,27 @@ from .layout import (
     check_suffix,
     retention_seconds,
 )
+from .objects import FOLDER_SCHEME, S3_SCHEME, FolderObjects, ObjectInfo, ObjectStore, StorageUnavailable
+from .postgres import Database, PostgresRecords, SchemaMismatch, upgrade
 from .retention import Retention
+from .s3 import S3Objects
+
+log = logging.getLogger(__name__)
+
+#: the URL schemes of ``HAIRPORT_DATABASE_URL``: SQLite (the records in the storage folder) or PostgreSQL
+SQLITE_SCHEME = "sqlite"
+POSTGRES_SCHEMES = ("postgresql://", "postgres://")
 
 __all__ = [
     "Blob", "DEPLOYMENT_FILE", "FILE_MODE", "LOCK_SUFFIX", "LocalStorage", "RECORD_SUFFIX", "SECONDS_PER_DAY", "TEMP_SUFFIX",
     "UPLOAD_CHUNK_BYTES", "UploadTooLarge", "blob_references", "blob_relpath", "check_name", "check_sha256",
-    "check_suffix", "deployment_id", "iter_upload", "queue_name", "retention_seconds",
+    "check_suffix", "deployment_id", "iter_upload", "queue_name", "retention_seconds", "ObjectInfo", "ObjectStore",
+    "StorageUnavailable", "object_store_for_url", "open_storage", "deployment_for", "open_records", "Database",
+    "PostgresRecords", "SchemaMismatch", "upgrade",
 ]
 
 
-class LocalStorage(BlobStore, DocumentStore, Retention):
+class LocalStorage(BlobStore, Retention):
     """Blobs and records in a local directory (see the module docstring for layout and assumptions).
 
     Parameters
@@ -78,17 +93,127 @@ class LocalStorage(BlobStore, DocumentStore, Retention):
         ``fsync`` every written file and the directory of every rename (the default). Off
         only for tests and throwaway stores: a crash could then leave an old or empty file,
         but atomicity between processes and the locking are the same.
+    remote : ObjectStore, optional
+        Where blobs live for every host (``HAIRPORT_STORAGE_URL``); ``root/blobs`` is then this
+        host's cache of them (:mod:`.blobs`).
+    records : FolderRecords or PostgresRecords, optional
+        Where the records live: by default ``root/records`` (:class:`~.documents.FolderRecords`),
+        or a database (``HAIRPORT_DATABASE_URL``, :class:`~.postgres.PostgresRecords`).
     """
 
-    def __init__(self, root: Path, *, durable: bool = True):
+    def __init__(self, root: Path, *, durable: bool = True, remote: ObjectStore | None = None, records=None):
         self.root = Path(root)
         self.durable = durable
+        self.remote = remote
         self.blobs_dir = self.root / "blobs"
         self.records_dir = self.root / "records"
         self.tmp_dir = self.root / "tmp"
         self.work_root = self.root / "work"
-        for folder in (self.blobs_dir, self.records_dir, self.tmp_dir, self.work_root):
+        for folder in (self.blobs_dir, self.tmp_dir, self.work_root):
             folder.mkdir(parents=True, exist_ok=True)
+        self.records = FolderRecords(self.records_dir, durable) if records is None else records
+
+    # the records: handed on to the record store (one of two, with the same methods)
+
+    def put_record(self, kind: str, record_id: str, document: dict, written: Written | None = None) -> None:
+        self.records.put_record(kind, record_id, document, written)
+
+    def get_record(self, kind: str, record_id: str) -> dict | None:
+        return self.records.get_record(kind, record_id)
+
+    def get_record_text(self, kind: str, record_id: str) -> str | None:
+        return self.records.get_record_text(kind, record_id)
+
+    def update_record(self, kind: str, record_id: str, change: Callable[[dict], dict | None],
+                      written: Written | None = None) -> dict | None:
+        return self.records.update_record(kind, record_id, change, written)
+
+    def list_records(self, kind: str) -> Iterator[dict]:
+        return self.records.list_records(kind)
+
+    def delete_record(self, kind: str, record_id: str) -> None:
+        self.records.delete_record(kind, record_id)
+
+    def has_record(self, kind: str, record_id: str) -> bool:
+        return self.records.has_record(kind, record_id)
+
+    def reachability(self) -> dict[str, Callable[[], bool]]:
+        """``{"storage": probe, "database": probe}`` for the object store and the records' database this storage
+        has (none for a folder alone): each probe says whether it answers, and logs why not."""
+        checks = {}
+        if self.remote is not None:
+            checks["storage"] = self.remote.check
+        database = getattr(self.records, "database", None)
+        if database is not None:
+            checks["database"] = database.check
+        return {name: functools.partial(_answers, name, check) for name, check in checks.items()}
 
     def __repr__(self) -> str:
-        return f"LocalStorage({str(self.root)!r}, durable={self.durable})"
+        remote = "" if self.remote is None else f", remote={self.remote.url!r}"
+        return f"LocalStorage({str(self.root)!r}, durable={self.durable}{remote})"
+
+
+def object_store_for_url(url: str, *, durable: bool = True, **s3_options) -> ObjectStore:
+    """The store a ``HAIRPORT_STORAGE_URL`` names: a folder (``file://`` URL or a plain path) or ``s3://bucket/prefix``
+    (``s3_options``: explicit endpoint, region and keys over the ``AWS_*`` variables, :class:`~.s3.S3Objects`).
+
+    Raises
+    ------
+    ValueError
+        For another scheme, naming the ones taken.
+    """
+    parsed = urlparse(url)
+    if parsed.scheme in ("", FOLDER_SCHEME):
+        return FolderObjects(Path(parsed.path if parsed.scheme else url), durable=durable)
+    if parsed.scheme == S3_SCHEME:
+        return S3Objects.from_url(url, **s3_options)
+    raise ValueError(f"HAIRPORT_STORAGE_URL {url!r}: the scheme {parsed.scheme!r} is not one of "
+                     f"{FOLDER_SCHEME}://, {S3_SCHEME}:// or a folder path")
+
+
+def _answers(name: str, check: Callable[[], None]) -> bool:
+    """Whether ``check()`` passes (a readiness probe); why not, in the log."""
+    try:
+        check()
+        return True
+    except (StorageUnavailable, SchemaMismatch) as error:
+        log.warning("%s not ready: %s", name, error)
+        return False
+
+
+def open_storage(settings) -> LocalStorage:
+    """The storage a deployment's settings name: ``storage_dir``, with the object store of ``storage_url``
+    (S3 credentials from the standard ``AWS_*`` variables unless the ``s3_*`` settings override them) when set.
+
+    Parameters
+    ----------
+    settings : hairport.settings.Settings
+    """
+    url = settings.storage_url
+    remote = object_store_for_url(url, **settings.s3_overrides()) if url else None
+    return LocalStorage(settings.storage_dir, remote=remote, records=open_records(settings.database_url))
+
+
+def open_records(database_url: str | None):
+    """The record store a ``HAIRPORT_DATABASE_URL`` names: None (the storage folder's) when unset or SQLite's
+    default, else the PostgreSQL database's (its schema made, when the database is empty, or checked on first use:
+:class:`SchemaMismatch` for another version).
+
+    Raises
+    ------
+    ValueError
+        A URL of another kind than ``postgresql://``.
+    """
+    if not database_url or database_url.startswith(SQLITE_SCHEME):
+        return None
+    if not database_url.startswith(POSTGRES_SCHEMES):
+        raise ValueError(f"HAIRPORT_DATABASE_URL: {database_url.split('://')[0]}:// is not one of "
+                         f"{', '.join(POSTGRES_SCHEMES)} or {SQLITE_SCHEME}")
+    # one per process and URL: its connections (one per thread) serve every repository; it connects, and
+    # makes or checks the schema, on its first use
+    database = _DATABASES.setdefault(database_url, Database(database_url))
+    return PostgresRecords(database)
+
+
+#: the databases this process opened, by URL (:func:`open_records`)
+_DATABASES: dict[str, Database] = {}

@@ -1,4 +1,11 @@
-"""Content-addressed blobs: uploads streamed in chunks, produced files, scratch folders of jobs."""
+"""Content-addressed blobs: uploads streamed in chunks, produced files, scratch folders of jobs.
+
+Without an object store every blob lives in the local folder (``root/blobs``), which all
+processes share. With one (``remote``: ``HAIRPORT_STORAGE_URL``, :mod:`.objects`) the store is
+where blobs live and the local folder is this host's cache of them: a save publishes the content
+to the store before it enters the cache (so the cache never holds what the store lacks), and a
+read that misses the cache fetches it from the store by its digest.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +17,7 @@ import os
 import shutil
 import tempfile
 import threading
+import time
 from collections.abc import AsyncIterator, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +25,12 @@ from pathlib import Path
 from hairport.solver import fsync_folder
 
 from .layout import _create_temp, _unlink, blob_relpath, check_sha256, check_suffix
+from .objects import ObjectStore
+
+#: a save of content the object store already holds writes it again when the stored copy is older
+#: than this (s): the store's objects keep their first write time, by which the orphan sweep judges
+#: them, and content saved again for a new record must not look older than its grace period
+REPUBLISH_AFTER_SECONDS = 600.0
 
 #: bytes read from an upload (or a produced file) at a time: bounds the memory of one save
 UPLOAD_CHUNK_BYTES = 1 << 20
@@ -90,6 +104,8 @@ class BlobStore:
     blobs_dir: Path
     tmp_dir: Path
     work_root: Path
+    #: where blobs live for every host, when not only in ``root`` (module docstring)
+    remote: ObjectStore | None = None
 
     async def save_stream(self, chunks: AsyncIterator[bytes], max_bytes: int, suffix: str = "") -> Blob:
         """Store an upload chunk by chunk, hashing while writing; memory stays at one chunk.
@@ -136,6 +152,7 @@ class BlobStore:
             digest, size = _hash_file(source)
             target = self.root / blob_relpath(digest, suffix)
             target.parent.mkdir(exist_ok=True)
+            self._publish(source, blob_relpath(digest, suffix))
             if self._touch(target):
                 source.unlink()
                 return Blob(digest, size, target)
@@ -162,7 +179,7 @@ class BlobStore:
         check_sha256(sha256)
         check_suffix(suffix)
         path = self.root / blob_relpath(sha256, suffix)
-        if not self._touch(path):
+        if not self._touch(path) and not self._fetch(blob_relpath(sha256, suffix), path):
             return None
         try:
             return Blob(sha256, path.stat().st_size, path)
@@ -195,6 +212,7 @@ class BlobStore:
         digest = sink.hash.hexdigest()
         target = self.root / blob_relpath(digest, suffix)
         target.parent.mkdir(exist_ok=True)
+        published = self._publish(sink.path, blob_relpath(digest, suffix))
         created = False
         if self._touch(target):
             _unlink(sink.path)
@@ -202,7 +220,25 @@ class BlobStore:
             os.replace(sink.path, target)
             self._fsync_dir(target.parent)
             created = True
-        return Blob(digest, sink.size, target, created)
+        return Blob(digest, sink.size, target, created if self.remote is None else published)
+
+    def _publish(self, path: Path, key: str) -> bool:
+        """Put a blob's content into the object store unless it holds a recent copy; whether it was not
+        there before (nothing without a store)."""
+        if self.remote is None:
+            return False
+        stored = self.remote.stat(key)
+        if stored is not None and stored.modified >= time.time() - REPUBLISH_AFTER_SECONDS:
+            return False
+        self.remote.put_file(key, path)
+        return stored is None
+
+    def _fetch(self, key: str, path: Path) -> bool:
+        """Bring a blob from the object store into the cache at ``path``; whether the store has it."""
+        if self.remote is None:
+            return False
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return self.remote.get_file(key, path)
 
     def discard_new(self, *blobs: Blob | None) -> int:
         """Remove the blobs this process's saves created (a refused upload keeps no file); a blob
@@ -210,7 +246,13 @@ class BlobStore:
 
         Blobs are shared by content: an identical upload accepted between this save and the
         discard would lose its file; the window is the validation of one upload."""
-        return sum(1 for blob in blobs if blob is not None and blob.created and _unlink(blob.path))
+        removed = 0
+        for blob in blobs:
+            if blob is not None and blob.created:
+                if self.remote is not None:
+                    self.remote.delete(blob_relpath(blob.sha256, blob.path.name[len(blob.sha256):]))
+                removed += _unlink(blob.path) or self.remote is not None
+        return removed
 
     def _fsync_dir(self, path: Path) -> None:
         if self.durable:

@@ -1,6 +1,7 @@
 """The deployment id: written once in the storage (``deployment.json``), read by API and workers.
 
-A deployment is one storage folder and the processes that share it. Its id names its queues
+A deployment is one storage (a folder, or an object store that hosts share: then its id is derived
+from the store's URL and endpoint, :func:`deployment_for`) and the processes that share it. Its id names its queues
 (:func:`queue_name`) and travels in every task, so that a worker started on another folder (a
 relative path resolved elsewhere, a typo, a second deployment on the same Redis database) never
 takes this deployment's tasks and says so, instead of finding no records and reporting success.
@@ -9,6 +10,7 @@ takes this deployment's tasks and says so, instead of finding no records and rep
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import secrets
@@ -19,6 +21,8 @@ from .layout import _create_temp, _unlink, check_name
 DEPLOYMENT_FILE = "deployment.json"
 #: random bytes of a new deployment id (hex-encoded: twice as many characters)
 DEPLOYMENT_ID_BYTES = 6
+#: the standard variable naming an S3 endpoint (a deployment on another endpoint is another deployment)
+AWS_ENDPOINT_VARIABLE = "AWS_ENDPOINT_URL"
 #: every queue and control name of hairport starts with this
 QUEUE_PREFIX = "hairport"
 
@@ -45,6 +49,17 @@ def deployment_id(root: Path, *, create: bool = True) -> str:
     finally:
         _unlink(temp)
     return _read(path)
+
+
+def deployment_for(settings) -> str:
+    """The deployment id of a process with these settings (:class:`hairport.settings.Settings`): with an object
+    store (``storage_url``), derived from its URL and endpoint, so that every host configured alike agrees
+    without writing anything; else the storage folder's (:func:`deployment_id`)."""
+    if not settings.storage_url:
+        return deployment_id(settings.storage_dir)
+    endpoint = settings.s3_endpoint_url or os.environ.get(AWS_ENDPOINT_VARIABLE, "")
+    name = f"{settings.storage_url.rstrip('/')}|{endpoint.rstrip('/')}"
+    return hashlib.blake2b(name.encode(), digest_size=DEPLOYMENT_ID_BYTES).hexdigest()
 
 
 def queue_name(deployment: str, queue: str) -> str:

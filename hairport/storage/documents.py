@@ -1,27 +1,55 @@
-"""JSON records: small documents rewritten atomically under a per-record ``flock``."""
+"""JSON records in a folder: small documents rewritten atomically under a per-record ``flock``.
+
+:class:`FolderRecords` is one of the two record stores (the other, in a PostgreSQL database, is
+:class:`~.postgres.PostgresRecords`); both answer the same methods, which
+:class:`~hairport.storage.LocalStorage` hands on.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import fcntl
 import json
+import math
 import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from hairport.solver import atomic_write_bytes
 
-from .layout import FILE_MODE, LOCK_SUFFIX, RECORD_SUFFIX, _files, _read_text, _unlink, check_name
+from .layout import (
+    FILE_MODE,
+    LOCK_SUFFIX,
+    RECORD_SUFFIX,
+    TEMP_SUFFIX,
+    _files,
+    _is_old,
+    _mtime,
+    _read_text,
+    _subdirs,
+    _unlink,
+    blob_references,
+    check_name,
+)
 
 #: ``written(old, new)``: called under a record's lock after it was written
 Written = Callable[[dict | None, dict], None]
 
 
-class DocumentStore:
-    """Records under ``root/records/<kind>/<id>.json`` (see :mod:`hairport.storage`)."""
+class FolderRecords:
+    """Records under ``records_dir/<kind>/<id>.json`` (see :mod:`hairport.storage`).
 
-    records_dir: Path
-    durable: bool
+    Parameters
+    ----------
+    records_dir : Path
+    durable : bool
+        ``fsync`` every written record.
+    """
+
+    def __init__(self, records_dir: Path, durable: bool = True):
+        self.records_dir = Path(records_dir)
+        self.durable = durable
+        self.records_dir.mkdir(parents=True, exist_ok=True)
 
     def put_record(self, kind: str, record_id: str, document: dict, written: Written | None = None) -> None:
         """Write (create or replace) a record atomically; ``written(old, new)`` runs under its lock after the
@@ -122,6 +150,62 @@ class DocumentStore:
             yield lock
         finally:
             os.close(fd)  # releases the lock
+
+
+    # ------------------------------------------------------------------ retention
+
+    def purge_old(self, cutoff: float, removed: Callable[[str, str], None] | None = None) -> tuple[int, set[str]]:
+        """Remove the records not written since ``cutoff`` (each under its lock, its mtime checked again), old
+        temporary files and orphaned lock files; the count removed and the digests the remaining records refer
+        to (:func:`~.layout.blob_references`). ``removed(kind, id)`` runs under a purged record's lock."""
+        count, referenced = 0, set()
+        for kind_dir in _subdirs(self.records_dir):
+            for entry in _files(kind_dir):
+                name = entry.name
+                if name.endswith(RECORD_SUFFIX) and not name.startswith("."):
+                    if _is_old(entry, cutoff) and self._purge_record(entry, cutoff, removed):
+                        count += 1
+                    else:
+                        referenced |= blob_references(_read_json(entry))
+                elif name.endswith(TEMP_SUFFIX) and _is_old(entry, cutoff):
+                    count += _unlink(entry)
+            for entry in _files(kind_dir):  # lock files of records gone by other means
+                if entry.name.endswith(LOCK_SUFFIX) and _is_old(entry, cutoff):
+                    record = entry.with_suffix(RECORD_SUFFIX)
+                    if not record.exists():
+                        with self._locked(record) as lock:
+                            if not record.exists():
+                                _unlink(lock)
+        return count, referenced
+
+    def references(self, kept_since: Callable[[str, dict], float | None] | None = None) -> tuple[set[str], float]:
+        """The digests every record refers to, and the earliest time since which ``kept_since(kind, document)``
+        keeps every blob (infinity when no record says so)."""
+        referenced: set[str] = set()
+        earliest = math.inf
+        for kind_dir in _subdirs(self.records_dir):
+            for entry in _files(kind_dir):
+                if entry.name.endswith(RECORD_SUFFIX) and not entry.name.startswith("."):
+                    document = _read_json(entry)
+                    if document is None:
+                        continue
+                    referenced |= blob_references(document)
+                    since = None if kept_since is None else kept_since(kind_dir.name, document)
+                    if since is not None:
+                        earliest = min(earliest, since)
+        return referenced, earliest
+
+    def _purge_record(self, path: Path, cutoff: float, removed: Callable[[str, str], None] | None) -> bool:
+        """Remove an old record unless it was written meanwhile; whether it was removed."""
+        with self._locked(path) as lock:
+            mtime = _mtime(path)
+            if mtime is None or mtime >= cutoff:
+                return False
+            _unlink(path)
+            if removed is not None:
+                removed(path.parent.name, path.name[:-len(RECORD_SUFFIX)])
+            _unlink(lock)
+            return True
 
 
 def _write_json(path: Path, document: dict, durable: bool = True) -> None:

@@ -1,5 +1,13 @@
 """Retention: what was not written, saved or read for a while is removed (see :meth:`purge`), and blobs no
-record refers to go after a grace period (see :meth:`sweep_orphans`)."""
+record refers to go after a grace period (see :meth:`sweep_orphans`).
+
+With an object store (:mod:`.objects`) the blobs' lives are judged there: a stored object keeps the time
+it was written (a read does not refresh it, a save of the same content does once it is older than
+:data:`~.blobs.REPUBLISH_AFTER_SECONDS`), so an object no record refers to goes once that time is older
+than the cutoff; each is looked at again just before it is deleted. The local folder is then only this
+host's cache: a cached blob not read for the cutoff goes whether records refer to it or not (the store
+still has it).
+"""
 
 from __future__ import annotations
 
@@ -10,24 +18,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from .documents import _read_json
-from .layout import (
-    LOCK_SUFFIX,
-    RECORD_SUFFIX,
-    SHA256_HEX_CHARS,
-    TEMP_NAME_BYTES,
-    TEMP_SUFFIX,
-    _files,
-    _is_old,
-    _mtime,
-    _subdirs,
-    _tree_stats,
-    _unlink,
-    blob_references,
-)
+from .layout import SHA256_HEX_CHARS, TEMP_NAME_BYTES, TEMP_SUFFIX, _files, _is_old, _subdirs, _tree_stats, _unlink
 
 #: prefix of a blob moved aside by a sweep, in ``tmp/``, for the instant its mtime is checked again
 SWEPT_PREFIX = "swept-"
+#: the object store's keys of blobs (:func:`~.layout.blob_relpath`)
+BLOBS_PREFIX = "blobs/"
 
 
 class Retention:
@@ -65,26 +61,8 @@ class Retention:
             Files removed (blobs, records, temporary files and files in work directories).
         """
         cutoff = (time.time() if now is None else now) - older_than_seconds
-        on_removed, removed = removed, 0
-        referenced: set[str] = set()
-        for kind_dir in _subdirs(self.records_dir):
-            for entry in _files(kind_dir):
-                name = entry.name
-                if name.endswith(RECORD_SUFFIX) and not name.startswith("."):
-                    if _is_old(entry, cutoff) and self._purge_record(entry, cutoff, on_removed):
-                        removed += 1
-                    else:
-                        referenced |= blob_references(_read_json(entry))
-                elif name.endswith(TEMP_SUFFIX) and _is_old(entry, cutoff):
-                    removed += _unlink(entry)
-            for entry in _files(kind_dir):  # lock files of records gone by other means
-                if entry.name.endswith(LOCK_SUFFIX) and _is_old(entry, cutoff):
-                    record = entry.with_suffix(RECORD_SUFFIX)
-                    if not record.exists():
-                        with self._locked(record) as lock:
-                            if not record.exists():
-                                _unlink(lock)
-        removed += self._remove_unreferenced(referenced, cutoff)
+        removed, referenced = self.records.purge_old(cutoff, removed)
+        removed += self._remove_unreferenced(referenced, cutoff, evict_cache=True)
         for entry in _files(self.tmp_dir):
             if _is_old(entry, cutoff):
                 removed += _unlink(entry)
@@ -123,26 +101,36 @@ class Retention:
             Blobs removed.
         """
         cutoff = (time.time() if now is None else now) - older_than_seconds
-        referenced: set[str] = set()
-        for kind_dir in _subdirs(self.records_dir):
-            for entry in _files(kind_dir):
-                if entry.name.endswith(RECORD_SUFFIX) and not entry.name.startswith("."):
-                    document = _read_json(entry)
-                    if document is None:
-                        continue
-                    referenced |= blob_references(document)
-                    since = None if kept_since is None else kept_since(kind_dir.name, document)
-                    if since is not None:
-                        cutoff = min(cutoff, since)
+        referenced, kept_from = self.records.references(kept_since)
+        cutoff = min(cutoff, kept_from)
         return self._remove_unreferenced(referenced, cutoff)
 
-    def _remove_unreferenced(self, referenced: set[str], cutoff: float) -> int:
-        """Remove the blobs whose digest is not in ``referenced``, last saved or read before ``cutoff``."""
+    def _remove_unreferenced(self, referenced: set[str], cutoff: float, evict_cache: bool = False) -> int:
+        """Remove the blobs whose digest is not in ``referenced``, last saved or read before ``cutoff``
+        (with an object store: stored before ``cutoff``; ``evict_cache`` also drops from the local cache
+        every blob not read since ``cutoff``, referenced or not). How many blobs are gone for good."""
         removed = 0
+        cache = self.remote is not None
         for fan_dir in _subdirs(self.blobs_dir):
             for entry in _files(fan_dir):
-                if entry.name[:SHA256_HEX_CHARS] not in referenced and _is_old(entry, cutoff):
-                    removed += self._remove_old_blob(entry, cutoff)
+                unreferenced = entry.name[:SHA256_HEX_CHARS] not in referenced
+                if (unreferenced or (cache and evict_cache)) and _is_old(entry, cutoff):
+                    removed += self._remove_old_blob(entry, cutoff) and not cache
+        if cache:
+            removed += self._remove_stored(referenced, cutoff)
+        return removed
+
+    def _remove_stored(self, referenced: set[str], cutoff: float) -> int:
+        """Remove from the object store the blobs no record refers to, stored before ``cutoff``."""
+        removed = 0
+        for stored in self.remote.list(BLOBS_PREFIX):
+            name = stored.key.rsplit("/", 1)[-1]
+            if name[:SHA256_HEX_CHARS] in referenced or stored.modified >= cutoff:
+                continue
+            again = self.remote.stat(stored.key)  # a save may have written it again meanwhile
+            if again is not None and again.modified < cutoff:
+                self.remote.delete(stored.key)
+                removed += 1
         return removed
 
     def _remove_old_blob(self, path: Path, cutoff: float) -> bool:
@@ -163,15 +151,3 @@ class Retention:
             os.link(aside, path)
         _unlink(aside)
         return False
-
-    def _purge_record(self, path: Path, cutoff: float, removed: Callable[[str, str], None] | None) -> bool:
-        """Remove an old record unless it was written meanwhile; whether it was removed."""
-        with self._locked(path) as lock:
-            mtime = _mtime(path)
-            if mtime is None or mtime >= cutoff:
-                return False
-            _unlink(path)
-            if removed is not None:
-                removed(path.parent.name, path.name[:-len(RECORD_SUFFIX)])
-            _unlink(lock)
-            return True

@@ -20,7 +20,8 @@ def healthz() -> dict:
     return {"status": "ok"}
 
 
-@router.get("/readyz", summary="The broker reachable and at least one worker of this deployment answering",
+@router.get("/readyz", summary="The broker (and the object store and records' database, when configured) reachable "
+                                "and at least one worker of this deployment answering",
             responses={503: {"description": "not ready"}})
 def readyz(request: Request):
     state = request.app.state

@@ -4,6 +4,7 @@ job's run alone, chunk bodies run as tasks would run them, obsolete and gone chu
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -69,7 +70,9 @@ def test_the_jobs_own_run_solves_every_chunk_nobody_takes_bit_for_bit(world, set
     assert [message[3] for message in sorted(recorder.sent, key=lambda m: m[2])] == [c.task_id for c in chunks]
     assert done.fine.run_token == done.run_token and recorder.revoked == []
     assert np.array_equal(result_points(world, job.id, tmp_path), one_process_points(world, job))
-    assert not fine.scratch_folder(world["repository"], job.id, done.run_token).exists()
+    # the run's own chunks stay in its memory; their inputs are a blob no record keeps (the orphan sweep's)
+    assert all(c.result is None for c in chunks)
+    assert_swept_but_outputs(world["repository"].storage, done, [done.fine.inputs])
     # the messages arriving now are no-ops: the job is over
     for job_id, token, index, task_id in recorder.sent:
         run_fine_chunk(world["repository"], settings, job_id, token, index, "late@host", task_id)
@@ -92,6 +95,17 @@ def test_chunks_solved_by_their_tasks_give_the_same_result(world, settings, tmp_
     assert all(c.state == CHUNK_DONE and c.seconds > 0 for c in done.fine.chunks)
     assert done.metrics["penetrating_particles"] == 0
     assert np.array_equal(result_points(world, job.id, tmp_path), one_process_points(world, job))
+    # each task's points came back as a blob (another host would fetch it from the object store by its digest)
+    assert len({c.result for c in done.fine.chunks}) == 4
+    assert_swept_but_outputs(repository.storage, done, [done.fine.inputs, *(c.result for c in done.fine.chunks)])
+
+
+def assert_swept_but_outputs(storage, job, scratch: list[str]) -> None:
+    """The fine level's blobs are there until an orphan sweep after the job, which keeps the job's outputs."""
+    assert all(storage.blob(digest, fine.FINE_SUFFIX) is not None for digest in scratch)
+    storage.sweep_orphans(0.0, now=time.time() + 1.0)
+    assert all(storage.blob(digest, fine.FINE_SUFFIX) is None for digest in scratch)
+    assert all(storage.blob(ref.sha256, ref.suffix) is not None for ref in job.outputs.values())
 
 
 def test_a_small_fine_level_or_no_queue_stays_in_the_jobs_own_run(world, settings):  # noqa: F811
@@ -113,8 +127,8 @@ def test_a_chunk_that_fails_on_its_input_fails_the_job_once_with_its_reason(worl
 
     def send(job_id, token, index, task_id):
         if index == 3:  # the first sent (they go out last first): its inputs are damaged before it runs
-            folder = fine.scratch_folder(repository, job_id, token)
-            (folder / fine.INPUTS_FILE).write_bytes(b"PK\x03\x04 not an archive")
+            inputs = repository.storage.blob(repository.job(job_id).fine.inputs, fine.FINE_SUFFIX).path
+            inputs.write_bytes(b"PK\x03\x04 not an archive")
             run_fine_chunk(repository, settings, job_id, token, index, "other@host", task_id)
 
     job = add_job(world)
@@ -124,7 +138,6 @@ def test_a_chunk_that_fails_on_its_input_fails_the_job_once_with_its_reason(worl
     assert done.error.code == "internal" and "chunk 3 of the fine level (strands 15..19)" in done.error.message
     assert done.fine.chunks[3].state == CHUNK_FAILED and done.fine.chunks[3].attempts == 1
     assert sorted(revoked) == sorted(c.task_id for c in done.fine.chunks if c.state == CHUNK_QUEUED)
-    assert not fine.scratch_folder(repository, job.id, done.run_token).exists()
 
 
 def _running_job_with_chunks(world, settings, **chunk_fields):  # noqa: F811
@@ -135,7 +148,7 @@ def _running_job_with_chunks(world, settings, **chunk_fields):  # noqa: F811
               for i in range(4)]
     chunks[0] = chunks[0].model_copy(update=chunk_fields)
     repository.set_job(job.id, state=RUNNING, run_token="run1", heartbeat_at=now(),
-                       fine=fine.FineRun(run_token="run1", folder="fine/x/run1", chunks=chunks).model_dump())
+                       fine=fine.FineRun(run_token="run1", inputs="0" * 64, chunks=chunks).model_dump())
     return job
 
 

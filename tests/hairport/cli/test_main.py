@@ -57,7 +57,7 @@ def test_missing_files_and_write_failures_are_one_line(world, tmp_path, capsys):
 
 
 def test_the_commands():
-    assert "{preprocess,retarget,batch,demo,assets,serve,worker,warmup,purge,reindex,openapi,hairline,convert}" in build_parser().format_help()
+    assert "{preprocess,retarget,batch,demo,assets,serve,worker,warmup,purge,reindex,db,migrate,openapi,hairline,convert}" in build_parser().format_help()
     args = build_parser().parse_args(["purge"])
     assert args.run.__name__ == "cmd_purge"
 
