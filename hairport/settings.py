@@ -105,7 +105,8 @@ class Settings(BaseSettings):
         secret = None if self.s3_secret_access_key is None else self.s3_secret_access_key.get_secret_value()
         given = {"endpoint_url": self.s3_endpoint_url, "region": self.s3_region,
                  "access_key_id": self.s3_access_key_id, "secret_access_key": secret}
-        return {name: value for name, value in given.items() if value is not None}
+        # an empty value (a compose file's unset variable) gives nothing
+        return {name: value for name, value in given.items() if value}
 
     @field_validator("storage_dir")
     @classmethod
