@@ -31,7 +31,7 @@ DONE = ("succeeded", "failed", "cancelled")
 OUTAGE_SECONDS = 4.0
 #: seconds the store stays down: longer than the rest of the slow job's solve (~15 s here), so that the job meets
 #: it when it writes its outputs
-STORE_OUTAGE_SECONDS = 30.0
+STORE_OUTAGE_SECONDS = 20.0
 
 
 @pytest.fixture(scope="module")
