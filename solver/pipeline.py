@@ -298,7 +298,7 @@ def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: Ret
                 wrapped = wrap_target(adaptable, target, landmarks=options.landmarks)
         target = wrapped.shape
     else:
-        require_a_wrap_for(options.landmarks, False, options.wrap)
+        require_a_wrap_for(options.landmarks, options.wrap)
         wrapped = None
     with timed(timings, "prepare"):
         progress("prepare", 0.02, "checking the target")

@@ -70,16 +70,15 @@ def needs_wrap(source: Character, target: Character, mode: str) -> bool:
     return mode == WRAP_ALWAYS or (mode == WRAP_AUTO and not is_same_topology(source, target))
 
 
-def require_a_wrap_for(landmarks: LandmarkPairs | None, wrapping: bool, mode: str) -> None:
-    """Refuse landmarks for a target that is not wrapped (``wrapping``: :func:`needs_wrap` under ``mode``):
-    they would change nothing.
+def require_a_wrap_for(landmarks: LandmarkPairs | None, mode: str) -> None:
+    """Refuse landmarks for a target that is not wrapped (under the wrap ``mode``): they would change nothing.
 
     Raises
     ------
     InputError
         ``bad_landmarks``.
     """
-    if landmarks is not None and not wrapping:
+    if landmarks is not None:
         raise InputError(f"the target has the source's mesh topology and is not wrapped (wrap {mode}); landmarks "
                          f"steer a wrap: give wrap {WRAP_ALWAYS} to wrap it anyway", "landmarks", BAD_LANDMARKS)
 

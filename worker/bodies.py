@@ -41,10 +41,7 @@ def collision_surface(repository: Repository, settings: Settings,
             return separating, {LOADED: time.perf_counter() - began}
     separating = solver.collision_faces(target.vertices, target.faces, target.name)
     seconds = time.perf_counter() - began
-    with repository.storage.work_dir() as work:
-        path = work / "surface.npy"
-        np.save(path, separating)
-        saved = repository.storage.save_file(path, ".npy")
+    saved = repository.storage.save_written(lambda path: np.save(path, separating), ".npy")
     repository.put(BodyRecord(key=key, sha256=saved.sha256, faces=target.n_faces, seconds=seconds,
                               created_at=now()), key)
     return separating, {BUILT: time.perf_counter() - began}

@@ -97,15 +97,6 @@ def plan_chunks(counts: np.ndarray, chunk_particles: int, max_chunks: int) -> li
     return [(int(run[0]), int(run[-1]) + 1) for run in distributed.chunk_strands(np.asarray(counts), size)]
 
 
-def save_blob(repository: Repository, write: Callable[[Path], None]) -> str:
-    """The digest of a blob ``write(path)`` makes (in a scratch folder of this host, then moved into the storage)."""
-    storage = repository.storage
-    with storage.work_dir() as work:
-        path = work / f"fine{FINE_SUFFIX}"
-        write(path)
-        return storage.save_file(path, FINE_SUFFIX, move=True).sha256
-
-
 def fine_blob(repository: Repository, digest: str, what: str) -> Path:
     """The local path of a fine-level blob (fetched from the object store when this host has none).
 
@@ -128,7 +119,7 @@ def save_chunk_result(repository: Repository, points: np.ndarray, report: distri
         with open(path, "wb") as handle:
             np.savez(handle, points=points, report=np.array(document))
 
-    return save_blob(repository, write)
+    return repository.storage.save_written(write, FINE_SUFFIX).sha256
 
 
 def load_chunk_result(repository: Repository, digest: str, particles: int) -> tuple[np.ndarray, distributed.SolveReport]:
@@ -304,7 +295,7 @@ class SpreadFineLevel:
 
     def _spread(self, level, plan, counts, progress, should_stop):
         token = self.run.token
-        inputs = save_blob(self.repository, level.inputs.save)
+        inputs = self.repository.storage.save_written(level.inputs.save, FINE_SUFFIX).sha256
         chunks = [FineChunk(index=i, first_strand=first, stop_strand=stop, particles=int(counts[first:stop].sum()),
                             task_id=new_task_id()) for i, (first, stop) in enumerate(plan)]
         if not self.run.write(fine=FineRun(run_token=token, inputs=inputs, chunks=chunks)):

@@ -92,10 +92,8 @@ def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str
             inputs = read_source(repository, settings, hairstyle)
             adaptable = solver.preprocess(inputs.source, inputs.hair, solver.PreprocessOptions(**variant.model_dump()),
                                           frame=inputs.frame, input_report=inputs.report)
-            with repository.storage.work_dir() as work:
-                path = work / f"adaptable{solver.ARTIFACT_EXTENSION}"
-                solver.save_adaptable(adaptable, path)
-                blob = repository.storage.save_file(path, solver.ARTIFACT_EXTENSION)
+            blob = repository.storage.save_written(lambda path: solver.save_adaptable(adaptable, path),
+                                                   solver.ARTIFACT_EXTENSION)
         repository.put(ArtifactRecord(
             key=key, sha256=blob.sha256, suffix=solver.ARTIFACT_EXTENSION, size=blob.size,
             format_version=solver.ARTIFACT_FORMAT_VERSION, seconds=time.perf_counter() - began,

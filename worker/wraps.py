@@ -73,11 +73,9 @@ def keep(repository: Repository, settings: Settings, wrapped: solver.WrappedTarg
     if wrapped is None or not settings.target_cache:
         return {}
     began = time.perf_counter()
-    with repository.storage.work_dir() as work:
-        path = work / "wrap.npz"
-        np.savez(path, vertices=np.asarray(wrapped.shape.vertices, dtype=np.float64),
-                 report=np.array(json.dumps(wrapped.report, default=json_default)))
-        saved = repository.storage.save_file(path, ".npz")
+    saved = repository.storage.save_written(lambda path: np.savez(
+        path, vertices=np.asarray(wrapped.shape.vertices, dtype=np.float64),
+        report=np.array(json.dumps(wrapped.report, default=json_default))), ".npz")
     repository.put(WrapRecord(key=wrapped.key, sha256=saved.sha256, vertices=wrapped.shape.n_vertices,
                               seconds=float(wrapped.report.get("seconds", 0.0)), created_at=now()), wrapped.key)
     return {STORED: time.perf_counter() - began}

@@ -202,7 +202,7 @@ def cmd_hairline(args: argparse.Namespace) -> int:
             progress("wrap", 0.0, f"wrapping the source body onto the target ({target.n_vertices:,} vertices)")
             target = solver.wrap_target(adaptable, target, landmarks=landmarks).shape
         else:
-            solver.require_a_wrap_for(landmarks, False, args.wrap)
+            solver.require_a_wrap_for(landmarks, args.wrap)
         # written in the groom's axes and units, as the result of a retarget (and read back so)
         document = documents.curve_document_in_frame(adaptable.frame, documents.hairline_document(
             adaptable, target, args.preset))

@@ -211,8 +211,9 @@ def open_records(database_url: str | None):
                          f"{', '.join(POSTGRES_SCHEMES)} or {SQLITE_SCHEME}")
     # one per process and URL: its connections (one per thread) serve every repository; it connects, and
     # makes or checks the schema, on its first use
-    database = _DATABASES.setdefault(database_url, Database(database_url))
-    return PostgresRecords(database)
+    if database_url not in _DATABASES:
+        _DATABASES[database_url] = Database(database_url)
+    return PostgresRecords(_DATABASES[database_url])
 
 
 #: the databases this process opened, by URL (:func:`open_records`)

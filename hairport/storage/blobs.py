@@ -18,7 +18,7 @@ import shutil
 import tempfile
 import threading
 import time
-from collections.abc import AsyncIterator, Iterable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -185,6 +185,13 @@ class BlobStore:
             return Blob(sha256, path.stat().st_size, path)
         except FileNotFoundError:
             return None
+
+    def save_written(self, write: Callable[[Path], None], suffix: str = "") -> Blob:
+        """Store the file ``write(path)`` makes (at a path of a fresh :meth:`work_dir`, moved into the store)."""
+        with self.work_dir() as work:
+            path = work / f"written{suffix}"
+            write(path)
+            return self.save_file(path, suffix, move=True)
 
     @contextlib.contextmanager
     def work_dir(self) -> Iterator[Path]:

@@ -208,10 +208,14 @@ class FolderRecords:
             return True
 
 
+def record_text(document: dict) -> str:
+    """A record's stored JSON text (compact), in a file or a database row alike."""
+    return json.dumps(document, separators=(",", ":"))
+
+
 def _write_json(path: Path, document: dict, durable: bool = True) -> None:
     """Atomically replace ``path`` by the JSON of ``document``."""
-    data = json.dumps(document, separators=(",", ":")).encode()
-    atomic_write_bytes(path, data, durable=durable)
+    atomic_write_bytes(path, record_text(document).encode(), durable=durable)
 
 
 def _read_json(path: Path) -> dict | None:

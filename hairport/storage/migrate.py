@@ -43,17 +43,17 @@ def migrate(source, target, progress: Callable[[str], None] = lambda message: No
                          "(HAIRPORT_DATABASE_URL)")
     report = MigrationReport()
     stored = {info.key for info in target.remote.list("blobs/")}
+    present = {key.rsplit("/", 1)[-1][:SHA256_HEX_CHARS] for key in stored}
     for fan_dir in _subdirs(source.blobs_dir):
         for entry in _files(fan_dir):
             key = f"blobs/{fan_dir.name}/{entry.name}"
+            present.add(entry.name[:SHA256_HEX_CHARS])
             if key in stored:
                 report.blobs_present += 1
             else:
                 target.remote.put_file(key, entry)
                 report.blobs_copied += 1
     progress(f"blobs: {report.blobs_copied} copied, {report.blobs_present} already there")
-    present = {key.rsplit("/", 1)[-1][:SHA256_HEX_CHARS] for key in stored} | {
-        entry.name[:SHA256_HEX_CHARS] for fan_dir in _subdirs(source.blobs_dir) for entry in _files(fan_dir)}
     for kind_dir in _subdirs(source.records_dir):
         for entry in _files(kind_dir):
             if not entry.name.endswith(RECORD_SUFFIX) or entry.name.startswith("."):

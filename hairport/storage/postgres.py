@@ -29,7 +29,7 @@ from collections.abc import Callable, Iterable, Iterator
 import psycopg
 from psycopg import errors as pg_errors
 
-from .documents import Written
+from .documents import Written, record_text
 from .index import IDS_PER_QUERY, JOBS, BatchCounts, JobRow, OwnedRow, Row, _job_values, _owned_values
 from .layout import blob_references, check_name
 from .objects import StorageUnavailable
@@ -275,7 +275,7 @@ class PostgresRecords:
             connection.execute(
                 "INSERT INTO records VALUES (%s, %s, %s, %s) ON CONFLICT (kind, id) DO UPDATE SET "
                 "document = excluded.document, written_at = excluded.written_at",
-                (kind, record_id, _json(document), time.time()))
+                (kind, record_id, record_text(document), time.time()))
             if written is not None:
                 written(old, document)
 
@@ -297,17 +297,18 @@ class PostgresRecords:
         _check(kind, record_id)
 
         def work(connection: psycopg.Connection) -> dict | None:
-            old = _document(connection.execute(
-                "SELECT document FROM records WHERE kind = %s AND id = %s FOR UPDATE", (kind, record_id)).fetchone())
-            if old is None:
+            row = connection.execute(
+                "SELECT document FROM records WHERE kind = %s AND id = %s FOR UPDATE", (kind, record_id)).fetchone()
+            if row is None:
                 return None
-            new = change(_loads(_json(old)))  # the change gets a copy: ``old`` stays as it was for ``written``
+            old = _loads(row[0])
+            new = change(_loads(row[0]))  # the change gets its own copy: ``old`` stays as it was for ``written``
             if new is None:
                 return old
             if not isinstance(new, dict):
                 raise TypeError(f"change must return a dict or None, got {type(new).__name__}")
             connection.execute("UPDATE records SET document = %s, written_at = %s WHERE kind = %s AND id = %s",
-                               (_json(new), time.time(), kind, record_id))
+                               (record_text(new), time.time(), kind, record_id))
             if written is not None:
                 written(old, new)
             return new
@@ -489,21 +490,10 @@ class PostgresIndex:
 
         return self.database.run(work)
 
-    def job_rows(self) -> list[JobRow]:
-        """Every job row (for tests and checks), by id."""
-        rows = self.database.run(lambda connection: connection.execute("SELECT * FROM jobs ORDER BY id").fetchall())
-        return [JobRow(id, owner, state, created_us / 1e6, updated, None if timings is None else _json(timings),
-                       batch, int(units), finished)
-                for id, owner, state, created_us, updated, timings, batch, units, finished in rows]
-
 
 def _check(kind: str, record_id: str) -> None:
     check_name(kind, "record kind")
     check_name(record_id, "record id")
-
-
-def _json(document) -> str:
-    return json.dumps(document, separators=(",", ":"))
 
 
 def _loads(text: str) -> dict:

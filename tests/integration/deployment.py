@@ -57,6 +57,24 @@ def spawn_worker(name: str, env: dict, log_folder: Path, warmup: bool = True) ->
         env=env, stdout=subprocess.DEVNULL, stderr=open(log_folder / f"{name}.log", "wb"), start_new_session=True)
 
 
+def wait_for_workers(queue, workers: dict[str, subprocess.Popen], logs: dict[str, Path],
+                     seconds: float = 90) -> None:
+    """Wait until every one of ``workers`` answers on ``queue``; fail with the log (``logs[name]``) of one that
+    died, or after ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while len(set(queue.workers(0.5))) < len(workers):
+        assert time.monotonic() < deadline and all(p.poll() is None for p in workers.values()), \
+            [logs[name].read_text()[-2000:] for name in workers]
+
+
+def kill_workers(workers: dict[str, subprocess.Popen]) -> None:
+    """SIGKILL every worker still running, and reap them all."""
+    for process in workers.values():
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait(30)
+
+
 def spawn_server(env: dict, port: int, log_folder: Path) -> subprocess.Popen:
     """A ``hairport serve`` process on ``port`` in a session of its own, its output in ``log_folder / "serve.log"``."""
     return subprocess.Popen([sys.executable, "-m", "hairport.cli", "serve", "--port", str(port)], env=env,

@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from .deployment import in_process_app, service_env, spawn_worker
+from .deployment import in_process_app, kill_workers, service_env, spawn_worker, wait_for_workers
 from .test_service_api import AUTH, upload_character, wait_for
 
 #: particles per chunk for this module's deployment, and the iteration cap that keeps each chunk busy
@@ -34,15 +34,9 @@ def spread(tmp_path_factory, redis_url):
     env = service_env(storage, redis_url, **PERIODS)
     with in_process_app(env) as (settings, queue, client):
         workers = {name: spawn_worker(name, env, storage, warmup=False) for name in ("s1", "s2", "s3")}
-        deadline = time.time() + 90
-        while len(set(queue.workers(0.5))) < 3:
-            assert time.time() < deadline and all(p.poll() is None for p in workers.values()), \
-                [(storage / f"{name}.log").read_text()[-2000:] for name in workers]
+        wait_for_workers(queue, workers, {name: storage / f"{name}.log" for name in workers})
         yield {"client": client, "storage": storage, "settings": settings, "workers": workers}
-        for process in workers.values():
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGKILL)
-            process.wait(30)
+        kill_workers(workers)
 
 
 @pytest.fixture(scope="module")

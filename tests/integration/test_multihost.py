@@ -8,9 +8,7 @@ is six chunk tasks over both workers; a 2 x 3 batch runs across them too.
 
 from __future__ import annotations
 
-import os
-import signal
-import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -19,7 +17,7 @@ from tests.hairport.storage.test_postgres import fresh_database
 from tests.servers.fixtures import postgres_server, postgres_url  # noqa: F401
 from tests.servers.seaweed import SeaweedServer
 
-from .deployment import in_process_app, service_env, spawn_worker
+from .deployment import in_process_app, kill_workers, service_env, spawn_worker, wait_for_workers
 from .test_service_api import AUTH, upload_character, wait_for
 
 CHUNK_PARTICLES = 3_000
@@ -37,26 +35,32 @@ def seaweed():
         yield server
 
 
-@pytest.fixture(scope="module")
-def hosts(tmp_path_factory, redis_url, postgres_url, seaweed):  # noqa: F811
+@contextmanager
+def url_deployment(tmp_path_factory, redis_url: str, database_server_url: str, seaweed, prefix: str,
+                   hosts: tuple[str, ...], periods: dict):
+    """An in-process API and a worker per name of ``hosts``, each with a cache folder of its own, their records in
+    a new database of ``database_server_url``'s server and their blobs under ``prefix`` of the SeaweedFS bucket:
+    ``{"client", "folders", "settings", "workers"}``."""
     endpoint, access_key, secret_key, bucket = seaweed.endpoint
-    shared = dict(PERIODS, HAIRPORT_DATABASE_URL=fresh_database(postgres_url),
-                  HAIRPORT_STORAGE_URL=f"s3://{bucket}/multihost", HAIRPORT_S3_ENDPOINT_URL=endpoint,
+    shared = dict(periods, HAIRPORT_DATABASE_URL=fresh_database(database_server_url),
+                  HAIRPORT_STORAGE_URL=f"s3://{bucket}/{prefix}", HAIRPORT_S3_ENDPOINT_URL=endpoint,
                   HAIRPORT_S3_ACCESS_KEY_ID=access_key, HAIRPORT_S3_SECRET_ACCESS_KEY=secret_key,
                   HAIRPORT_S3_REGION="us-east-1")
-    folders = {name: tmp_path_factory.mktemp(f"{name}-cache") for name in ("api", *HOSTS)}
+    folders = {name: tmp_path_factory.mktemp(f"{name}-cache") for name in ("api", *hosts)}
     workers = {name: spawn_worker(name, service_env(folders[name], redis_url, **shared), folders[name], warmup=False)
-               for name in HOSTS}
-    with in_process_app(service_env(folders["api"], redis_url, **shared)) as (settings, queue, client):
-        deadline = time.time() + 90
-        while len(set(queue.workers(0.5))) < len(HOSTS):
-            assert time.time() < deadline and all(p.poll() is None for p in workers.values()), \
-                [(folders[name] / f"{name}.log").read_text()[-2000:] for name in workers]
-        yield {"client": client, "folders": folders, "settings": settings, "workers": workers, "shared": shared}
-        for process in workers.values():
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGKILL)
-            process.wait(30)
+               for name in hosts}
+    try:
+        with in_process_app(service_env(folders["api"], redis_url, **shared)) as (settings, queue, client):
+            wait_for_workers(queue, workers, {name: folders[name] / f"{name}.log" for name in workers})
+            yield {"client": client, "folders": folders, "settings": settings, "workers": workers}
+    finally:
+        kill_workers(workers)
+
+
+@pytest.fixture(scope="module")
+def hosts(tmp_path_factory, redis_url, postgres_url, seaweed):  # noqa: F811
+    with url_deployment(tmp_path_factory, redis_url, postgres_url, seaweed, "multihost", HOSTS, PERIODS) as deployment:
+        yield deployment
 
 
 @pytest.fixture(scope="module")

@@ -7,18 +7,14 @@ process with a cache folder of its own."""
 
 from __future__ import annotations
 
-import os
-import signal
 import time
 
 import pytest
 
-from tests.hairport.storage.test_postgres import fresh_database
 from tests.servers.postgres import PostgresServer
 from tests.servers.seaweed import SeaweedServer
 
-from .deployment import in_process_app, service_env, spawn_worker
-from .test_multihost import inputs  # noqa: F401
+from .test_multihost import inputs, url_deployment  # noqa: F401
 from .test_service_api import AUTH, wait_for
 
 PERIODS = dict(HAIRPORT_HEARTBEAT_SECONDS="1", HAIRPORT_STALE_AFTER_SECONDS="8", HAIRPORT_SWEEP_SECONDS="2",
@@ -42,21 +38,9 @@ def servers():
 
 @pytest.fixture(scope="module")
 def hosts(tmp_path_factory, redis_url, servers):
-    endpoint, access_key, secret_key, bucket = servers["seaweed"].endpoint
-    shared = dict(PERIODS, HAIRPORT_DATABASE_URL=fresh_database(servers["postgres"].url),
-                  HAIRPORT_STORAGE_URL=f"s3://{bucket}/faults", HAIRPORT_S3_ENDPOINT_URL=endpoint,
-                  HAIRPORT_S3_ACCESS_KEY_ID=access_key, HAIRPORT_S3_SECRET_ACCESS_KEY=secret_key,
-                  HAIRPORT_S3_REGION="us-east-1")
-    folders = {name: tmp_path_factory.mktemp(f"{name}-cache") for name in ("api", "host1")}
-    worker = spawn_worker("host1", service_env(folders["host1"], redis_url, **shared), folders["host1"], warmup=False)
-    with in_process_app(service_env(folders["api"], redis_url, **shared)) as (settings, queue, client):
-        deadline = time.time() + 90
-        while not queue.workers(0.5):
-            assert time.time() < deadline and worker.poll() is None, (folders["host1"] / "host1.log").read_text()[-2000:]
-        yield {"client": client, "folders": folders, "settings": settings, "workers": {"host1": worker}}
-        if worker.poll() is None:
-            os.killpg(worker.pid, signal.SIGKILL)
-        worker.wait(30)
+    with url_deployment(tmp_path_factory, redis_url, servers["postgres"].url, servers["seaweed"], "faults",
+                        ("host1",), PERIODS) as deployment:
+        yield deployment
 
 
 def running_job(hosts, inputs) -> str:  # noqa: F811
