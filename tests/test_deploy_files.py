@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import re
 import shlex
+import subprocess
 import tomllib
 from pathlib import Path
 
@@ -319,3 +320,43 @@ def test_flower_is_optional_and_points_at_the_same_redis(services):
     assert "redis" in _depends_on(flower)
     assert f"--broker={REDIS_URL}" in _command(flower["command"])
     assert any(str(p).endswith("5555:5555") for p in flower["ports"])
+
+
+def _defaults(text: str) -> str:
+    """``text`` with each ``${NAME:-default}`` as compose gives it when NAME is unset."""
+    return re.sub(r"\$\{\w+:-([^}]*)\}", r"\1", text)
+
+
+def test_the_multihost_profile_adds_postgres_and_seaweedfs_and_the_services_take_their_urls(compose, services):
+    for name in ("postgres", "seaweedfs"):
+        assert services[name]["profiles"] == ["multihost"], name
+        assert _volume_mounts(services[name]) and set(_volume_mounts(services[name]).values()) <= set(compose["volumes"])
+    for name in ("api", "worker"):
+        env = _env(services[name])
+        for setting in ("STORAGE_URL", "DATABASE_URL", "S3_ENDPOINT_URL", "S3_ACCESS_KEY_ID", "S3_SECRET_ACCESS_KEY"):
+            assert env[f"HAIRPORT_{setting}"] == f"${{HAIRPORT_{setting}:-}}", (name, setting)  # unset: one host
+    assert "pg_isready" in _healthcheck_text(services["postgres"])
+
+
+def test_the_compose_store_signs_with_the_services_s3_settings(compose, services):
+    identities = json.loads(_defaults(compose["configs"]["seaweedfs-s3"]["content"]))["identities"]
+    assert len(identities) == 1
+    credentials = identities[0]["credentials"][0]
+    raw = compose["configs"]["seaweedfs-s3"]["content"]
+    assert "${HAIRPORT_S3_ACCESS_KEY_ID:-" in raw and "${HAIRPORT_S3_SECRET_ACCESS_KEY:-" in raw
+    assert credentials["accessKey"] and credentials["secretKey"]
+    seaweedfs = services["seaweedfs"]
+    assert [mount["target"] for mount in seaweedfs["configs"]] == ["/etc/seaweedfs/s3.json"]
+    command = _command(seaweedfs["command"])
+    assert command[0] == "server" and "-s3.config=/etc/seaweedfs/s3.json" in command
+    assert any(str(port).endswith(":8333") for port in seaweedfs["ports"])
+    # the image runs the version the tests run, and every flag is one that version takes
+    from tests.servers.seaweed import find_weed
+
+    weed = find_weed()
+    version = subprocess.run([str(weed), "version"], capture_output=True, text=True, check=True).stdout
+    assert f" {seaweedfs['image'].rsplit(':', 1)[1]} " in version, version
+    accepted = subprocess.run([str(weed), "server", "-h"], capture_output=True, text=True).stderr
+    accepted += subprocess.run([str(weed), "server", "-h"], capture_output=True, text=True).stdout
+    for flag in command[1:]:
+        assert re.search(rf"^\s+{re.escape(flag.split('=')[0])}\b", accepted, re.MULTILINE), flag
