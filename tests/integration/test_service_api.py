@@ -22,6 +22,8 @@ AUTH = {"Authorization": f"Bearer {KEY}"}
 OTHER = {"X-API-Key": OTHER_KEY}
 #: seconds a dead worker's job waits before Redis hands it out again (short for the test)
 VISIBILITY_TIMEOUT = 6
+#: a dead worker's job is also seen stale by the sweeper within seconds (the defaults take about a minute)
+PERIODS = dict(HAIRPORT_HEARTBEAT_SECONDS="1", HAIRPORT_STALE_AFTER_SECONDS="8", HAIRPORT_SWEEP_SECONDS="2")
 JOB_TIMEOUT = 240
 
 
@@ -30,7 +32,7 @@ def service(tmp_path_factory, redis_url):
     """Storage folder, settings, the app, and a started worker process (the environment is
     restored afterwards)."""
     storage = tmp_path_factory.mktemp("service-storage")
-    env = service_env(storage, redis_url, HAIRPORT_VISIBILITY_TIMEOUT=str(VISIBILITY_TIMEOUT))
+    env = service_env(storage, redis_url, HAIRPORT_VISIBILITY_TIMEOUT=str(VISIBILITY_TIMEOUT), **PERIODS)
     with in_process_app(env) as (settings, queue, client):
         yield from _service(storage, env, settings, queue, client)
 
