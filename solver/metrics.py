@@ -16,6 +16,7 @@ from hairport.solver.adaptation.source.neighbours import Neighbours, neighbour_a
 from hairport.solver.jit import parallel_kernel, prange, warms
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.segment_crossing import crossing_segments
 from hairport.solver.model.hair import DEGENERATE_SEGMENT_M, Hair
 
 #: a particle counts as closer than eps_c only when it is short by more than this (m): the
@@ -332,7 +333,12 @@ def hairstyle_metrics(
     """
     n = len(points)
     is_root = source.is_root
-    pen = penetration_stats or penetration(points, source.at_root, query if body is None else body, eps_c)
+    body = query if body is None else body
+    pen = penetration_stats or penetration(points, source.at_root, body, eps_c)
+    distance = np.zeros(n)
+    distance[~source.at_root] = pen["distance"]
+    segment_rows = source.segments
+    crossings = crossing_segments(points, segment_rows, source.at_root, body, distance)
     segments = segment_figures(points, source.points, source.offsets)
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))
@@ -348,6 +354,7 @@ def hairstyle_metrics(
         "penetrating_particles": pen["inside"],
         "particles_below_clearance": pen["below_clearance"],
         "min_signed_distance_m": pen["min_distance"],
+        "crossing_segments": crossings.report(segment_rows, source.offsets),
         "energy_strand_shape_per_particle": terms.strand_shape / n,
         "energy_inter_strand_per_particle": terms.inter_strand / n,
         "energy_hair_body_per_particle": terms.hair_body / n,

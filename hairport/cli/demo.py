@@ -59,6 +59,8 @@ TABLE_ROWS = (
         "particles nearer the skin than the clearance eps_c ({eps_c_mm:g} mm)"),
     Row("min_signed_distance_m", "min signed distance (m)", "{:.2e}",
         "the nearest particle's distance to the skin (< 0: inside)"),
+    Row("crossing_segments.count", "segments through the body", "{:d}",
+        "segments between two particles outside that pass through the skin (drawn curves clip it)"),
     Row("root_to_target_max", "max root error (m)", "{:.1e}", "farthest a root lies from its place on the new scalp"),
     Row("mean_segment_angle_rad", "mean segment angle (rad)", "{:.4f}",
         "how far segments turned from the source's directions (Eq. 7)"),

@@ -191,3 +191,19 @@ def test_a_body_that_traps_hair_fails_with_its_code(method):
     # the baseline without push-out claims nothing, and reports its penetration
     plain = pipeline.retarget(adaptable, body, pipeline.RetargetOptions(method="root-translate"))
     assert plain.metrics["penetrating_particles"] > 20 and "penetration_resolved" not in plain.metrics
+
+
+def test_every_report_counts_the_segments_that_pass_through_the_body(female, fringe):
+    """A baseline that ignores the body leaves segments through it: the report's count is the exact test's."""
+    from hairport.solver.mesh.segment_crossing import crossing_segments
+
+    heavy = build_character(PRESETS["heavy-male"])
+    result = pipeline.retarget(pipeline.preprocess(female, fringe), heavy,
+                               pipeline.RetargetOptions(method="root-translate"))
+    body = collision_query(heavy.vertices, heavy.faces)
+    expected = crossing_segments(result.hair.points, fringe.segments, fringe.at_root, body)
+    report = result.metrics["crossing_segments"]
+    assert report["count"] == expected.count > 0
+    assert report["deepest_m"] == pytest.approx(expected.depth.max()) and report["deepest_m"] > 0
+    strand, segment = report["deepest_strand"], report["deepest_segment"]
+    assert 0 <= segment < fringe.counts[strand] - 1

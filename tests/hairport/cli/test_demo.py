@@ -157,8 +157,10 @@ def test_an_unknown_preset_is_one_line(tmp_path, capsys):
 def test_table_lines_up_ours_and_the_baseline():
     metrics = {row.key: 0 if row.fmt == "{:d}" else 0.5 for row in TABLE_ROWS if "." not in row.key}
     metrics["segment_length_ratio_in_strand"] = {"p5": 0.125, "p50": 1.0, "p95": 2.5}
+    metrics["crossing_segments"] = {"count": 3, "deepest_m": 0.001}
     lines = format_table(metrics, metrics, "rbf-warp").splitlines()
     assert len(lines) == 2 + len(TABLE_ROWS) and len({len(line) for line in lines}) == 1
     assert lines[2].startswith("penetrating particles") and lines[2].endswith("0")
     in_strand = [line for line in lines if line.startswith("segment length in strand")]
     assert [line.split()[-1] for line in in_strand] == ["0.125", "2.500"]
+    assert [line for line in lines if line.startswith("segments through the body")][0].split()[-1] == "3"
