@@ -216,7 +216,9 @@ DISPLAY_DESCRIPTION = (
     "`application/vnd.hairport.display`: the ASCII magic `HPD1`, a little-endian uint32 header length, a JSON "
     "header (`arrays`: name, dtype, shape, offset from the end of the header), then the arrays, 8-byte aligned. "
     "Strands: `positions` (M, 3) float32 meters in hairport's frame (+Y up, face toward +Z), `starts` (K+1,) "
-    "uint32, `inside` (M,) uint8 (1: inside the target body), `color` (M, 3) uint8 when the groom has colours. "
+    "uint32, `inside` (M,) uint8 (1: inside the target body), `crossing` (M,) uint8 (1: the drawn segment from "
+    "this vertex spans one that passes through the target body between two particles outside it; the header's "
+    "`crossing` counts them), `color` (M, 3) uint8 when the groom has colours. "
     "Bodies: `vertices` (V, 3) float32, `faces` (F, 3) uint32, and the header's `up` vector.")
 
 

@@ -1,9 +1,10 @@
-"""What a browser draws: a job's scene (body, strands, particles inside the body, hairline), decimated
-and packed for the dashboard's WebGL viewer.
+"""What a browser draws: a job's scene (body, strands, particles inside the body and segments through it,
+hairline), decimated and packed for the dashboard's WebGL viewer.
 
 A job's run saves its *scene* once (:func:`scene_arrays`, :func:`save_scene`): the target body and the
 result in hairport's frame (meters, +Y up, face toward +Z) as float32, which particles are inside the
-body (bit-packed), the strands' colours, the target's current front hairline and each preset's edit of
+body and which start a segment through it (bit-packed; a scene saved before the second was kept has
+none), the strands' colours, the target's current front hairline and each preset's edit of
 it, and the rotation that takes hairport's frame to the groom file's axes (a drawn hairline is sent in
 the groom's axes, as ``hairport hairline`` writes it). A wrapped target (another topology, or ``options.wrap``
 always) adds the source body wrapped onto it (:data:`WRAPPED_ARRAYS`; a scene without them had no wrap, as one
@@ -188,7 +189,8 @@ def colors_u8(color: np.ndarray | None) -> np.ndarray | None:
 def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, color: np.ndarray | None,
                  body_vertices: np.ndarray, body_faces: np.ndarray, groom_rotation: np.ndarray,
                  hairline: dict, presets: dict[str, dict],
-                 wrapped: tuple[np.ndarray, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+                 wrapped: tuple[np.ndarray, np.ndarray] | None = None,
+                 crossing: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """A job's scene, in hairport's frame.
 
     Parameters
@@ -209,6 +211,9 @@ def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, co
     wrapped : ((W, 3) float64, (G, 3) int) or None
         The source body wrapped onto a target of another topology (its vertices in the target's shape, the
         source's faces), kept as :data:`WRAPPED_ARRAYS`; None when the target was not wrapped.
+    crossing : (N,) bool, optional
+        Particles that start a segment passing through the target body between two particles outside it
+        (kept as ``crossing`` bits; a scene without them draws none).
     """
     arrays = {
         "points": np.asarray(points, dtype=np.float32), "offsets": np.asarray(offsets, dtype=np.int64),
@@ -221,6 +226,8 @@ def scene_arrays(points: np.ndarray, offsets: np.ndarray, inside: np.ndarray, co
     }
     if color is not None:
         arrays["color"] = colors_u8(color)
+    if crossing is not None:
+        arrays["crossing"] = np.packbits(np.asarray(crossing, dtype=bool))
     for name, document in presets.items():
         arrays[scene_preset_array(name)] = np.asarray(document["points"], dtype=np.float32).reshape(-1, 3)
     if wrapped is not None:
@@ -248,9 +255,10 @@ def load_scene(path: str | os.PathLike, names: tuple[str, ...] | None = None) ->
 
 
 def strands_payload(scene: dict[str, np.ndarray], strand_ids: np.ndarray, stride: int, layer: str) -> bytes:
-    """The drawn strands of a scene (or of any groom: ``points``, ``offsets``, optional ``inside`` bits and
-    ``color``) in the wire format: ``positions`` (M, 3) float32, ``starts`` (K+1,) uint32, ``inside`` (M,)
-    uint8 (0/1) and ``color`` (M, 3) uint8 when the groom has colours."""
+    """The drawn strands of a scene (or of any groom: ``points``, ``offsets``, optional ``inside`` and
+    ``crossing`` bits and ``color``) in the wire format: ``positions`` (M, 3) float32, ``starts`` (K+1,) uint32,
+    ``inside`` (M,) uint8 (0/1), ``crossing`` (M,) uint8 (1: the drawn segment from this vertex spans a segment
+    through the body) and ``color`` (M, 3) uint8 when the groom has colours."""
     offsets = scene["offsets"]
     particles, starts = decimate(offsets, strand_ids, stride)
     arrays = {"positions": np.asarray(scene["points"], dtype=np.float32)[particles],
@@ -259,12 +267,36 @@ def strands_payload(scene: dict[str, np.ndarray], strand_ids: np.ndarray, stride
     if "inside" in scene:
         inside = np.unpackbits(scene["inside"], count=n_particles).astype(bool)
         arrays["inside"] = inside[particles].astype(np.uint8)
+    if "crossing" in scene:
+        crossing = np.unpackbits(scene["crossing"], count=n_particles).astype(bool)
+        arrays["crossing"] = drawn_crossing(crossing, particles, starts).astype(np.uint8)
     if "color" in scene:
         arrays["color"] = scene["color"][particles]
     header = {"layer": layer, "strands": int(len(offsets) - 1), "particles": n_particles,
               "drawn_strands": int(len(strand_ids)), "drawn_vertices": int(len(particles)), "stride": int(stride),
-              "inside": int(arrays["inside"].sum()) if "inside" in arrays else None}
+              "inside": int(arrays["inside"].sum()) if "inside" in arrays else None,
+              "crossing": int(arrays["crossing"].sum()) if "crossing" in arrays else None}
     return encode(header, arrays)
+
+
+def drawn_crossing(crossing: np.ndarray, particles: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(M,) bool: drawn vertices whose drawn segment (to the next drawn vertex of its strand) spans a segment of
+    the groom that passes through the body.
+
+    Parameters
+    ----------
+    crossing : (N,) bool
+        The groom's particles that start such a segment.
+    particles : (M,) int64, starts : (K+1,) int64
+        The drawn particles, strand by strand (:func:`decimate`).
+    """
+    before = np.zeros(len(crossing) + 1, dtype=np.int64)
+    np.cumsum(crossing, out=before[1:])  # before[i]: crossing segments starting before particle i
+    spans = np.zeros(len(particles), dtype=bool)
+    if len(particles) > 1:
+        spans[:-1] = before[particles[1:]] > before[particles[:-1]]
+    spans[starts[1:] - 1] = False  # a strand's last drawn vertex starts no drawn segment
+    return spans
 
 
 def body_payload(vertices: np.ndarray, faces: np.ndarray, layer: str, **header) -> bytes:

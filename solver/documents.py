@@ -26,7 +26,7 @@ from hairport.solver.hairline.relocation import edit_curve, scalp_chart
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
-from hairport.solver.pipeline import RetargetResult, penetrating_mask
+from hairport.solver.pipeline import RetargetResult, crossing_mask, penetrating_mask
 
 __all__ = ["curve_document_in_frame", "display_scene", "hairline_document", "hairline_documents", "source_scene"]
 
@@ -69,11 +69,13 @@ def curve_document_in_frame(frame: InputFrame, document: dict) -> dict:
 
 def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target: Character) -> dict[str, np.ndarray]:
     """What the dashboard draws of a retarget (:func:`~hairport.solver.display.scene_arrays`): the result, its
-    particles inside the body, the target, and the target's current front hairline with every preset's edit of
-    it (left out, with the reason in ``meta``, when the groom has no front hairline to find). The hairline of a
-    target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`), the body drawn is the target;
-    the wrapped body is kept beside it (``wrapped_vertices``, ``wrapped_faces``) to be drawn over it."""
+    particles inside the body and its segments through it, the target, and the target's current front hairline
+    with every preset's edit of it (left out, with the reason in ``meta``, when the groom has no front hairline
+    to find). The hairline of a target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`),
+    the body drawn is the target; the wrapped body is kept beside it (``wrapped_vertices``, ``wrapped_faces``) to
+    be drawn over it."""
     inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
+    crossing = result.crossing if result.crossing is not None else crossing_mask(result.hair, target)
     try:
         shape = target if result.wrapped is None else result.wrapped.shape
         documents = hairline_documents(adaptable, shape, (None, *HAIRLINE_PRESETS))
@@ -82,7 +84,7 @@ def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target:
         documents, hairline, hairline_error = {}, {"points": [], "turning_points": []}, error.problem
     wrapped = None if result.wrapped is None else (result.wrapped.shape.vertices, result.wrapped.shape.faces)
     arrays = scene_arrays(result.hair.points, result.hair.offsets, inside, result.hair.color, target.vertices,
-                          target.faces, adaptable.frame.rotation, hairline, documents, wrapped)
+                          target.faces, adaptable.frame.rotation, hairline, documents, wrapped, crossing)
     meta = {"groom_units": adaptable.frame.units, "hairline_error": hairline_error}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
     return arrays

@@ -16,7 +16,7 @@ from hairport.solver.adaptation.source.neighbours import Neighbours, neighbour_a
 from hairport.solver.jit import parallel_kernel, prange, warms
 from hairport.solver.mesh.polyline import rest_lengths
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.segment_crossing import crossing_segments
+from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments
 from hairport.solver.model.hair import DEGENERATE_SEGMENT_M, Hair
 
 #: a particle counts as closer than eps_c only when it is short by more than this (m): the
@@ -307,6 +307,7 @@ def hairstyle_metrics(
     weights: EnergyWeights = EnergyWeights(),
     body: MeshQuery | None = None,
     penetration_stats: dict | None = None,
+    crossings: SegmentCrossings | None = None,
 ) -> dict:
     """All section-4 metrics of a retargeted hairstyle, as a JSON-ready dict.
 
@@ -330,15 +331,18 @@ def hairstyle_metrics(
         penetration figures; ``query`` by default.
     penetration_stats : dict, optional
         :func:`penetration` of ``points`` against that body, when the caller measured it already.
+    crossings : SegmentCrossings, optional
+        :func:`~.mesh.segment_crossing.crossing_segments` of ``points`` against that body, likewise.
     """
     n = len(points)
     is_root = source.is_root
     body = query if body is None else body
     pen = penetration_stats or penetration(points, source.at_root, body, eps_c)
-    distance = np.zeros(n)
-    distance[~source.at_root] = pen["distance"]
     segment_rows = source.segments
-    crossings = crossing_segments(points, segment_rows, source.at_root, body, distance)
+    if crossings is None:
+        distance = np.zeros(n)
+        distance[~source.at_root] = pen["distance"]
+        crossings = crossing_segments(points, segment_rows, source.at_root, body, distance)
     segments = segment_figures(points, source.points, source.offsets)
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))

@@ -41,6 +41,7 @@ from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.segment_crossing import crossing_segments
 from hairport.solver.metrics import hairstyle_metrics, penetration
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import require_no_stray_strands
@@ -73,6 +74,9 @@ class RetargetResult:
     inside: np.ndarray | None = None
     #: the wrap of the source body onto a target of another topology (None: the target's own topology)
     wrapped: WrappedTarget | None = None
+    #: (N,) bool: the particles that start a segment passing through the target body between two particles
+    #: outside it (:mod:`~hairport.solver.mesh.segment_crossing`)
+    crossing: np.ndarray | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -251,10 +255,14 @@ def retarget(
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
         body_distance = penetration(points, hair.at_root, body, options.eps_c)
-        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
-                                    weights, body=body, penetration_stats=body_distance)
         inside = np.zeros(hair.n_particles, dtype=bool)
         inside[~hair.at_root] = body_distance["distance"] < 0.0
+        crossings = crossing_segments(points, hair.segments, hair.at_root, body,
+                                      _scatter_free(body_distance["distance"], hair))
+        metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
+                                    weights, body=body, penetration_stats=body_distance, crossings=crossings)
+        crossing = np.zeros(hair.n_particles, dtype=bool)
+        crossing[hair.segments[crossings.rows, 0]] = True
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved
@@ -270,8 +278,15 @@ def retarget(
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped,
+        wrapped, crossing,
     )
+
+
+def _scatter_free(values: np.ndarray, hair: Hair) -> np.ndarray:
+    """(N,) float64: ``values`` (one per particle not at a root) in place, 0 at the roots."""
+    out = np.zeros(hair.n_particles)
+    out[~hair.at_root] = values
+    return out
 
 
 def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,
@@ -406,6 +421,16 @@ def relocate_hairline(
     start = initial + (1.0 - gamma)[:, None] * shift
     start[hair.roots] = relocation.roots
     return relocation, hair.place_at_roots(start), gamma
+
+
+def crossing_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:
+    """(N,) bool: the particles that start a segment passing through the target body between two particles
+    outside it (:func:`~hairport.solver.mesh.segment_crossing.crossing_segments`, against the collision surface
+    unless ``query`` is given)."""
+    query = query or collision_query(target.vertices, target.faces, target.name)
+    mask = np.zeros(hair.n_particles, dtype=bool)
+    mask[hair.segments[crossing_segments(hair.points, hair.segments, hair.at_root, query).rows, 0]] = True
+    return mask
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:

@@ -1,4 +1,4 @@
-// The 3D view: a body, strands (particles inside the body in red), orbit/zoom/pan, drawn on demand.
+// The 3D view: a body, strands (particles inside the body and segments through it in red), orbit/zoom/pan, drawn on demand.
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 
@@ -38,22 +38,25 @@ export function wrapOverlay({ arrays }) {
     color: WRAP_COLOR, wireframe: true, transparent: true, opacity: WRAP_OPACITY, depthWrite: false }));
 }
 
-/** Strands' line segments from a display payload: file colours when present, else the layer's; inside in red.
- * Segments with a particle inside the body are drawn on top of everything (no depth test): the body would hide
- * them otherwise, and they are what the viewer is asked to show. */
+/** Strands' line segments from a display payload: file colours when present, else the layer's; particles inside
+ * the body and segments passing through it (between two particles outside) in red. Those segments are drawn on top
+ * of everything (no depth test): the body would hide them otherwise, and they are what the viewer is asked to
+ * show. */
 export function strandLines({ arrays }, rgb, showInside = true) {
   const positions = arrays.positions;
   const starts = arrays.starts;
   const vertices = positions.length / 3;
   const strands = starts.length - 1;
   const inside = showInside ? arrays.inside : null;
+  const crossing = showInside ? arrays.crossing : null;
+  const flagged = inside || crossing;
   const outerIndex = new Uint32Array(2 * (vertices - strands));
-  const insideIndex = new Uint32Array(inside ? 2 * (vertices - strands) : 0);
+  const insideIndex = new Uint32Array(flagged ? 2 * (vertices - strands) : 0);
   let outer = 0;
   let within = 0;
   for (let strand = 0; strand < strands; strand++) {
     for (let vertex = starts[strand]; vertex < starts[strand + 1] - 1; vertex++) {
-      if (inside && (inside[vertex] || inside[vertex + 1])) {
+      if (inside?.[vertex] || inside?.[vertex + 1] || crossing?.[vertex]) {
         insideIndex[within++] = vertex;
         insideIndex[within++] = vertex + 1;
       } else {
@@ -63,7 +66,10 @@ export function strandLines({ arrays }, rgb, showInside = true) {
     }
   }
   // colours are sRGB (files, the layer colours); the renderer works in linear light
-  const rgbOf = (vertex) => (inside?.[vertex] ? INSIDE_RGB
+  // a crossing segment's two vertices are red (a strand's last vertex starts none: crossing[vertex - 1] at a
+  // strand's first vertex is the previous strand's last, 0)
+  const red = (vertex) => inside?.[vertex] || crossing?.[vertex] || (vertex > 0 && crossing?.[vertex - 1]);
+  const rgbOf = (vertex) => (red(vertex) ? INSIDE_RGB
     : arrays.color ? arrays.color.subarray(3 * vertex, 3 * vertex + 3) : rgb);
   const colors = new Float32Array(vertices * 3);
   for (let vertex = 0; vertex < vertices; vertex++) {

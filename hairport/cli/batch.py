@@ -38,7 +38,7 @@ from .solve import _DEFAULTS, add_hairline_arguments, hairline_edit
 
 #: the summary's columns: the pair, its outcome, then the metrics every retarget reports
 SUMMARY_COLUMNS = ("groom", "target", "folder", "status", "error", "seconds", "particles", "penetrating_particles",
-                   "mean_segment_angle_rad", "mean_bend_error_rad", "interstrand_error_m", "root_to_target_max",
+                   "crossing_segments", "mean_segment_angle_rad", "mean_bend_error_rad", "interstrand_error_m", "root_to_target_max",
                    "wrap")
 #: the summary's ``wrap`` column: the pair's target was wrapped for it, or an earlier pair's wrap was reused
 #: (empty: the target has the groom's topology)
@@ -190,6 +190,7 @@ def _retarget_pair(groom: Groom, target_at: tuple[int, str], target: solver.Char
             outputs.commit()
         metrics = result.metrics
         row.update(status="ok", **{name: metrics[name] for name in SUMMARY_COLUMNS if name in metrics})
+        row["crossing_segments"] = metrics["crossing_segments"]["count"]
         row["wrap"] = None if result.wrapped is None else WRAPPED if wrapped is None else REUSED
     except InputError as error:
         row.update(status="failed", error=str(error))

@@ -80,7 +80,8 @@ def get_display(
     repository: RepositoryDep,
     job: OwnedJob,
     layer: Annotated[StrandLayer, Query(description="result: the retargeted groom with the particles inside the "
-                                                    "target flagged; source: the groom on its source character")
+                                                    "target and the segments through it flagged; source: the groom "
+                                                    "on its source character")
                      ] = "result",
     strands: Annotated[int | None, Query(ge=1, le=MAX_DISPLAY_STRANDS, description=(
         "strands drawn, spread over the groom (default: as many as the vertex budget allows)"))] = None,

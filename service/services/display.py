@@ -68,7 +68,7 @@ def _layer_arrays(repository: Repository, job: JobRecord, layer: str, names: tup
 def strands(repository: Repository, job: JobRecord, layer: str, strand_count: int | None, stride: int | None,
             max_vertices: int) -> bytes:
     """The job's ``layer`` strands, decimated (422 for a plan over the display limits)."""
-    arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "color"))
+    arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "crossing", "color"))
     try:
         strand_ids, stride = display.plan_display(arrays["offsets"], max_vertices, strand_count, stride)
     except solver.InputError as error:

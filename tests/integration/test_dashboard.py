@@ -210,11 +210,14 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert heavy["metrics"]["hairline"]["roots_moved"] > 0
         assert heavy["metrics"]["penetrating_particles"] == 0
 
-        # the result in the viewer: body and strands drawn, nothing red (0 particles inside)
+        # the result in the viewer: body and strands drawn, red only for segments through the body (0 particles inside)
         page.goto(f"{base}/ui/#/view/{heavy_job}")
         page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
         stats = page.inner_text("#viewer-stats")
         assert f"{GROOM_STRANDS} of {GROOM_STRANDS} strands" in stats and "0 drawn inside" in stats
+        # segments through the body between two particles outside: as many drawn (stride 1) as the report counts
+        crossing = heavy["metrics"]["crossing_segments"]["count"]
+        assert f"{crossing:,} drawn segments through it" in stats, stats
         assert page.locator("input[name=show-wrapped]").count() == 0  # the same topology: nothing was wrapped
         both = viewer_pixels(page, "06-viewer")
         area = both.shape[0] * both.shape[1]
@@ -226,7 +229,7 @@ def test_dashboard_end_to_end(deployment, inputs):
         assert count_drawn(body_only) > 0.03 * area
         assert count_near(strands_only, RESULT_RGB, 12) > 300
         assert count_drawn(strands_only) < count_drawn(both)
-        assert count_red(strands_only) == 0
+        assert (count_red(strands_only) > 0) == (crossing > 0)
 
         # the source groom beside the result, on its own body, then over the result
         set_checkbox(page, "body", True)
@@ -250,10 +253,15 @@ def test_dashboard_end_to_end(deployment, inputs):
         page.wait_for_selector("#viewer-stats[data-inside]:not([data-inside=''])", state="attached",
                                timeout=JOB_SECONDS * 1000)
         inside = int(page.get_attribute("#viewer-stats", "data-inside"))
+        crossing = int(page.get_attribute("#viewer-stats", "data-crossing"))
         set_checkbox(page, "result", False)
         baseline = viewer_pixels(page, "07-viewer-baseline")
         assert inside > 20
         assert count_red(baseline) > 50
+        # its segments through the body between two particles outside are counted and drawn (stride 1: all)
+        baseline_job = page.locator("select[name=compare]").input_value()
+        counted = api.get(f"/v1/jobs/{baseline_job}").json()["metrics"]["crossing_segments"]
+        assert crossing == counted["count"] > 0, (crossing, counted, page.inner_text("#viewer-stats"))
 
         # a hairline drawn by clicking five points on the head, sent, opened in the viewer
         click_hairline_points(page, base, heavy_job)

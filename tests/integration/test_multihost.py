@@ -238,8 +238,9 @@ def test_the_dashboard_works_against_the_hosts(hosts, inputs, redis_url, tmp_pat
                                                    "options": {"max_iterations": 10}})
         assert response.status_code == 202, response.text
         job_id = response.json()["jobs"][0]["id"]
-        assert wait_for(hosts["client"], f"/v1/jobs/{job_id}", lambda body: body["state"] in DONE,
-                        JOB_TIMEOUT)["state"] == "succeeded"
+        done = wait_for(hosts["client"], f"/v1/jobs/{job_id}", lambda body: body["state"] in DONE, JOB_TIMEOUT)
+        assert done["state"] == "succeeded", done
+        crossing = done["metrics"]["crossing_segments"]["count"]
         with chromium() as page:
             enter_key(page, base, KEY)
             page.wait_for_selector("#key-state:text('key accepted')")
@@ -248,11 +249,12 @@ def test_the_dashboard_works_against_the_hosts(hosts, inputs, redis_url, tmp_pat
                 page.wait_for_selector(f"#characters tr[data-id='{inputs[name]}']")
             page.goto(f"{base}/ui/#/view/{job_id}")
             page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
-            assert "60 of 60 strands" in page.inner_text("#viewer-stats")
+            stats = page.inner_text("#viewer-stats")
+            assert "60 of 60 strands" in stats and f"{crossing:,} drawn segments through it" in stats, stats
             page.set_checked("input[name=show-body]", False)
             page.wait_for_timeout(400)
             strands = pixels(shot(page, "multihost-viewer", "#viewer"))
-            assert count_near(strands, RESULT_RGB, 12) > 100 and count_red(strands) == 0
+            assert count_near(strands, RESULT_RGB, 12) > 100 and (count_red(strands) > 0) == (crossing > 0)
             page.goto(f"{base}/ui/#/jobs/{job_id}")
             with page.expect_download() as download:
                 page.click("#downloads button[data-format=obj]")

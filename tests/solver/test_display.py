@@ -151,3 +151,24 @@ def test_a_lone_character_is_drawn_up_its_given_axis_or_its_longest_extent():
     lying = np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.4, 0], [0, 0, 1.8]])  # a Z-up body in meters
     assert display.display_up(lying, None) == ([0.0, 0.0, 1.0], "longest extent")
     assert display.display_up(lying, "-y") == ([0.0, -1.0, 0.0], "given")
+
+
+def test_a_drawn_segment_is_crossing_when_it_spans_a_groom_segment_through_the_body():
+    points = np.arange(30, dtype=np.float64).reshape(10, 3)
+    offsets = np.array([0, 4, 10])
+    crossing = np.zeros(10, bool)
+    crossing[[1, 5, 8]] = True  # segments 1-2, 5-6 and 8-9 pass through the body
+    scene = display.scene_arrays(points, offsets, np.zeros(10, bool), None, np.eye(3), np.array([[0, 1, 2]]),
+                                 np.eye(3), {"points": [[0, 0, 0]] * 3, "turning_points": [0, 2]}, {},
+                                 crossing=crossing)
+    header, arrays = display.decode(display.strands_payload(scene, np.array([0, 1]), 2, "result"))
+    # drawn: strand 0 as 0-2-3, strand 1 as 4-6-8-9: 0-2 spans 1-2, 4-6 spans 5-6, 8-9 is 8-9
+    np.testing.assert_array_equal(arrays["crossing"], [1, 0, 0, 1, 0, 1, 0])
+    assert header["crossing"] == 3
+    # at stride 1 every groom segment is drawn: the flags are the groom's
+    header, arrays = display.decode(display.strands_payload(scene, np.array([0, 1]), 1, "result"))
+    np.testing.assert_array_equal(arrays["crossing"], crossing.astype(np.uint8))
+    # a scene without the bits (written before they were kept) draws none
+    del scene["crossing"]
+    header, arrays = display.decode(display.strands_payload(scene, np.array([0, 1]), 2, "result"))
+    assert "crossing" not in arrays and header["crossing"] is None

@@ -109,8 +109,11 @@ export async function viewerPage(main, { params: [id], query, signal }) {
       Object.entries(drawn).map(([layer, header]) =>
       `${layer}: ${formatNumber(header.drawn_strands)} of ${formatNumber(header.strands)} strands, ` +
       `${formatNumber(header.drawn_vertices)} vertices (stride ${header.stride})` +
-      (header.inside === null || header.inside === undefined ? "" : `, ${formatNumber(header.inside)} drawn inside the body`)).join("; ");
+      (header.inside === null || header.inside === undefined ? "" : `, ${formatNumber(header.inside)} drawn inside the body`) +
+      (header.crossing === null || header.crossing === undefined ? ""
+        : `, ${formatNumber(header.crossing)} drawn segments through it`)).join("; ");
     stats.dataset.inside = drawn.compare?.inside ?? "";
+    stats.dataset.crossing = drawn.compare?.crossing ?? "";
   }
 
   async function listComparisons(chosen = null) {

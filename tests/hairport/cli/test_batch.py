@@ -47,10 +47,15 @@ def test_a_3_by_4_grid_gives_12_folders_a_summary_and_the_single_pair_results(wo
     assert len(rows) == 12 and all(row["status"] == "ok" and row["error"] == "" for row in rows)
     summary = json.loads((out / "summary.json").read_text())["pairs"]
     assert all(pair["penetrating_particles"] == 0 and pair["root_to_target_max"] <= 1e-6 for pair in summary)
-    for folder in expected:
+    for folder, pair, row in zip(expected, sorted(summary, key=lambda pair: pair["folder"]),
+                                 sorted(rows, key=lambda row: row["folder"]), strict=True):
         strands = {"hair": 60, "curly": 30, "third": 20}[folder.split("__")[0]]
         assert read_hair(out / folder / "result.ply").n_strands == strands
-        assert json.loads((out / folder / "report.json").read_text())["metrics"]["penetrating_particles"] == 0
+        metrics = json.loads((out / folder / "report.json").read_text())["metrics"]
+        assert metrics["penetrating_particles"] == 0
+        # the summary's count of segments through the body is the pair's report's
+        assert pair["folder"] == row["folder"] == folder
+        assert pair["crossing_segments"] == metrics["crossing_segments"]["count"] == int(row["crossing_segments"])
     single = tmp_path / "single.ply"
     assert cli.main(["retarget", "--source", str(d / "source.obj"), "--hair", str(tmp_path / "curly.data"),
                      "--target", str(d / "bare.obj"), "--out", str(single), "--max-iterations", "5", "--quiet"]) == 0
