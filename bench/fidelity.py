@@ -1,4 +1,4 @@
-"""Fidelity past the paper (issue 16): particle spacing, segment angles and round trips over every MakeHuman pair.
+"""Fidelity past the paper: particle spacing, segment angles and round trips over every MakeHuman pair.
 
 For every ordered pair of MakeHuman presets and every groom style, the groom made on the
 source is retargeted (multiscale) as the paper has it (spacing term off, no shape carry:
@@ -10,7 +10,10 @@ per configuration:
 * ``angle``: mean segment angle to the source (rad); ``bend``: mean change of the angle between
   consecutive segments (rad; a kink in a collapsed segment shows here, not in ``angle``);
   ``inter``: inter-strand error (mm);
-* ``pen``: particles inside the body; ``s``: the retarget's wall time.
+* ``pen``: particles inside the body; ``cross``: segments between two particles outside it that pass
+  through it (``metrics.crossing_segments``); ``relation``: the hair-body relation change (mm), each
+  particle's offset to its closest body point in the result against the source's, averaged
+  (:func:`~hairport.solver.metrics.hair_body_relation_change`); ``s``: the retarget's wall time.
 
 Then the summary per configuration: pairs whose p5-p95 lie within [0.8, 1.25], the worst angle
 and how many pairs got a worse angle than the paper's, and the round trip A -> B -> A (average
@@ -34,7 +37,8 @@ from datetime import date
 import numpy as np
 
 from hairport.solver import pipeline
-from hairport.solver.metrics import mean_particle_distance, mean_segment_angle
+from hairport.solver.mesh.collision import collision_query
+from hairport.solver.metrics import hair_body_relation_change, mean_particle_distance, mean_segment_angle
 from hairport.solver.synthetic.groom import STYLES, generate_groom
 from hairport.solver.synthetic.makehuman import PRESETS, build_character
 
@@ -56,15 +60,20 @@ def options_of(config: str) -> pipeline.RetargetOptions:
     return pipeline.RetargetOptions(**{name: float(value) for name, value in values.items()})
 
 
-def measure(adaptable, target, config: str) -> dict:
+def measure(adaptable, target, config: str, bodies: tuple) -> dict:
+    """One retarget's figures; ``bodies``: the target's and the source's collision queries (the relation)."""
     began = time.perf_counter()
     result = pipeline.retarget(adaptable, target, options_of(config))
+    seconds = time.perf_counter() - began
     metrics = result.metrics
     ratio = metrics["segment_length_ratio_in_strand"]
+    groom = adaptable.hair
+    relation = hair_body_relation_change(result.hair.points, groom.points, groom.at_root, *bodies)
     return {"p5": ratio["p5"], "p95": ratio["p95"], "angle": metrics["mean_segment_angle_rad"],
             "bend": metrics["mean_bend_error_rad"],
             "inter": metrics["interstrand_error_m"] * 1e3, "pen": metrics["penetrating_particles"],
-            "seconds": time.perf_counter() - began, "result": result}
+            "cross": metrics["crossing_segments"]["count"], "relation": relation * 1e3,
+            "seconds": seconds, "result": result}
 
 
 def within(row: dict) -> bool:
@@ -86,26 +95,27 @@ def main() -> None:
     print(f"# bench/fidelity.py, {date.today()}, {platform.processor() or platform.machine()}, "
           f"grooms of {args.strands} strands x {args.particles} particles; {PAPER} is the paper's method")
     characters = {name: build_character(PRESETS[name]) for name in args.presets}
+    bodies = {name: collision_query(c.vertices, c.faces, name) for name, c in characters.items()}
     header = "| source -> target | style | " + " | ".join(
-        f"{c} in-strand p5/p95 | angle | bend | inter mm | pen | s" for c in configs) + " |"
+        f"{c} in-strand p5/p95 | angle | bend | inter mm | pen | cross | relation mm | s" for c in configs) + " |"
     print(header)
-    print("|" + "---|" * (2 + 6 * len(configs)))
+    print("|" + "---|" * (2 + 8 * len(configs)))
     rows: list[tuple[str, str, str, dict[float, dict]]] = []
     for (source, target), style in itertools.product(itertools.permutations(args.presets, 2), args.styles):
         hair = generate_groom(characters[source], style, args.strands, args.particles, seed=0)
         adaptable = pipeline.preprocess(characters[source], hair)
-        measured = {c: measure(adaptable, characters[target], c) for c in configs}
+        measured = {c: measure(adaptable, characters[target], c, (bodies[target], bodies[source])) for c in configs}
         rows.append((source, target, style, measured))
         cells = " | ".join(f"{m['p5']:.2f}/{m['p95']:.2f} | {m['angle']:.3f} | {m['bend']:.3f} | {m['inter']:.3f} | "
-                           f"{m['pen']} | "
+                           f"{m['pen']} | {m['cross']} | {m['relation']:.2f} | "
                            f"{m['seconds']:.1f}" for m in measured.values())
         print(f"| {source} -> {target} | {style} | {cells} |", flush=True)
 
     print()
     print("| options | pairs within [0.8, 1.25] | worst p5 / p95 | mean angle | worst angle | pairs with a worse angle "
-          "than the paper's | mean bend | pairs with a worse bend | mean inter mm | penetrating | median s | "
-          "worst angle, long and fringe to the heavy and muscular males |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "than the paper's | mean bend | pairs with a worse bend | mean inter mm | penetrating | crossing segments "
+          "| mean relation mm | median s | worst angle, long and fringe to the heavy and muscular males |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for config in configs:
         measured = [m[config] for *_, m in rows]
         paper = [m[PAPER] for *_, m in rows]
@@ -117,7 +127,8 @@ def main() -> None:
               f"{max(m['p95'] for m in measured):.2f} | {np.mean([m['angle'] for m in measured]):.3f} | "
               f"{max(m['angle'] for m in measured):.3f} | {worse} | {np.mean([m['bend'] for m in measured]):.4f} | "
               f"{worse_bend} | {np.mean([m['inter'] for m in measured]):.3f} | "
-              f"{sum(m['pen'] for m in measured)} | {np.median([m['seconds'] for m in measured]):.2f} | "
+              f"{sum(m['pen'] for m in measured)} | {sum(m['cross'] for m in measured)} | "
+              f"{np.mean([m['relation'] for m in measured]):.2f} | {np.median([m['seconds'] for m in measured]):.2f} | "
               f"{max(hardest, default=float('nan')):.3f} |")
 
     print()

@@ -31,6 +31,34 @@ def mean_particle_distance(points: np.ndarray, reference: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(points - reference, axis=1))) if len(points) else 0.0
 
 
+def hair_body_relation_change(points: np.ndarray, source_points: np.ndarray, is_root: np.ndarray,
+                              body: MeshQuery, source_body: MeshQuery) -> float:
+    """Mean change (m) of each non-root particle's offset to its closest body point, result against source.
+
+    A particle at offset ``s - c_S(s)`` from the source body should sit at about the same offset ``p - c_T(p)``
+    from the target: ``|(p - c_T(p)) - (s - c_S(s))|``, averaged (0 when the hair keeps its relation to the
+    body exactly; a strand lying on the skin that ends up a few millimetres off it counts those millimetres).
+
+    Parameters
+    ----------
+    points, source_points : (N, 3) float64
+        The result and the source hairstyle.
+    is_root : (N,) bool
+    body, source_body : MeshQuery
+        The target and the source bodies.
+    """
+    free = np.flatnonzero(~np.asarray(is_root, dtype=bool))
+    if len(free) == 0:
+        return 0.0
+    total = 0.0
+    for start in range(0, len(free), METRICS_CHUNK):  # bounds the queries' temporaries
+        rows = free[start : start + METRICS_CHUNK]
+        offset = points[rows] - body.signed_distance(points[rows]).closest
+        source_offset = source_points[rows] - source_body.signed_distance(source_points[rows]).closest
+        total += float(np.linalg.norm(offset - source_offset, axis=1).sum())
+    return total / len(free)
+
+
 def vector_angles(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle (rad) between rows of ``(M, 3)`` vectors, ``atan2(|a x b|, a . b)``: accurate for tiny angles.
 

@@ -179,3 +179,26 @@ def test_with_the_spacing_term_on_the_energy_counts_it():
     assert spaced["energy_spacing_per_particle"] == pytest.approx(expected, rel=1e-12)
     assert spaced["energy_total_per_particle"] == pytest.approx(plain["energy_total_per_particle"] + 2.0 * expected,
                                                                 rel=1e-12)
+
+
+def test_the_hair_body_relation_change_is_how_far_each_offset_to_the_body_moved():
+    from hairport.solver.mesh.query import MeshQuery
+    from hairport.solver.metrics import hair_body_relation_change
+    from tests.solver.mesh.meshes import icosphere
+
+    vertices, faces = icosphere(radius=0.1, subdivisions=4)
+    source_body, body = MeshQuery(vertices, faces), MeshQuery(1.1 * vertices, faces)
+    rng = np.random.default_rng(2)
+    directions = rng.normal(size=(200, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    source = 0.12 * directions  # 2 cm off the source sphere (less its facets' sag, the same on both)
+    is_root = np.zeros(200, dtype=bool)
+    is_root[:10] = True
+    kept = 0.13 * directions  # 2 cm off the larger sphere: the same relation
+    assert hair_body_relation_change(kept, source, is_root, body, source_body) < 2e-4
+    farther = 0.135 * directions  # 5 mm farther out
+    assert hair_body_relation_change(farther, source, is_root, body, source_body) == pytest.approx(5e-3, abs=3e-4)
+    moved = farther.copy()
+    moved[:10] += 1.0  # roots are not measured
+    assert hair_body_relation_change(moved, source, is_root, body, source_body) == pytest.approx(
+        hair_body_relation_change(farther, source, is_root, body, source_body))
