@@ -115,6 +115,15 @@ def penetration(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, eps_c
     }
 
 
+def particle_distances(stats: dict, at_root: np.ndarray) -> np.ndarray:
+    """(N,) float64: the signed distances of :func:`penetration`'s ``stats`` (one per particle not at a root) in
+    their particles' places, 0 at the roots."""
+    at_root = np.asarray(at_root, dtype=bool)
+    distance = np.zeros(len(at_root))
+    distance[~at_root] = stats["distance"]
+    return distance
+
+
 def root_errors(root_points: np.ndarray, root_targets: np.ndarray, query: MeshQuery) -> dict:
     """Distance of roots ``(S, 3)`` to their target positions and to the body surface (m)."""
     to_target = np.linalg.norm(root_points - root_targets, axis=1)
@@ -368,9 +377,8 @@ def hairstyle_metrics(
     pen = penetration_stats or penetration(points, source.at_root, body, eps_c)
     segment_rows = source.segments
     if crossings is None:
-        distance = np.zeros(n)
-        distance[~source.at_root] = pen["distance"]
-        crossings = crossing_segments(points, segment_rows, source.at_root, body, distance)
+        crossings = crossing_segments(points, segment_rows, source.at_root, body,
+                                      particle_distances(pen, source.at_root))
     segments = segment_figures(points, source.points, source.offsets)
     residual_norm = interstrand_residual_norms(neighbours, points, source.points)
     hair_body = sum(float(np.sum((points[rows] - initial[rows]) ** 2))

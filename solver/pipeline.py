@@ -42,7 +42,7 @@ from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.penetration import resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.segment_crossing import crossing_segments
-from hairport.solver.metrics import hairstyle_metrics, penetration
+from hairport.solver.metrics import hairstyle_metrics, particle_distances, penetration
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import require_no_stray_strands
 from hairport.solver.model.frame import InputFrame
@@ -258,11 +258,9 @@ def retarget(
         inside = np.zeros(hair.n_particles, dtype=bool)
         inside[~hair.at_root] = body_distance["distance"] < 0.0
         crossings = crossing_segments(points, hair.segments, hair.at_root, body,
-                                      _scatter_free(body_distance["distance"], hair))
+                                      particle_distances(body_distance, hair.at_root))
         metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
                                     weights, body=body, penetration_stats=body_distance, crossings=crossings)
-        crossing = np.zeros(hair.n_particles, dtype=bool)
-        crossing[hair.segments[crossings.rows, 0]] = True
         metrics["method"] = options.method
         if resolved is not None:
             metrics["penetration_resolved"] = resolved
@@ -278,15 +276,8 @@ def retarget(
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped, crossing,
+        wrapped, crossings.starts(hair.segments, hair.n_particles),
     )
-
-
-def _scatter_free(values: np.ndarray, hair: Hair) -> np.ndarray:
-    """(N,) float64: ``values`` (one per particle not at a root) in place, 0 at the roots."""
-    out = np.zeros(hair.n_particles)
-    out[~hair.at_root] = values
-    return out
 
 
 def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,
@@ -428,9 +419,7 @@ def crossing_mask(hair: Hair, target: Character, query: MeshQuery | None = None)
     outside it (:func:`~hairport.solver.mesh.segment_crossing.crossing_segments`, against the collision surface
     unless ``query`` is given)."""
     query = query or collision_query(target.vertices, target.faces, target.name)
-    mask = np.zeros(hair.n_particles, dtype=bool)
-    mask[hair.segments[crossing_segments(hair.points, hair.segments, hair.at_root, query).rows, 0]] = True
-    return mask
+    return crossing_segments(hair.points, hair.segments, hair.at_root, query).starts(hair.segments, hair.n_particles)
 
 
 def penetrating_mask(hair: Hair, target: Character, query: MeshQuery | None = None) -> np.ndarray:

@@ -57,6 +57,12 @@ class SegmentCrossings:
     def count(self) -> int:
         return int(len(self.rows))
 
+    def starts(self, segments: np.ndarray, n_particles: int) -> np.ndarray:
+        """(N,) bool: the particles that start a crossing segment (``segments``: the ones these rows index)."""
+        mask = np.zeros(n_particles, dtype=bool)
+        mask[segments[self.rows, 0]] = True
+        return mask
+
     def report(self, segments: np.ndarray, offsets: np.ndarray) -> dict:
         """``{"count", "deepest_m", "deepest_strand", "deepest_segment"}`` for the metrics: the deepest crossing
         segment as its strand and its index along it (from the root); None when none crosses.
