@@ -23,6 +23,7 @@ from hairport.solver.hairline.edit import HairlineEdit
 from hairport.solver.hairline.presets import PRESETS as HAIRLINE_PRESETS
 from hairport.solver.hairline.presets import parse_preset
 from hairport.solver.hairline.relocation import edit_curve, scalp_chart
+from hairport.solver.mesh.collision import collision_query
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.frame import InputFrame
@@ -74,8 +75,11 @@ def display_scene(adaptable: AdaptableHairstyle, result: RetargetResult, target:
     to find). The hairline of a target of another topology is found on its wrap (:attr:`RetargetResult.wrapped`),
     the body drawn is the target; the wrapped body is kept beside it (``wrapped_vertices``, ``wrapped_faces``) to
     be drawn over it."""
-    inside = result.inside if result.inside is not None else penetrating_mask(result.hair, target)
-    crossing = result.crossing if result.crossing is not None else crossing_mask(result.hair, target)
+    inside, crossing = result.inside, result.crossing
+    if inside is None or crossing is None:  # a result the pipeline did not measure: one collision surface for both
+        body = collision_query(target.vertices, target.faces, target.name)
+        inside = penetrating_mask(result.hair, target, body) if inside is None else inside
+        crossing = crossing_mask(result.hair, target, body) if crossing is None else crossing
     try:
         shape = target if result.wrapped is None else result.wrapped.shape
         documents = hairline_documents(adaptable, shape, (None, *HAIRLINE_PRESETS))

@@ -1,5 +1,7 @@
 """Hairline curve documents and the dashboard's scene (solver/documents.py)."""
 
+import dataclasses
+
 import numpy as np
 
 from hairport.solver import display, documents, pipeline
@@ -29,6 +31,12 @@ def test_the_display_scene_holds_the_result_its_inside_flags_and_the_hairlines(f
     middle = len(current["points"]) // 2
     assert np.linalg.norm(np.subtract(widows["points"][middle], current["points"][middle])) > 1e-3
     np.testing.assert_allclose(widows["points"][0], current["points"][0], atol=1e-6)
+    # its crossing bits are the report's; a result the pipeline did not measure gets both sets of bits measured
+    crossing = np.unpackbits(scene["crossing"], count=fringe.n_particles).astype(bool)
+    assert crossing.sum() == result.metrics["crossing_segments"]["count"] > 0
+    unmeasured = documents.display_scene(adaptable, dataclasses.replace(result, inside=None, crossing=None), male)
+    for name in ("inside", "crossing"):
+        np.testing.assert_array_equal(unmeasured[name], scene[name])
 
 
 def test_a_curve_document_is_written_in_the_grooms_units_and_axes():
