@@ -9,8 +9,9 @@ MakeHuman pair (average female -> heavy male) and a "long" groom, then measures:
 * peak memory: the process's resident high-water mark (reset through
   ``/proc/self/clear_refs``) during preprocessing and during the retargets, the latter plus
   each fine-level worker process at the largest one's peak (every process counted);
-* the per-stage split (distance grid, coarse, fine with µs per particle per iteration) and a
-  least-squares per-particle slope over the sizes.
+* the per-stage split (distance grid, coarse, fine with µs per particle per iteration; the segments
+  through the body the solve cleared and the seconds that took; those left) and a least-squares
+  per-particle slope over the sizes.
 
 The kernels are warmed first (``hairport warmup``: loaded from numba's on-disk cache), as in a
 worker; the compile itself is measured by ``hairport warmup`` in a fresh cache.
@@ -137,6 +138,10 @@ def measure_size(args) -> dict:
         "worker_peak_rss": children if report.workers > 1 else 0,
         "workers": report.workers,
         "penetrating": result.metrics["penetrating_particles"],
+        "crossing": result.metrics["crossing_segments"]["count"],
+        # the segments the solve found through the body and the seconds it took to clear them (both levels)
+        "segments_cleared": sum(level.segments_crossing for level in [report.coarse, *report.fine] if level),
+        "segment_seconds": sum(level.segment_seconds for level in [report.coarse, *report.fine] if level),
         "coarse_iterations": report.coarse.iterations if report.coarse else 0,
         "fine_iterations": fine_iterations,
         "fine_particles": fine_particles,
@@ -277,7 +282,8 @@ def print_tables(rows: list[dict], args) -> None:
         per_work = 1e6 * r["fine"] / max(1, r["fine_work"])
         print(f"  {r['particles']:>10}: {r['distance_grid']:.2f} / {r['coarse']:.2f} ({r['coarse_iterations']} it) / "
               f"{r['fine']:.2f} ({r['fine_iterations']} it; {per_iteration:.3f} / {per_work:.3f} us/p/it); "
-              f"metrics {r['metrics']:.2f}; {r['penetrating']} penetrating")
+              f"metrics {r['metrics']:.2f}; {r['penetrating']} penetrating, {r.get('crossing', 0)} crossing segments "
+              f"({r.get('segments_cleared', 0)} cleared in {r.get('segment_seconds', 0.0):.2f} s)")
     print()
     print("memory (MB): process before preprocessing / preprocessing peak / before the retarget / retarget peak"
           " (all processes); fine-level processes")

@@ -4,7 +4,8 @@
 "adaptable hairstyle"); ``retarget(adaptable, target)`` adapts it to one target: initial
 transfer (Eq. 2-6), then shape adaptation (Eq. 1) or a baseline, then the final penetration
 check for the methods that claim a penetration-free result (the solvers, baselines with
-``+pushout``: :func:`~hairport.solver.mesh.penetration.resolve_penetration`), then metrics.
+``+pushout``: :func:`~hairport.solver.mesh.penetration.resolve_penetration`) and, for the
+solvers, of their segments (:func:`~hairport.solver.mesh.penetration.resolve_crossings`), then metrics.
 Collisions (Eq. 13, push-outs, the check, the penetration metrics) are against the target's
 collision surface (:func:`~hairport.solver.mesh.collision.collision_query`); anchoring and the
 roots' metrics against its whole mesh.
@@ -39,7 +40,7 @@ from hairport.solver.hairline.relocation import Relocation, relocate_roots
 from hairport.solver.hairline.weights import adaptive_weights
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
-from hairport.solver.mesh.penetration import resolve_penetration
+from hairport.solver.mesh.penetration import resolve_crossings, resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.segment_crossing import crossing_segments
 from hairport.solver.metrics import hairstyle_metrics, particle_distances, penetration
@@ -246,24 +247,26 @@ def retarget(
             # a collapsed strand stays on its root, as with the solvers (on a copy: a baseline may share arrays)
             points = hair.place_at_roots(np.array(points, dtype=np.float64))
 
-    resolved = None
+    resolved = segments_resolved = body_distance = crossings = None
     if claims_outside:
         with timed(timings, "penetration_check"):
-            progress("penetration_check", 0.94, "checking that no particle is inside the body")
-            points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, contact.name)
+            progress("penetration_check", 0.94, "checking that no particle or segment is inside the body")
+            points, resolved, segments_resolved, body_distance, crossings = final_check(points, hair, body, options,
+                                                                                        contact.name)
 
     with timed(timings, "metrics"):
         progress("metrics", 0.95, "measuring")
-        body_distance = penetration(points, hair.at_root, body, options.eps_c)
+        body_distance = body_distance or penetration(points, hair.at_root, body, options.eps_c)
         inside = np.zeros(hair.n_particles, dtype=bool)
         inside[~hair.at_root] = body_distance["distance"] < 0.0
-        crossings = crossing_segments(points, hair.segments, hair.at_root, body,
-                                      particle_distances(body_distance, hair.at_root))
+        crossings = crossings or crossing_segments(points, hair.segments, hair.at_root, body,
+                                                   particle_distances(body_distance, hair.at_root))
         metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
                                     weights, body=body, penetration_stats=body_distance, crossings=crossings)
         metrics["method"] = options.method
-        if resolved is not None:
-            metrics["penetration_resolved"] = resolved
+        for name, value in (("penetration_resolved", resolved), ("segments_resolved", segments_resolved)):
+            if value is not None:
+                metrics[name] = value
         if relocation is not None:
             metrics["hairline"] = relocation.report
         if wrapped is not None:
@@ -278,6 +281,40 @@ def retarget(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
         wrapped, crossings.starts(hair.segments, hair.n_particles),
     )
+
+
+def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: RetargetOptions, name: str) -> tuple:
+    """The final check of a method that claims a penetration-free result: no particle inside the body
+    (:func:`~hairport.solver.mesh.penetration.resolve_penetration`) and, for the solvers, no segment through it
+    (:func:`~hairport.solver.mesh.penetration.resolve_crossings`); a baseline's push-out promises its particles
+    (its segments are counted in the metrics).
+
+    Returns
+    -------
+    points : (N, 3) float64
+    resolved : dict
+        The particles' check.
+    segments_resolved : dict or None
+        The segments' check (None for a baseline).
+    body_distance : dict or None
+        :func:`~hairport.solver.metrics.penetration` at ``points`` (None when the segments' check moved them).
+    crossings : SegmentCrossings or None
+        The segments through the body at ``points`` (none; None when not checked or moved).
+    """
+    # one query of every particle serves both checks and, when they move nothing, the metrics
+    body_distance = penetration(points, hair.at_root, body, options.eps_c)
+    points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, name,
+                                           particle_distances(body_distance, hair.at_root))
+    if resolved["particles"]:
+        body_distance = penetration(points, hair.at_root, body, options.eps_c)
+    if options.method not in SOLVER_METHODS:
+        return points, resolved, None, body_distance, None
+    points, segments_resolved, crossings = resolve_crossings(
+        points, hair.segments, hair.at_root, body, options.eps_c, hair.offsets, name,
+        particle_distances(body_distance, hair.at_root), hair.short_segments)
+    if segments_resolved["segments"]:
+        return points, resolved, segments_resolved, None, None
+    return points, resolved, segments_resolved, body_distance, crossings
 
 
 def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,

@@ -13,6 +13,7 @@ guide, guides without neighbours) is solved strand by strand on the compiled ker
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 
@@ -23,10 +24,17 @@ from hairport.solver.adaptation.coupled.numpy_level import NumpyLevel
 from hairport.solver.adaptation.fine.fine_solve import CompiledLevel, pull_weights
 from hairport.solver.adaptation.loop import active_set
 from hairport.solver.adaptation.loop.active_set import run_active_set
-from hairport.solver.adaptation.loop.options import ENGINE_COMPILED, ENGINES, SolveOptions, SolveReport
+from hairport.solver.adaptation.loop.options import (
+    ENGINE_COMPILED,
+    ENGINES,
+    SEGMENT_ITERATIONS,
+    SolveOptions,
+    SolveReport,
+)
 from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.problem.energies import EnergyWeights, ShapeModel
 from hairport.solver.adaptation.problem.strand_problem import StrandProblem, problem_from_shape_model
+from hairport.solver.adaptation.segments import clear_segments
 from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.progress import ProgressFn
@@ -45,7 +53,8 @@ def solve_strands(
     should_stop: Callable[[], bool] | None = None,
     engine: str = ENGINE_COMPILED,
 ) -> tuple[np.ndarray, SolveReport]:
-    """Minimise Eq. 1 under Eq. 12-13 by the active-set loop (:func:`.loop.active_set.run_active_set`).
+    """Minimise Eq. 1 under Eq. 12-13 by the active-set loop (:func:`.loop.active_set.run_active_set`), then
+    the strands with a segment through the body again with margins (:func:`.segments.clear_segments`).
 
     Uncoupled strands each run the loop on their own, with their own merit penalty (so a strand's
     result does not depend on the strands solved with it); with a diagonal ``K`` the compiled level
@@ -79,9 +88,33 @@ def solve_strands(
     if engine not in ENGINES:
         raise ValueError(f"unknown engine {engine!r}; expected one of {', '.join(ENGINES)}")
     began = time.perf_counter()
+    level = _level(problem, engine)(problem, distance, weights, options, start)
+    points, report = run_active_set(level, options, progress, should_stop, began)
+    # pushed particles moved away from their last distance: the check queries them all again
+    last_distance = level.distance if report.pushed_out == 0 else None
+    points = clear_segments(problem, distance, options, points, report,
+                            _solve_again(weights, options, engine, should_stop), last_distance)
+    report.seconds = time.perf_counter() - began
+    return points, report
+
+
+def _level(problem: StrandProblem, engine: str) -> type:
+    """The active-set level that solves ``problem``: compiled for a diagonal ``K`` unless ``engine`` is numpy."""
     compiled = engine == ENGINE_COMPILED and pull_weights(problem.coupling) is not None
-    level = (CompiledLevel if compiled else NumpyLevel)(problem, distance, weights, options, start)
-    return run_active_set(level, options, progress, should_stop, began)
+    return CompiledLevel if compiled else NumpyLevel
+
+
+def _solve_again(weights: EnergyWeights, options: SolveOptions, engine: str,
+                 should_stop: Callable[[], bool] | None) -> Callable:
+    """The :data:`.segments.SolveFn` of a solve: its active-set loop over a subset of its strands."""
+
+    again = dataclasses.replace(options, max_iterations=min(options.max_iterations, SEGMENT_ITERATIONS))
+
+    def solve(sub: StrandProblem, shifted: BodyDistance, start: np.ndarray) -> tuple[np.ndarray, SolveReport]:
+        return run_active_set(_level(sub, engine)(sub, shifted, weights, again, start), again,
+                              should_stop=should_stop)
+
+    return solve
 
 
 def solve_hairstyle(
@@ -129,14 +162,18 @@ def solve_hairstyle(
     ValueError
         For a backend not in :data:`QP_BACKENDS`.
     """
+    if backend not in QP_BACKENDS:
+        raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
+    problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
     if backend == osqp_backend.BACKEND:
-        return osqp_backend.solve_shape_adaptation(
+        points, report = osqp_backend.solve_shape_adaptation(
             model, initial, fixed, target, weights, options, gamma=gamma, start=start, progress=progress,
             should_stop=should_stop,
         )
-    if backend != active_set.BACKEND:
-        raise ValueError(f"unknown QP backend {backend!r}; expected one of {', '.join(QP_BACKENDS)}")
-    problem = problem_from_shape_model(model, offsets, initial, fixed, gamma)
+        # the strands with a segment through the body are solved again by the active-set loop, which takes margins
+        points = clear_segments(problem, BodyDistance(target, band, grid), options, points, report,
+                                _solve_again(weights, options, ENGINE_COMPILED, should_stop))
+        return points, report
     return solve_strands(
         problem, BodyDistance(target, band, grid), weights, options, start=start, progress=progress,
         should_stop=should_stop,

@@ -21,7 +21,7 @@ INSIDE_PUSH_ROUNDS = 6
 ON_SURFACE = 1e-12
 
 
-def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float) -> np.ndarray:
+def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float | np.ndarray) -> np.ndarray:
     """Move non-root particles closer than ``clearance`` to the body out to exactly ``clearance``.
 
     A particle ``p`` with signed distance ``d < clearance`` (less :data:`PUSH_TOLERANCE`) goes
@@ -37,8 +37,8 @@ def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearanc
         Roots are never moved.
     query : MeshQuery
         Over the target body.
-    clearance : float
-        Meters, >= 0.
+    clearance : float or (N,) float64
+        Meters, >= 0 (each particle's own, or one for all).
 
     Returns
     -------
@@ -46,16 +46,17 @@ def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearanc
         A new array.
     """
     out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 3)
+    each = np.broadcast_to(np.asarray(clearance, dtype=np.float64), (len(out),))
     active = np.flatnonzero(~np.asarray(is_root, dtype=bool))
     for _ in range(MAX_PUSH_ROUNDS):
         if active.size == 0:
             break
         sd = query.signed_distance(out[active])
-        close = sd.distance < clearance - PUSH_TOLERANCE
+        close = sd.distance < each[active] - PUSH_TOLERANCE
         if not close.any():
             break
         active = active[close]
-        out[active] += (clearance - sd.distance[close])[:, None] * sd.normal[close]
+        out[active] += (each[active] - sd.distance[close])[:, None] * sd.normal[close]
     return out
 
 

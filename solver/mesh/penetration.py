@@ -6,6 +6,10 @@ body are counted by its inside test (the winding number, :mod:`.inside`, the sam
 the penetration metrics); any found are pushed out (:func:`.clearance.push_inside_out`) and
 reported; if some are still inside after that, the result is refused with
 :class:`~hairport.solver.model.errors.PenetrationRemaining` (code ``penetration_remaining``).
+Then the segments between particles outside that pass through the body
+(:mod:`.segment_crossing`; the solvers clear theirs, :mod:`hairport.solver.adaptation.segments`):
+any found have their ends pushed away along the normal at their deepest point
+(:func:`resolve_crossings`), and a result that keeps one is refused the same way.
 
 Convention: particles ``(N, 3) float64`` in meters.
 """
@@ -16,10 +20,12 @@ import numpy as np
 
 from hairport.solver.mesh.clearance import push_inside_out
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments
 from hairport.solver.model.errors import PenetrationRemaining
 
 
-def inside_depths(points: np.ndarray, is_root: np.ndarray, query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
+def inside_depths(points: np.ndarray, is_root: np.ndarray, query: MeshQuery,
+                  distance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The non-root particles inside the body and how deep (m) they are.
 
     Parameters
@@ -28,6 +34,8 @@ def inside_depths(points: np.ndarray, is_root: np.ndarray, query: MeshQuery) -> 
     is_root : (N,) bool
     query : MeshQuery
         The body (its collision surface: the sign of its distance is the inside test).
+    distance : (N,) float64, optional
+        Every particle's signed distance (roots: anything), when the caller has it.
 
     Returns
     -------
@@ -37,13 +45,17 @@ def inside_depths(points: np.ndarray, is_root: np.ndarray, query: MeshQuery) -> 
         Their distance to the body's surface (m).
     """
     free = np.flatnonzero(~np.asarray(is_root, dtype=bool))
-    distance = query.signed_distance(points[free]).distance if len(free) else np.zeros(0)
-    inside = distance < 0.0
-    return free[inside], -distance[inside]
+    if distance is not None:
+        free_distance = np.asarray(distance, dtype=np.float64)[free]
+    else:
+        free_distance = query.signed_distance(points[free]).distance if len(free) else np.zeros(0)
+    inside = free_distance < 0.0
+    return free[inside], -free_distance[inside]
 
 
 def resolve_penetration(
-    points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float, body: str | None = None
+    points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float, body: str | None = None,
+    distance: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Push out the particles a method left inside the body, or refuse the result.
 
@@ -59,6 +71,8 @@ def resolve_penetration(
         Meters: where pushed particles land beyond the surface (``eps_c``).
     body : str, optional
         The body's name, for the error.
+    distance : (N,) float64, optional
+        Every particle's signed distance at ``points`` (roots: anything), when the caller has it.
 
     Returns
     -------
@@ -73,7 +87,7 @@ def resolve_penetration(
     PenetrationRemaining
         Some particles are still inside after the push-out.
     """
-    rows, depth = inside_depths(points, is_root, query)
+    rows, depth = inside_depths(points, is_root, query, distance)
     resolved = {"particles": int(len(rows)), "deepest_m": float(depth.max(initial=0.0))}
     if len(rows) == 0:
         return points, resolved
@@ -86,3 +100,205 @@ def resolve_penetration(
             body,
         )
     return pushed, resolved
+
+
+#: rounds at most of moving the segments through the body out of it (each checked again) ...
+SEGMENT_PUSH_ROUNDS = 12
+#: ... in the first ones a segment that sags into the body has its ends pushed out; after them, its strand's
+#: tail is taken back across, as for a segment through a thin part
+PUSH_ONLY_ROUNDS = 4
+
+
+def push_segment_ends(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, crossings: SegmentCrossings,
+                      clearance: float, welded: np.ndarray | None = None) -> np.ndarray:
+    """Move the free ends of crossing segments so that each one's deepest point would sit out of the body.
+
+    Each end goes along the outward normal at its segment's deepest point, by the depth over its lever
+    (:meth:`.segment_crossing.SegmentCrossings.levers`) plus the clearance; an end of several crossing
+    segments takes, per axis, the largest push each way (not their sum).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    segments : (M, 2) int64
+    is_root : (N,) bool
+    crossings : SegmentCrossings
+        Over ``segments``.
+    clearance : float
+        Meters.
+    welded : (N,) bool, optional
+        Particles that start a degenerate segment (:attr:`~hairport.solver.model.hair.Hair.short_segments`):
+        each run of particles joined by such segments moves as one.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        A new array.
+    """
+    lever = crossings.levers(segments, is_root)
+    moving = lever > 0.0
+    ends = segments[crossings.rows][moving]
+    lift = np.broadcast_to(crossings.depth[:, None], lever.shape)[moving] / lever[moving] + clearance
+    push = lift[:, None] * np.repeat(crossings.normal[:, None, :], 2, axis=1)[moving]
+    out = np.array(points, dtype=np.float64)
+    up, down = np.zeros_like(out), np.zeros_like(out)
+    np.maximum.at(up, ends, np.maximum(push, 0.0))
+    np.minimum.at(down, ends, np.minimum(push, 0.0))
+    if welded is not None and len(out):
+        run = np.cumsum(np.concatenate([[True], ~np.asarray(welded, dtype=bool)[:-1]])) - 1
+        run_up, run_down = np.zeros((run[-1] + 1, 3)), np.zeros((run[-1] + 1, 3))
+        np.maximum.at(run_up, run, up)
+        np.minimum.at(run_down, run, down)
+        up, down = run_up[run], run_down[run]
+    return out + up + down
+
+
+def pull_tails(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, crossings: SegmentCrossings,
+               offsets: np.ndarray, query: MeshQuery, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Take the rest of each strand back across the body part its first crossing segment passes through.
+
+    A segment whose ends lie on either side of a thin part (a hand, between particles a centimetre off
+    the skin) is not lifted out by moving its ends along a normal: one end would have to go through.
+    Here the segment's far end and every particle after it on the strand move by one translation,
+    which puts that end ``clearance`` short of where the segment enters the body: the tail keeps its
+    shape and the strand reaches the part's near side.
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+    segments : (M, 2) int64
+        Root side first.
+    is_root : (N,) bool
+    crossings : SegmentCrossings
+        Over ``segments``.
+    offsets : (S + 1,) int64
+    query : MeshQuery
+    clearance : float
+        Meters.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        A new array.
+    strands : (T,) int64
+        The strands whose tails moved.
+    """
+    out = np.array(points, dtype=np.float64)
+    near, far = segments[crossings.rows, 0], segments[crossings.rows, 1]
+    strand = np.searchsorted(offsets, near, side="right") - 1
+    # the first crossing segment of each strand: the tail after it moves, later ones with it
+    strand, first = np.unique(strand, return_index=True)
+    near, far = near[first], far[first]
+    keep = ~is_root[far]
+    strand, near, far = strand[keep], near[keep], far[keep]
+    if len(far) == 0:
+        return out, strand
+    direction = out[far] - out[near]
+    hits = query.first_hits(out[near], direction)
+    length = np.linalg.norm(direction, axis=1)
+    entry = np.where(hits.hit, np.minimum(hits.distance, length), length)
+    reach = np.maximum(entry - clearance, 0.0) / np.maximum(length, 1e-300)
+    move = out[near] + reach[:, None] * direction - out[far]
+    counts = offsets[strand + 1] - far
+    rows = np.repeat(far - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
+    out[rows] += np.repeat(move, counts, axis=0)
+    return out, strand
+
+
+def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float,
+              offsets: np.ndarray, welded: np.ndarray | None, crossings: SegmentCrossings,
+              classify: bool) -> tuple[np.ndarray, SegmentCrossings, np.ndarray, np.ndarray]:
+    """Up to :data:`SEGMENT_PUSH_ROUNDS` rounds of moving the crossing segments out: pushes for those that sag,
+    tail moves for those through a thin part (``classify``: by
+    :meth:`~.segment_crossing.SegmentCrossings.through`, else none) and, after :data:`PUSH_ONLY_ROUNDS`,
+    for all; particles pushed inside go out again. Returns the points, the crossings and the particles
+    inside after the last round, and the strands whose tails moved."""
+    pulled = np.zeros(0, dtype=np.int64)
+    inside = np.zeros(0, dtype=np.int64)
+    for round_number in range(SEGMENT_PUSH_ROUNDS):
+        if crossings.count == 0 and len(inside) == 0:
+            break
+        late = round_number >= PUSH_ONLY_ROUNDS
+        through = (crossings.through(points, segments, query) if classify and not late
+                   else np.full(crossings.count, late))
+        points = push_segment_ends(points, segments, is_root, crossings.subset(~through), clearance, welded)
+        if through.any():
+            points, strands = pull_tails(points, segments, is_root, crossings.subset(through), offsets, query,
+                                         clearance)
+            pulled = np.union1d(pulled, strands)
+        inside, _ = inside_depths(points, is_root, query)
+        if len(inside):
+            points, inside = push_inside_out(points, inside, query, clearance)
+        crossings = crossing_segments(points, segments, is_root, query)
+    return points, crossings, inside, pulled
+
+
+def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery,
+                      clearance: float, offsets: np.ndarray, body: str | None = None,
+                      distance: np.ndarray | None = None,
+                      welded: np.ndarray | None = None) -> tuple[np.ndarray, dict, SegmentCrossings]:
+    """Push away the segments a method left through the body, or refuse the result.
+
+    Rounds of :func:`push_segment_ends` for the segments that sag into the body from one side, and of
+    :func:`pull_tails` for those through a thin part
+    (:meth:`~.segment_crossing.SegmentCrossings.through`) and, after :data:`PUSH_ONLY_ROUNDS`, for any
+    still there, then the particles pushed inside out again (:func:`.clearance.push_inside_out`), until
+    neither a particle nor a segment is inside; if that fails, the same from the method's result with
+    pushes only until :data:`PUSH_ONLY_ROUNDS` (the order that clears some strands through the hands).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        A result with no particle inside (:func:`resolve_penetration`).
+    segments : (M, 2) int64
+    is_root : (N,) bool
+    query : MeshQuery
+        The body's collision surface.
+    clearance : float
+        Meters (``eps_c``).
+    offsets : (S + 1,) int64
+        The strands' first particles, for the error.
+    body : str, optional
+        The body's name, for the error.
+    distance : (N,) float64, optional
+        Each particle's signed distance at ``points`` (roots: anything), when the caller has it.
+    welded : (N,) bool, optional
+        Particles joined to the next by a degenerate segment: they move together.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        ``points`` itself when no segment crossed, else a new array.
+    resolved : dict
+        ``segments``: how many crossed; ``deepest_m``: the deepest point of any (0 when none);
+        ``tails_moved``: strands whose tails were taken back across a thin part (:func:`pull_tails`).
+    crossings : SegmentCrossings
+        None cross at the returned points: the last check's (empty) result.
+
+    Raises
+    ------
+    PenetrationRemaining
+        Some segment still passes through the body after :data:`SEGMENT_PUSH_ROUNDS` rounds.
+    """
+    crossings = crossing_segments(points, segments, is_root, query, distance)
+    resolved = {"segments": crossings.count, "deepest_m": crossings.report(segments, offsets)["deepest_m"],
+                "tails_moved": 0}
+    if crossings.count == 0:
+        return points, resolved, crossings
+    # two orders of the same moves, each from the method's result: the first that clears every segment wins
+    for classify in (True, False):
+        moved, after, inside, pulled = _move_out(points, segments, is_root, query, clearance, offsets, welded,
+                                                 crossings, classify)
+        if after.count == 0 and len(inside) == 0:
+            resolved["tails_moved"] = int(len(pulled))
+            return moved, resolved, after
+    crossings = after
+    left = crossings.report(segments, offsets)
+    raise PenetrationRemaining(
+        f"segments of hair still pass through the target body between two particles outside it: {crossings.count:,}, "
+        f"after moving the {resolved['segments']:,} the method left there (deepest {1e3 * resolved['deepest_m']:.2f} "
+        f"mm) out for {SEGMENT_PUSH_ROUNDS} rounds, twice (the deepest left: strand {left['deepest_strand']}, segment "
+        f"{left['deepest_segment']}; {len(inside):,} particles inside); no result that keeps the whole strands out "
+        "of the body was found",
+        body,
+    )

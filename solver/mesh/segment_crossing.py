@@ -27,6 +27,9 @@ from hairport.solver.mesh.query import MeshQuery
 END_TOLERANCE = 1e-6
 #: points along a crossing segment whose signed distance gives its depth (the ends excluded)
 DEPTH_SAMPLES = 33
+#: the smallest share of a lift of a segment's deepest point that its free end takes when the other end
+#: is a root (:meth:`SegmentCrossings.levers`): a point next to the root would ask an unbounded lift
+MIN_LEVER = 0.1
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,49 @@ class SegmentCrossings:
         mask = np.zeros(n_particles, dtype=bool)
         mask[segments[self.rows, 0]] = True
         return mask
+
+    def levers(self, segments: np.ndarray, is_root: np.ndarray) -> np.ndarray:
+        """``(K, 2) float64``: how far the deepest point of each crossing segment moves when its first or second
+        end moves by 1 and the other as much: 1 when both are free; next to a root (which stays), the free
+        end's share of the segment at that point (at least :data:`MIN_LEVER`); 0 for a root.
+
+        Parameters
+        ----------
+        segments : (M, 2) int64
+            The segments these rows index.
+        is_root : (N,) bool
+        """
+        first, second = segments[self.rows, 0], segments[self.rows, 1]
+        lever = np.ones((self.count, 2))
+        lever[:, 0] = np.where(is_root[second], np.maximum(1.0 - self.deepest_at, MIN_LEVER), 1.0)
+        lever[:, 1] = np.where(is_root[first], np.maximum(self.deepest_at, MIN_LEVER), 1.0)
+        lever[is_root[first], 0] = 0.0
+        lever[is_root[second], 1] = 0.0
+        return lever
+
+    def through(self, points: np.ndarray, segments: np.ndarray, query: MeshQuery) -> np.ndarray:
+        """``(K,) bool``: the crossing segments with an end whose own way out of the body opposes the one at
+        their deepest point: through a thin part (a hand), where lifting the ends along a normal cannot
+        clear them; the others sag into a curved skin from one side (their ends' normals and the deepest
+        point's agree).
+
+        Parameters
+        ----------
+        points : (N, 3) float64
+        segments : (M, 2) int64
+            The segments these rows index.
+        query : MeshQuery
+            The body.
+        """
+        ends = segments[self.rows].ravel()
+        normal = query.signed_distance(points[ends]).normal.reshape(self.count, 2, 3)
+        agreement = np.einsum("kej,kj->ke", normal, self.normal)
+        return (agreement < 0.0).any(axis=1)
+
+    def subset(self, keep: np.ndarray) -> "SegmentCrossings":
+        """The crossings where ``keep (K,) bool``."""
+        return SegmentCrossings(self.rows[keep], self.depth[keep], self.deepest_point[keep], self.deepest_at[keep],
+                                self.normal[keep])
 
     def report(self, segments: np.ndarray, offsets: np.ndarray) -> dict:
         """``{"count", "deepest_m", "deepest_strand", "deepest_segment"}`` for the metrics: the deepest crossing
@@ -135,8 +181,10 @@ def crossing_segments(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
     segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
     is_root = np.asarray(is_root, dtype=bool)
     if distance is None:
+        # only the particles of these segments: a check of a few strands asks about their particles alone
         distance = np.zeros(len(points))
-        free = np.flatnonzero(~is_root)
+        ends = np.unique(segments)
+        free = ends[~is_root[ends]]
         distance[free] = query.signed_distance(points[free]).distance if len(free) else 0.0
     distance = np.where(is_root, 0.0, distance)
     ends_out = (distance[segments] >= 0.0).all(axis=1)

@@ -15,8 +15,9 @@ from hairport.solver.options import PreprocessOptions, RetargetOptions
 from hairport.solver.pipeline import preprocess, retarget
 from hairport.solver.synthetic.groom import generate_groom
 
-#: the codes a degenerate groom may be refused with: a stray strand, or nothing but degenerate strands
-REFUSALS = {STRAY_STRANDS, EMPTY_HAIR}
+#: the codes a degenerate groom may be refused with: a stray strand, nothing but degenerate strands, or a strand
+#: whose segments no push clears of the body (a straight one through the head)
+REFUSALS = {STRAY_STRANDS, EMPTY_HAIR, "penetration_remaining"}
 KINDS = ("collapse", "origin", "origin_tail", "repeat", "tiny_strand", "tiny_segment", "duplicate", "two_points",
          "collinear", "zigzag", "stray")
 #: a small groom, few guides and iterations: an example takes about a second

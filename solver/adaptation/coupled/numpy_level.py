@@ -128,7 +128,7 @@ class NumpyLevel:
             # second-order correction: the linearised half-spaces ignore the body's curvature, and
             # without it the loop zig-zags along the surface
             moved[short] += (eps_c - d[short])[:, None] * nrm[short]
-            d2, nrm2, nr2 = self.body(moved[short])
+            d2, nrm2, nr2 = self.body(moved[short], self.index[todo][short])
             d[short], nrm[short], nr[short] = d2, nrm2, nr2
         self.trial[todo] = moved
         self.trial_dist[todo], self.trial_normal[todo], self.trial_near[todo] = d, nrm, nr

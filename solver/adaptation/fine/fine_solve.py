@@ -223,7 +223,7 @@ class CompiledLevel:
                 qp_strands = open_strands[hit]
                 rows = strand_rows(offsets, qp_strands)
                 again = rows[bounded[rows]]
-                dist[again], normal[again], near[again] = self.body(points[again])
+                dist[again], normal[again], near[again] = self.body(points[again], again)
                 anchor_points[again], anchor_distance[again] = points[again], dist[again]
                 anchor_normal[again], anchor_near[again], bounded[again] = normal[again], near[again], False
                 self.active[rows], self.penalty[qp_strands] = active_before[rows], penalty_before[qp_strands]
@@ -253,13 +253,15 @@ class CompiledLevel:
         nr, queried = np.empty(len(moved), dtype=bool), np.empty(len(moved), dtype=bool)
         line_search_kernels.bound_trial_distances(strands, offsets, packed, moved, *self.anchors, self.least, d, nrm,
                                                   nr, queried)
+        # the particles of the packed rows, for a body with margins (BodyDistance.with_margin)
+        rows = None if self.body.margin is None else strand_rows(offsets, strands)
         if queried.any():
-            d[queried], nrm[queried], nr[queried] = self.body(moved[queried])
+            d[queried], nrm[queried], nr[queried] = self.body(moved[queried], None if rows is None else rows[queried])
         short = nr & (d < eps_c) & free
         if short.any():
             # second-order correction: the linearised half-spaces ignore the body's curvature
             moved[short] += (eps_c - d[short])[:, None] * nrm[short]
-            d[short], nrm[short], nr[short] = self.body(moved[short])
+            d[short], nrm[short], nr[short] = self.body(moved[short], None if rows is None else rows[short])
         todo_merit = np.zeros(len(todo))
         self._merits(strands, packed[:-1], moved, d, todo_merit)
         self.merit_trial[todo] = todo_merit

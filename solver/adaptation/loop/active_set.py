@@ -212,7 +212,8 @@ def run_active_set(
     points = level.points
     if not report.converged:
         points, report.pushed_out = push_out_short(
-            points, level.fixed, level.distance, level.body.query, options.eps_c, options.clearance_tolerance
+            points, level.fixed, level.distance, level.body.query, options.eps_c, options.clearance_tolerance,
+            level.body.margin,
         )
     report.seconds = time.perf_counter() - began
     return points, report

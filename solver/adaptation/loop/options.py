@@ -40,6 +40,13 @@ DAMPING_LOWER_ABOVE = 0.75
 #: instead of 24 M, in 6.5 s instead of 8.6 (2 mm: 6.9 s, fewer skipped; 0.5 mm steps are common)
 QUERY_MARGIN = 1e-3
 
+#: rounds at most of solving again the strands with a segment through the body (the default of
+#: :attr:`SolveOptions.segment_rounds`, :mod:`~hairport.solver.adaptation.segments`)
+SEGMENT_ROUNDS = 6
+#: outer iterations at most of each such round, from the solve's result: the strands start converged
+#: but for the ends of their crossing segments; a round its cap stops pushes them out to their margins
+SEGMENT_ITERATIONS = 8
+
 #: how the active-set loop runs over uncoupled strands (a diagonal ``K``, Eq. 14's fine level):
 #: on compiled per-strand kernels (:mod:`.fine_solve`), or in numpy, the readable reference
 ENGINE_COMPILED = "compiled"
@@ -80,6 +87,10 @@ class SolveOptions:
         The uncoupled active-set line search queries a trial point's distance only where its bound from
         the particle's last query is below ``eps_c`` plus this (m; :data:`QUERY_MARGIN`,
         :class:`.constraints.QueryAnchors`); ``inf`` queries every one.
+    segment_rounds : int
+        Rounds at most of solving again, with margins, the strands that have a segment through the body
+        after the loop (:func:`hairport.solver.adaptation.segments.clear_segments`); 0: particles only,
+        as in the paper.
     """
 
     eps_c: float = 5e-4
@@ -91,6 +102,7 @@ class SolveOptions:
     osqp_eps_rel: float = 1e-7
     osqp_max_iter: int = 50_000
     query_margin: float = QUERY_MARGIN
+    segment_rounds: int = SEGMENT_ROUNDS
 
 
 @dataclass
@@ -122,6 +134,11 @@ class SolveReport:
         conjugate-gradient steps.
     merit : list of float
         Active-set only, per iteration: Eq. 1 plus the clearance penalty after the step.
+    segments_crossing, segment_rounds, segments_left : int
+        Segments through the body after the loop, rounds of solving their strands again with margins,
+        segments through it after them (:mod:`hairport.solver.adaptation.segments`).
+    segment_seconds : float
+        The time those checks and rounds took (part of ``seconds``).
     osqp_status : list of str
     osqp_iterations : list of int
         OSQP only, per iteration: OSQP's status and iterations.
@@ -137,6 +154,10 @@ class SolveReport:
     seconds: float = 0.0
     groups: int = 0
     converged_groups: int = 0
+    segments_crossing: int = 0
+    segment_rounds: int = 0
+    segments_left: int = 0
+    segment_seconds: float = 0.0
     open_groups: list[int] = field(default_factory=list)
     active_set_rounds: list[int] = field(default_factory=list)
     cg_steps: list[int] = field(default_factory=list)

@@ -20,6 +20,8 @@ Convention: particles ``(N, 3) float64`` in meters; ``fixed (N,) bool`` marks th
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from hairport.solver.mesh.clearance import push_out
@@ -53,14 +55,45 @@ class BodyDistance:
         self.band = band
         self.grid = grid
         self._cells = _NOT_MADE  # the query's cell cache (None if its face search has none), made on the first call
+        #: (N,) float64 or None: each particle's clearance beyond ``eps_c`` (m), see :meth:`with_margin`
+        self.margin: np.ndarray | None = None
+
+    def with_margin(self, margin: np.ndarray) -> "BodyDistance":
+        """This distance less a clearance of each particle's own: ``margin (N,) float64`` (m, >= 0, below
+        ``band``), over the particles of the solve it serves.
+
+        A solve that keeps ``distance >= eps_c`` then keeps particle ``i`` at ``eps_c + margin[i]``
+        from the body (:mod:`hairport.solver.adaptation.segments`). The shifted distance stays
+        1-Lipschitz for each particle, so the line search's bounds (:class:`QueryAnchors`) hold. Its
+        calls must say which particles they ask about (``rows``). The cell cache is shared.
+        """
+        if self._cells is _NOT_MADE:
+            self._cells = self.query.cell_cache()
+        shifted = copy.copy(self)
+        shifted.margin = np.asarray(margin, dtype=np.float64)
+        return shifted
 
     def _signed_distance(self, points: np.ndarray):
         if self._cells is _NOT_MADE:
             self._cells = self.query.cell_cache()
         return self.query.signed_distance(points, cells=self._cells)
 
-    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``points (N, 3)`` -> distance ``(N,)``, normal ``(N, 3)``, near ``(N,) bool``."""
+    def __call__(self, points: np.ndarray, rows: np.ndarray | slice | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``points (N, 3)`` -> distance ``(N,)``, normal ``(N, 3)``, near ``(N,) bool``.
+
+        ``rows``: the solve's particles these points are (indices or a slice; all of them, in order, when
+        omitted); read only with a :meth:`with_margin`.
+        """
+        distance, normal, near = self._distance(points)
+        if self.margin is not None:
+            margin = self.margin if rows is None else self.margin[rows]
+            if len(margin) != len(points):
+                raise ValueError(f"{len(points)} points asked about with {len(margin)} particles' margins")
+            distance = distance - margin
+        return distance, normal, near
+
+    def _distance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n = len(points)
         if self.grid is None:
             sd = self._signed_distance(points)
@@ -167,7 +200,8 @@ def clearance_violation(distance: np.ndarray, eps_c: float, fixed: np.ndarray | 
 
 
 def push_out_short(
-    points: np.ndarray, fixed: np.ndarray, distance: np.ndarray, query: MeshQuery, eps_c: float, tolerance: float
+    points: np.ndarray, fixed: np.ndarray, distance: np.ndarray, query: MeshQuery, eps_c: float, tolerance: float,
+    margin: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """Eq. 13 made to hold when the iteration cap stopped the loop.
 
@@ -186,6 +220,9 @@ def push_out_short(
     eps_c : float
     tolerance : float
         A particle counts as short below ``eps_c - tolerance`` (m).
+    margin : (N,) float64, optional
+        Each particle's clearance beyond ``eps_c`` (:meth:`BodyDistance.with_margin`; ``distance`` is
+        then less it too).
 
     Returns
     -------
@@ -196,7 +233,7 @@ def push_out_short(
     """
     pushed = int(np.sum((distance < eps_c - tolerance) & ~fixed))
     if pushed:
-        points = push_out(points, fixed, query, eps_c)
+        points = push_out(points, fixed, query, eps_c if margin is None else eps_c + margin)
     return points, pushed
 
 
@@ -258,7 +295,7 @@ class QueryAnchors:
         nrm = self.normal[particles].copy()
         nr = ~queried
         if queried.any():
-            d[queried], nrm[queried], nr[queried] = distance(moved[queried])
+            d[queried], nrm[queried], nr[queried] = distance(moved[queried], particles[queried])
         return d, nrm, nr, queried
 
     def commit(self, particles: np.ndarray, points: np.ndarray, distance: np.ndarray, normal: np.ndarray,
@@ -275,7 +312,7 @@ class QueryAnchors:
     def refresh(self, distance: BodyDistance, particles: np.ndarray,
                 points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact queries of ``particles (T,)`` at their iterate ``points (T, 3)``, committed: ``(distance, normal, near)``."""
-        d, nrm, nr = distance(points)
+        d, nrm, nr = distance(points, particles)
         self.commit(particles, points, d, nrm, nr, np.ones(len(particles), dtype=bool))
         return d, nrm, nr
 

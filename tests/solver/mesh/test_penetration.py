@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from hairport.solver.mesh import penetration
 from hairport.solver.mesh.clearance import INSIDE_PUSH_ROUNDS
 from hairport.solver.mesh.collision import collision_query
-from hairport.solver.mesh.penetration import inside_depths, resolve_penetration
+from hairport.solver.mesh.penetration import inside_depths, resolve_crossings, resolve_penetration
+from hairport.solver.mesh.segment_crossing import crossing_segments
 from hairport.solver.model.errors import InputError, PenetrationRemaining
 from tests.solver.mesh.meshes import icosphere
 from tests.solver.mesh.test_inside import open_capsule
@@ -87,3 +89,79 @@ def test_a_crack_narrower_than_every_push_fails_with_its_code():
                                                    r"particle 0\); no penetration-free result") as error:
         resolve_penetration(points, np.zeros(3, dtype=bool), body, EPS_C, "blocks")
     assert error.value.code == "penetration_remaining" and isinstance(error.value, InputError)
+
+
+def strand_crossings(points, offsets, query):
+    hair_segments = np.array([[i, i + 1] for s in range(len(offsets) - 1) for i in range(offsets[s], offsets[s + 1] - 1)])
+    return hair_segments, crossing_segments(points, hair_segments, np.isin(np.arange(len(points)), offsets[:-1]), query)
+
+
+def test_a_segment_sagging_into_a_shoulder_has_its_ends_lifted_by_its_depth_plus_the_clearance():
+    sphere = collision_query(*icosphere(radius=0.05, subdivisions=5), "shoulder")
+    top = sphere.signed_distance(np.array([[0.0, 0.0, 0.1]])).closest[0]
+    ends = []
+    for side in (-0.008, 0.008):  # a 16 mm chord 0.5 mm off a 5 cm radius sags 0.14 mm into it
+        sd = sphere.signed_distance((top + [side, 0.0, 0.0])[None])
+        ends.append(sd.closest[0] + EPS_C * sd.normal[0])
+    points = np.vstack([[0.0, 0.0, 0.2], *ends])  # a root far above, then the chord
+    offsets = np.array([0, 3])
+    segments, before = strand_crossings(points, offsets, sphere)
+    assert before.rows.tolist() == [1]
+    is_root = np.array([True, False, False])
+    out, resolved, after = resolve_crossings(points, segments, is_root, sphere, EPS_C, offsets, "shoulder")
+    assert resolved == {"segments": 1, "deepest_m": pytest.approx(before.depth[0]), "tails_moved": 0}
+    assert after.count == 0
+    lift = np.linalg.norm(out - points, axis=1)
+    assert lift[0] == 0.0 and lift[1:] == pytest.approx(before.depth[0] + EPS_C, rel=0.05)
+
+
+def test_a_strand_through_a_thin_plate_has_its_tail_taken_back_across_it():
+    """A 3 mm plate between two particles 1 cm off it on either side: lifting the ends along a normal
+    cannot clear the segment; the tail (the far end and what follows) comes back across, its shape kept,
+    where it then passes the plate's edge."""
+    plate = collision_query(*boxes(([-0.05, -0.05, -0.0015], [0.05, 0.05, 0.0015])), "plate")
+    offsets = np.array([0, 4])
+    is_root = np.array([True, False, False, False])
+    past_the_edge = np.array([[0.04, 0.0, 0.05], [0.045, 0.0, 0.0115], [0.049, 0.0, -0.0115], [0.09, 0.0, -0.008]])
+    segments, before = strand_crossings(past_the_edge, offsets, plate)
+    assert before.rows.tolist() == [1]
+    out, resolved, after = resolve_crossings(past_the_edge, segments, is_root, plate, EPS_C, offsets, "plate")
+    assert resolved["segments"] == 1 and resolved["tails_moved"] == 1 and after.count == 0
+    assert (plate.signed_distance(out[1:]).distance > 0).all() and (out[1:3, 2] > 0).all()  # on the root's side
+    # the tail keeps its shape (but for the pushes after it, tens of micrometres)
+    np.testing.assert_allclose(out[3] - out[2], past_the_edge[3] - past_the_edge[2], atol=1e-4)
+
+    # a tail that goes on straight through: pulled back segment after segment, it ends folded on the near side
+    straight_through = np.array([[0.0, 0.0, 0.05], [0.0, 0.0, 0.0115], [0.004, 0.0, -0.0115], [0.008, 0.0, -0.04]])
+    out, resolved, after = resolve_crossings(straight_through, segments, is_root, plate, EPS_C, offsets, "plate")
+    assert after.count == 0 and resolved["segments"] == 1
+    assert (out[1:, 2] > 0.0015).all() and (plate.signed_distance(out[1:]).distance > 0).all()
+
+
+def test_a_segment_the_rounds_do_not_clear_refuses_the_result(monkeypatch):
+    plate = collision_query(*boxes(([-0.05, -0.05, -0.0015], [0.05, 0.05, 0.0015])), "plate")
+    points = np.array([[0.0, 0.0, 0.05], [0.0, 0.0, 0.0115], [0.004, 0.0, -0.0115], [0.008, 0.0, -0.04]])
+    offsets = np.array([0, 4])
+    segments, _ = strand_crossings(points, offsets, plate)
+    monkeypatch.setattr(penetration, "SEGMENT_PUSH_ROUNDS", 0)  # no round to move it
+    with pytest.raises(PenetrationRemaining) as error:
+        resolve_crossings(points, segments, np.array([True, False, False, False]), plate, EPS_C, offsets, "plate")
+    assert error.value.code == "penetration_remaining"
+    assert error.value.problem.startswith("segments of hair still pass through the target body between two particles "
+                                          "outside it: 1, after moving the 1 the method left there")
+    assert "(the deepest left: strand 0, segment 1; 0 particles inside)" in error.value.problem
+
+
+def test_welded_particles_at_a_crossing_segments_end_move_together():
+    sphere = collision_query(*icosphere(radius=0.05, subdivisions=4), "ball")
+    top = sphere.signed_distance(np.array([[0.0, 0.0, 0.1]])).closest[0]
+    a = sphere.signed_distance((top + [-0.009, 0.0, 0.0])[None])
+    b = sphere.signed_distance((top + [0.009, 0.0, 0.0])[None])
+    chord = np.vstack([a.closest + EPS_C * a.normal, b.closest + EPS_C * b.normal])
+    points = np.vstack([[0.0, 0.0, 0.2], chord[0], chord[1], chord[1]])  # the chord's end repeated
+    segments = np.array([[0, 1], [1, 2], [2, 3]])
+    welded = np.array([False, False, True, False])
+    out, _, after = resolve_crossings(points, segments, np.array([True, False, False, False]), sphere, EPS_C,
+                                      np.array([0, 4]), "ball", welded=welded)
+    assert after.count == 0 and np.linalg.norm(out[2] - points[2]) > 1e-4
+    np.testing.assert_array_equal(out[3], out[2])

@@ -94,14 +94,16 @@ class TiltedSphere:
     """A :class:`BodyDistance` stand-in: the exact signed distance to a sphere at the origin, with normals turned
     by ``tilt`` (rad) about z, as a faceted body's may be off the direction that restores the clearance: the
     projection of a line-search trial then leaves it short, and the merit's clearance penalty decides steps.
-    Each point's result depends on that point alone (no batch-dependent rounding)."""
+    Each point's result depends on that point alone (no batch-dependent rounding). It has no mesh: the solves
+    under it check no segments (``segment_rounds`` 0)."""
 
     query = None
+    margin = None
 
     def __init__(self, radius: float, tilt: float):
         self.radius, self.cos, self.sin = radius, np.cos(tilt), np.sin(tilt)
 
-    def __call__(self, points):
+    def __call__(self, points, rows=None):
         x, y, z = points[:, 0], points[:, 1], points[:, 2]
         r = np.sqrt(x * x + y * y + z * z)
         normal = np.stack([(self.cos * x - self.sin * y) / r, (self.sin * x + self.cos * y) / r, z / r], axis=1)
@@ -122,28 +124,31 @@ def test_a_strand_solved_alone_or_in_any_chunk_gives_the_same_result(sphere, eng
     problem = fine_problem(hair, start, rng.uniform(0.5, 1.5, hair.n_particles),
                            hair.points + rng.normal(scale=2e-3, size=hair.points.shape))
     body = TiltedSphere(0.1, 0.4)
-    together, report = solve_strands(problem, body, engine=engine)
+    particles_only = SolveOptions(segment_rounds=0)
+    together, report = solve_strands(problem, body, options=particles_only, engine=engine)
     assert report.converged and len(set(report.open_groups)) > 2  # strands leave the loop at different iterations
     for s in range(problem.n_strands):
         single, rows = problem.strand_run(s, s + 1)
-        alone, _ = solve_strands(single, body, engine=engine)
+        alone, _ = solve_strands(single, body, options=particles_only, engine=engine)
         np.testing.assert_array_equal(alone, together[rows])
     for half, rows in [problem.strand_run(0, 4), problem.strand_run(4, problem.n_strands)]:
-        chunked, _ = solve_strands(half, body, engine=engine)
+        chunked, _ = solve_strands(half, body, options=particles_only, engine=engine)
         np.testing.assert_array_equal(chunked, together[rows])
 
 
 class RepellingStart:
     """A :class:`BodyDistance` stand-in under which only the given points are outside (1 m off a body below
     them); any other point is 1 m deep: every trial step of the line search raises the merit. Not a
-    distance (not 1-Lipschitz): solves under it query every trial point (``query_margin`` inf)."""
+    distance (not 1-Lipschitz): solves under it query every trial point (``query_margin`` inf) and, with no
+    mesh, check no segments (``segment_rounds`` 0)."""
 
     query = None
+    margin = None
 
     def __init__(self, start):
         self.start = start
 
-    def __call__(self, points):
+    def __call__(self, points, rows=None):
         at_start = (points[:, None, :] == self.start[None, :, :]).all(axis=2).any(axis=1)
         normal = np.zeros_like(points)
         normal[:, 1] = 1.0
@@ -153,7 +158,8 @@ class RepellingStart:
 @pytest.mark.parametrize("engine", ENGINES)
 def test_a_strand_without_a_better_trial_stays_and_stops(groom, engine):
     problem, first = groom
-    points, report = solve_strands(problem, RepellingStart(first), options=SolveOptions(query_margin=np.inf),
+    points, report = solve_strands(problem, RepellingStart(first),
+                                   options=SolveOptions(query_margin=np.inf, segment_rounds=0),
                                    start=first, engine=engine)
     np.testing.assert_array_equal(points, first)  # the shortest step is not taken anyway
     assert report.converged and report.iterations == 2  # two failed line searches in a row: stalled
@@ -212,9 +218,9 @@ class CountingDistance(BodyDistance):
 
     asked = 0
 
-    def __call__(self, points):
+    def __call__(self, points, rows=None):
         self.asked += len(points)
-        return super().__call__(points)
+        return super().__call__(points, rows)
 
 
 @pytest.mark.parametrize("engine", ENGINES)
