@@ -10,8 +10,9 @@ MakeHuman pair (average female -> heavy male) and a "long" groom, then measures:
   ``/proc/self/clear_refs``) during preprocessing and during the retargets, the latter plus
   each fine-level worker process at the largest one's peak (every process counted);
 * the per-stage split (distance grid, coarse, fine with µs per particle per iteration; the segments
-  through the body the solve cleared and the seconds that took; those left) and a least-squares
-  per-particle slope over the sizes.
+  through the body the solve cleared and the seconds that took; those left; how many iterations the
+  fine level's strands took and how many the cap stopped) and a least-squares per-particle slope over
+  the sizes.
 
 The kernels are warmed first (``hairport warmup``: loaded from numba's on-disk cache), as in a
 worker; the compile itself is measured by ``hairport warmup`` in a fresh cache.
@@ -142,6 +143,7 @@ def measure_size(args) -> dict:
         # the segments the solve found through the body and the seconds it took to clear them (both levels)
         "segments_cleared": sum(level.segments_crossing for level in [report.coarse, *report.fine] if level),
         "segment_seconds": sum(level.segment_seconds for level in [report.coarse, *report.fine] if level),
+        "fine_spread": report.fine_iterations(),
         "coarse_iterations": report.coarse.iterations if report.coarse else 0,
         "fine_iterations": fine_iterations,
         "fine_particles": fine_particles,
@@ -284,6 +286,10 @@ def print_tables(rows: list[dict], args) -> None:
               f"{r['fine']:.2f} ({r['fine_iterations']} it; {per_iteration:.3f} / {per_work:.3f} us/p/it); "
               f"metrics {r['metrics']:.2f}; {r['penetrating']} penetrating, {r.get('crossing', 0)} crossing segments "
               f"({r.get('segments_cleared', 0)} cleared in {r.get('segment_seconds', 0.0):.2f} s)")
+        spread = r.get("fine_spread")
+        if spread:
+            print(f"  {'':>10}  fine-level strands by iterations: p50 {spread['p50']}, p90 {spread['p90']}, "
+                  f"p99 {spread['p99']}, max {spread['max']}; {spread['capped']} of {spread['strands']} stopped by the cap")
     print()
     print("memory (MB): process before preprocessing / preprocessing peak / before the retarget / retarget peak"
           " (all processes); fine-level processes")

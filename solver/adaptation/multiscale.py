@@ -152,6 +152,24 @@ class MultiscaleReport:
     def pushed_out(self) -> int:
         return (self.coarse.pushed_out if self.coarse else 0) + sum(f.pushed_out for f in self.fine)
 
+    def fine_iterations(self) -> dict:
+        """How many outer iterations the fine level's strands took, over all chunks: ``strands``, ``p50``,
+        ``p90``, ``p99``, ``max`` (iterations) and ``capped`` (strands the iteration cap stopped, counted at the cap)."""
+        longest = max((len(f.stopped) for f in self.fine), default=0)
+        counts = np.zeros(longest, dtype=np.int64)
+        for level in self.fine:
+            counts[:len(level.stopped)] += level.stopped
+            if level.capped:
+                counts[len(level.stopped) - 1] += level.capped
+        total = int(counts.sum())
+        if total == 0:
+            return {"strands": 0, "p50": 0, "p90": 0, "p99": 0, "max": 0, "capped": 0}
+        cumulative = np.cumsum(counts)
+        share = {name: int(np.searchsorted(cumulative, q * total) + 1) for name, q in
+                 (("p50", 0.5), ("p90", 0.9), ("p99", 0.99))}
+        return {"strands": total, **share, "max": int(np.flatnonzero(counts)[-1] + 1),
+                "capped": int(sum(level.capped for level in self.fine))}
+
 
 @dataclass(eq=False)
 class FineLevel:

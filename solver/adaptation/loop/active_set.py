@@ -209,6 +209,7 @@ def run_active_set(
         report.end_iteration(iteration, outcome.merit, fraction, done, outcome.max_step, outcome.min_clearance,
                              len(open_groups), options.max_iterations, progress)
     report.converged = len(open_groups) == 0
+    report.capped = len(open_groups)
     points = level.points
     if not report.converged:
         points, report.pushed_out = push_out_short(

@@ -134,6 +134,11 @@ class SolveReport:
         conjugate-gradient steps.
     merit : list of float
         Active-set only, per iteration: Eq. 1 plus the clearance penalty after the step.
+    stopped : list of int
+        Active-set only, per iteration: the groups that stopped after it (how many iterations each
+        strand took, when strands are groups).
+    capped : int
+        Active-set only: groups still open when the iteration cap stopped the loop.
     segments_crossing, segment_rounds, segments_left : int
         Segments through the body after the loop, rounds of solving their strands again with margins,
         segments through it after them (:mod:`hairport.solver.adaptation.segments`).
@@ -154,6 +159,8 @@ class SolveReport:
     seconds: float = 0.0
     groups: int = 0
     converged_groups: int = 0
+    stopped: list[int] = field(default_factory=list)
+    capped: int = 0
     segments_crossing: int = 0
     segment_rounds: int = 0
     segments_left: int = 0
@@ -173,6 +180,7 @@ class SolveReport:
         self.merit.append(float(merit.sum()))
         self.step_fractions.append(float(fraction.min(initial=1.0)))
         self.converged_groups += int(done.sum())
+        self.stopped.append(int(done.sum()))
         self.max_step.append(float(max_step.max(initial=0.0)))
         self.min_clearance.append(float(min_clearance))
         self.iterations = iteration + 1

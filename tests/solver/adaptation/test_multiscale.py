@@ -125,3 +125,17 @@ def test_a_single_strand_has_no_inter_strand_term_and_retargets():
     assert result.metrics["interstrand_error_m"] == 0.0
     assert result.metrics["root_to_target_max"] <= 1e-12
     assert np.isfinite(result.hair.points).all()
+
+
+def test_the_report_counts_how_many_iterations_the_fine_strands_took(case):
+    _, target, hair, adaptable, multiscale = case
+    spread = multiscale.solve.fine_iterations()
+    fine = multiscale.solve.fine[0]
+    assert spread["strands"] == 75 == sum(fine.stopped) + fine.capped  # every normal strand, once
+    assert 1 <= spread["p50"] <= spread["p90"] <= spread["p99"] <= spread["max"] == fine.iterations
+    assert spread["capped"] == fine.capped == fine.groups - fine.converged_groups
+    # with a cap of 3 iterations, the strands still open after the third are counted as capped, at 3
+    capped = pipeline.retarget(adaptable, target, pipeline.RetargetOptions(method="multiscale", workers=1,
+                                                                           max_iterations=3))
+    spread = capped.solve.fine_iterations()
+    assert spread["max"] == 3 and spread["capped"] > 0 and spread["strands"] == 75

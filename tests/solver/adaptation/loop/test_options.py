@@ -42,7 +42,7 @@ def test_solve_report_fields_are_the_job_reports_keys():
     report = asdict(SolveReport(backend="active-set"))
     assert list(report) == [
         "backend", "iterations", "converged", "max_step", "min_clearance", "step_fractions", "pushed_out", "seconds",
-        "groups", "converged_groups", "segments_crossing", "segment_rounds", "segments_left", "segment_seconds",
+        "groups", "converged_groups", "stopped", "capped", "segments_crossing", "segment_rounds", "segments_left", "segment_seconds",
         "open_groups",
         "active_set_rounds", "cg_steps", "merit",
         "osqp_status", "osqp_iterations",
