@@ -85,6 +85,23 @@ def lift_margins(segments: np.ndarray, fixed: np.ndarray, crossings: SegmentCros
     return wanted
 
 
+def welded_run_ids(problem: StrandProblem) -> np.ndarray:
+    """``(N,) int64``: the run of particles joined by welded segments (a zero source direction) each one is in."""
+    starts_weld = ~np.any(problem.source_directions != 0.0, axis=1)
+    starts_weld[problem.offsets[1:] - 1] = False  # a tip starts no segment
+    return np.cumsum(np.concatenate([[True], ~starts_weld[:-1]])) - 1
+
+
+def welded_maximum(margin: np.ndarray, runs: np.ndarray) -> np.ndarray:
+    """Each particle's margin raised to the largest of its welded run (``runs``: :func:`welded_run_ids`), so that a
+    weld's particles keep one clearance and stay together."""
+    if len(margin) == 0:
+        return margin
+    largest = np.zeros(runs[-1] + 1)
+    np.maximum.at(largest, runs, margin)
+    return largest[runs]
+
+
 def segment_windows(offsets: np.ndarray, rows: np.ndarray, reach: int) -> np.ndarray:
     """The stretches of strands around some segments: ``(W, 2) int64`` particle ranges ``[first, stop)``.
 
@@ -181,6 +198,7 @@ def clear_segments(problem: StrandProblem, distance: BodyDistance, options: Solv
         return points
     began = time.perf_counter()
     segments = problem_segments(problem)
+    welded_runs = welded_run_ids(problem)
     query = distance.query
     margin = np.zeros(problem.n_particles)
     checked = np.arange(len(segments))
@@ -196,7 +214,8 @@ def clear_segments(problem: StrandProblem, distance: BodyDistance, options: Solv
         ends = np.unique(segments[crossings.rows].ravel())
         end_distance = np.zeros(problem.n_particles)
         end_distance[ends] = query.signed_distance(points[ends]).distance
-        margin = lift_margins(segments, problem.fixed, crossings, end_distance, options.eps_c, margin)
+        margin = welded_maximum(lift_margins(segments, problem.fixed, crossings, end_distance, options.eps_c, margin),
+                                welded_runs)
         windows = segment_windows(problem.offsets, segments[crossings.rows, 0], WINDOW_REACH)
         sub, index = window_problem(problem, windows, points)
         solved, _ = solve(sub, distance.with_margin(margin[index]), points[index])

@@ -228,9 +228,17 @@ def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, que
             pulled = np.union1d(pulled, strands)
         inside, _ = inside_depths(points, is_root, query)
         if len(inside):
-            points, inside = push_inside_out(points, inside, query, clearance)
+            points, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance)
         crossings = crossing_segments(points, segments, is_root, query)
     return points, crossings, inside, pulled
+
+
+def _whole_runs(rows: np.ndarray, welded: np.ndarray | None, is_root: np.ndarray) -> np.ndarray:
+    """``rows (K,) int64`` and the other free particles welded to them (one place: one push keeps them together)."""
+    if welded is None or len(rows) == 0:
+        return rows
+    run = np.cumsum(np.concatenate([[True], ~np.asarray(welded, dtype=bool)[:-1]])) - 1
+    return np.flatnonzero(np.isin(run, run[rows]) & ~is_root)
 
 
 def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery,

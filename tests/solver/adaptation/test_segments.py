@@ -8,7 +8,14 @@ from hairport.solver.adaptation.loop.options import SolveOptions
 from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.problem.energies import EnergyWeights
 from hairport.solver.adaptation.problem.strand_problem import group_energies, problem_from_shape_model
-from hairport.solver.adaptation.segments import MAX_MARGIN, lift_margins, segment_windows, window_problem
+from hairport.solver.adaptation.segments import (
+    MAX_MARGIN,
+    lift_margins,
+    segment_windows,
+    welded_maximum,
+    welded_run_ids,
+    window_problem,
+)
 from hairport.solver.adaptation.solve import solve_hairstyle, solve_strands
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments
@@ -153,3 +160,13 @@ def test_a_distance_with_margins_is_the_body_distance_less_each_particles_margin
     assert plain.margin is None  # the original is untouched
     with pytest.raises(ValueError, match="2 points asked about with 3 particles' margins"):
         shifted(points[:2])
+
+
+def test_a_welds_particles_share_the_largest_margin_of_the_weld():
+    hair = Hair.from_strands([np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [0.0, 0.0, 0.01], [0.0, 0.0, 0.02]]),
+                              np.array([[0.1, 0.0, 0.0], [0.1, 0.0, 0.01], [0.1, 0.0, 0.02]])])
+    problem = fine_problem(hair, hair.points, np.ones(hair.n_particles), hair.points)
+    runs = welded_run_ids(problem)
+    assert runs.tolist() == [0, 1, 1, 2, 3, 4, 5]  # particles 1 and 2 coincide; a tip never joins the next root
+    margin = np.array([0.0, 0.0, 2e-3, 1e-3, 0.0, 5e-4, 0.0])
+    assert welded_maximum(margin, runs).tolist() == [0.0, 2e-3, 2e-3, 1e-3, 0.0, 5e-4, 0.0]
