@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from hairport.solver.adaptation.loop.options import SolveOptions, SolveReport
 from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.problem.strand_problem import StrandProblem
-from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments
+from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments, weld_runs
 
 #: particles on either side of a crossing segment solved again with it (the rest of its strand held): a
 #: lift of a segment's ends spreads along the strand over a few segments, and a whole 100-particle strand
@@ -76,10 +76,7 @@ def lift_margins(segments: np.ndarray, fixed: np.ndarray, crossings: SegmentCros
     margin : (N,) float64
         A new array, at least ``margin`` everywhere, new ones at most :data:`MAX_MARGIN`.
     """
-    lever = crossings.levers(segments, fixed)
-    moving = lever > 0.0
-    ends = segments[crossings.rows][moving]
-    lift = np.broadcast_to(crossings.depth[:, None], lever.shape)[moving] / lever[moving] + eps_c
+    ends, _, lift = crossings.end_lifts(segments, fixed, eps_c)
     wanted = np.array(margin, dtype=np.float64)
     np.maximum.at(wanted, ends, np.minimum(distance[ends] + lift - eps_c, MAX_MARGIN))
     return wanted
@@ -89,7 +86,7 @@ def welded_run_ids(problem: StrandProblem) -> np.ndarray:
     """``(N,) int64``: the run of particles joined by welded segments (a zero source direction) each one is in."""
     starts_weld = ~np.any(problem.source_directions != 0.0, axis=1)
     starts_weld[problem.offsets[1:] - 1] = False  # a tip starts no segment
-    return np.cumsum(np.concatenate([[True], ~starts_weld[:-1]])) - 1
+    return weld_runs(starts_weld)
 
 
 def welded_maximum(margin: np.ndarray, runs: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 
 from hairport.solver.mesh.clearance import push_inside_out
 from hairport.solver.mesh.query import MeshQuery
-from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments
+from hairport.solver.mesh.segment_crossing import SegmentCrossings, crossing_segments, weld_runs
 from hairport.solver.model.errors import PenetrationRemaining
 
 
@@ -135,17 +135,14 @@ def push_segment_ends(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
     points : (N, 3) float64
         A new array.
     """
-    lever = crossings.levers(segments, is_root)
-    moving = lever > 0.0
-    ends = segments[crossings.rows][moving]
-    lift = np.broadcast_to(crossings.depth[:, None], lever.shape)[moving] / lever[moving] + clearance
-    push = lift[:, None] * np.repeat(crossings.normal[:, None, :], 2, axis=1)[moving]
+    ends, crossing, lift = crossings.end_lifts(segments, is_root, clearance)
+    push = lift[:, None] * crossings.normal[crossing]
     out = np.array(points, dtype=np.float64)
     up, down = np.zeros_like(out), np.zeros_like(out)
     np.maximum.at(up, ends, np.maximum(push, 0.0))
     np.minimum.at(down, ends, np.minimum(push, 0.0))
     if welded is not None and len(out):
-        run = np.cumsum(np.concatenate([[True], ~np.asarray(welded, dtype=bool)[:-1]])) - 1
+        run = weld_runs(welded)
         run_up, run_down = np.zeros((run[-1] + 1, 3)), np.zeros((run[-1] + 1, 3))
         np.maximum.at(run_up, run, up)
         np.minimum.at(run_down, run, down)
@@ -237,7 +234,7 @@ def _whole_runs(rows: np.ndarray, welded: np.ndarray | None, is_root: np.ndarray
     """``rows (K,) int64`` and the other free particles welded to them (one place: one push keeps them together)."""
     if welded is None or len(rows) == 0:
         return rows
-    run = np.cumsum(np.concatenate([[True], ~np.asarray(welded, dtype=bool)[:-1]])) - 1
+    run = weld_runs(welded)
     return np.flatnonzero(np.isin(run, run[rows]) & ~is_root)
 
 

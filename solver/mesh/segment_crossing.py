@@ -85,6 +85,24 @@ class SegmentCrossings:
         lever[is_root[second], 1] = 0.0
         return lever
 
+    def end_lifts(self, segments: np.ndarray, is_root: np.ndarray,
+                  clearance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """How far each free end of the crossing segments must rise along a normal to bring its segment's deepest
+        point out of the body: its depth over the end's lever (:meth:`levers`) plus ``clearance`` (m).
+
+        Returns
+        -------
+        ends : (J,) int64
+            The free ends (a particle may appear once per crossing segment it ends).
+        crossing : (J,) int64
+            The crossing (of these rows) each belongs to.
+        lift : (J,) float64
+        """
+        lever = self.levers(segments, is_root)
+        moving = lever > 0.0
+        crossing = np.broadcast_to(np.arange(self.count)[:, None], lever.shape)[moving]
+        return segments[self.rows][moving], crossing, self.depth[crossing] / lever[moving] + clearance
+
     def through(self, points: np.ndarray, segments: np.ndarray, query: MeshQuery) -> np.ndarray:
         """``(K,) bool``: the crossing segments with an end whose own way out of the body opposes the one at
         their deepest point: through a thin part (a hand), where lifting the ends along a normal cannot
@@ -127,6 +145,12 @@ class SegmentCrossings:
         strand = int(np.searchsorted(offsets, first, side="right") - 1)
         return {"count": self.count, "deepest_m": float(self.depth[worst]), "deepest_strand": strand,
                 "deepest_segment": first - int(offsets[strand])}
+
+
+def weld_runs(welded: np.ndarray) -> np.ndarray:
+    """``(N,) int64``: the run of particles joined by degenerate segments each particle is in (``welded (N,) bool``:
+    the particles that start one; a strand's tip starts none, so no run spans two strands)."""
+    return np.cumsum(np.concatenate([[True], ~np.asarray(welded, dtype=bool)[:-1]])) - 1
 
 
 def segment_entries(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray,
