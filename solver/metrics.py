@@ -107,6 +107,11 @@ def penetration(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, eps_c
     for start in range(0, len(free), METRICS_CHUNK):  # bounds the query's temporaries
         rows = free[start : start + METRICS_CHUNK]
         distance[start : start + len(rows)] = query.signed_distance(points[rows]).distance
+    return penetration_stats(distance, eps_c)
+
+
+def penetration_stats(distance: np.ndarray, eps_c: float) -> dict:
+    """:func:`penetration`'s statistics of the signed distances ``(N_free,)`` of the non-root particles."""
     return {
         "inside": int(np.sum(distance < 0.0)),
         "below_clearance": int(np.sum(distance < eps_c - CLEARANCE_REPORT_TOLERANCE)),

@@ -43,7 +43,7 @@ from hairport.solver.mesh.distance_grid import DistanceGrid
 from hairport.solver.mesh.penetration import resolve_crossings, resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.segment_crossing import crossing_segments
-from hairport.solver.metrics import hairstyle_metrics, particle_distances, penetration
+from hairport.solver.metrics import hairstyle_metrics, particle_distances, penetration, penetration_stats
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import require_no_stray_strands
 from hairport.solver.model.frame import InputFrame
@@ -296,10 +296,10 @@ def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: Retarg
         The particles' check.
     segments_resolved : dict or None
         The segments' check (None for a baseline).
-    body_distance : dict or None
-        :func:`~hairport.solver.metrics.penetration` at ``points`` (None when the segments' check moved them).
+    body_distance : dict
+        :func:`~hairport.solver.metrics.penetration` at ``points``.
     crossings : SegmentCrossings or None
-        The segments through the body at ``points`` (none; None when not checked or moved).
+        The segments through the body at ``points`` (none; None for a baseline, whose segments are not checked).
     """
     # one query of every particle serves both checks and, when they move nothing, the metrics
     body_distance = penetration(points, hair.at_root, body, options.eps_c)
@@ -309,11 +309,12 @@ def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: Retarg
         body_distance = penetration(points, hair.at_root, body, options.eps_c)
     if options.method not in SOLVER_METHODS:
         return points, resolved, None, body_distance, None
-    points, segments_resolved, crossings = resolve_crossings(
+    points, segments_resolved, crossings, distance = resolve_crossings(
         points, hair.segments, hair.at_root, body, options.eps_c, hair.offsets, name,
         particle_distances(body_distance, hair.at_root), hair.short_segments)
     if segments_resolved["segments"]:
-        return points, resolved, segments_resolved, None, None
+        # the check queried the particles it moved again: its distances are the result's
+        body_distance = penetration_stats(distance[~hair.at_root], options.eps_c)
     return points, resolved, segments_resolved, body_distance, crossings
 
 

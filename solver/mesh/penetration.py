@@ -138,16 +138,19 @@ def push_segment_ends(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
     ends, crossing, lift = crossings.end_lifts(segments, is_root, clearance)
     push = lift[:, None] * crossings.normal[crossing]
     out = np.array(points, dtype=np.float64)
-    up, down = np.zeros_like(out), np.zeros_like(out)
-    np.maximum.at(up, ends, np.maximum(push, 0.0))
-    np.minimum.at(down, ends, np.minimum(push, 0.0))
-    if welded is not None and len(out):
-        run = weld_runs(welded)
-        run_up, run_down = np.zeros((run[-1] + 1, 3)), np.zeros((run[-1] + 1, 3))
-        np.maximum.at(run_up, run, up)
-        np.minimum.at(run_down, run, down)
-        up, down = run_up[run], run_down[run]
-    return out + up + down
+    run = weld_runs(welded) if welded is not None and np.any(welded) else None
+    # the pushes of the few ends (or of their weld runs), not arrays over every particle
+    moving, slot = np.unique(ends if run is None else run[ends], return_inverse=True)
+    up, down = np.zeros((len(moving), 3)), np.zeros((len(moving), 3))
+    np.maximum.at(up, slot, np.maximum(push, 0.0))
+    np.minimum.at(down, slot, np.minimum(push, 0.0))
+    if run is None:
+        out[moving] = out[moving] + up + down
+        return out
+    members = np.flatnonzero(np.isin(run, moving))
+    slot = np.searchsorted(moving, run[members])
+    out[members] = out[members] + up[slot] + down[slot]
+    return out
 
 
 def pull_tails(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, crossings: SegmentCrossings,
@@ -202,14 +205,36 @@ def pull_tails(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, cr
     return out, strand
 
 
+def _requery(before: np.ndarray, after: np.ndarray, distance: np.ndarray, is_root: np.ndarray,
+             query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
+    """``distance (N,)`` at ``after (N, 3)``, given it at ``before (N, 3)``: only the free particles that moved are
+    queried (a round of the check moves a few strands of the whole hairstyle). A new array, and ``(N,) bool``:
+    the particles that moved."""
+    moved = np.any(after != before, axis=1) & ~is_root
+    distance = distance.copy()
+    if moved.any():
+        distance[moved] = query.signed_distance(after[moved]).distance
+    return distance, moved
+
+
+def _recheck(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery, distance: np.ndarray,
+             crossings: SegmentCrossings, moved: np.ndarray) -> SegmentCrossings:
+    """:func:`.segment_crossing.crossing_segments` at ``points`` given ``crossings`` before the particles where
+    ``moved (N,) bool`` moved: only the segments with a moved end are cast again (the others have not changed)."""
+    touched = np.flatnonzero(moved[segments].any(axis=1))
+    kept = crossings.subset(~np.isin(crossings.rows, touched))
+    return kept.joined(crossing_segments(points, segments, is_root, query, distance, among=touched))
+
+
 def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float,
-              offsets: np.ndarray, welded: np.ndarray | None, crossings: SegmentCrossings,
-              classify: bool) -> tuple[np.ndarray, SegmentCrossings, np.ndarray, np.ndarray]:
+              offsets: np.ndarray, welded: np.ndarray | None, crossings: SegmentCrossings, distance: np.ndarray,
+              classify: bool) -> tuple[np.ndarray, SegmentCrossings, np.ndarray, np.ndarray, np.ndarray]:
     """Up to :data:`SEGMENT_PUSH_ROUNDS` rounds of moving the crossing segments out: pushes for those that sag,
     tail moves for those through a thin part (``classify``: by
     :meth:`~.segment_crossing.SegmentCrossings.through`, else none) and, after :data:`PUSH_ONLY_ROUNDS`,
-    for all; particles pushed inside go out again. Returns the points, the crossings and the particles
-    inside after the last round, and the strands whose tails moved."""
+    for all; particles pushed inside go out again. ``distance (N,)`` is every particle's signed distance at
+    ``points`` (roots: anything). Returns the points, the crossings and the particles inside after the last
+    round, the strands whose tails moved and the signed distances at the returned points."""
     pulled = np.zeros(0, dtype=np.int64)
     inside = np.zeros(0, dtype=np.int64)
     for round_number in range(SEGMENT_PUSH_ROUNDS):
@@ -218,16 +243,20 @@ def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, que
         late = round_number >= PUSH_ONLY_ROUNDS
         through = (crossings.through(points, segments, query) if classify and not late
                    else np.full(crossings.count, late))
-        points = push_segment_ends(points, segments, is_root, crossings.subset(~through), clearance, welded)
+        moved = push_segment_ends(points, segments, is_root, crossings.subset(~through), clearance, welded)
         if through.any():
-            points, strands = pull_tails(points, segments, is_root, crossings.subset(through), offsets, query,
-                                         clearance)
+            moved, strands = pull_tails(moved, segments, is_root, crossings.subset(through), offsets, query,
+                                        clearance)
             pulled = np.union1d(pulled, strands)
-        inside, _ = inside_depths(points, is_root, query)
+        distance, changed = _requery(points, moved, distance, is_root, query)
+        points = moved
+        inside, _ = inside_depths(points, is_root, query, distance)
         if len(inside):
-            points, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance)
-        crossings = crossing_segments(points, segments, is_root, query)
-    return points, crossings, inside, pulled
+            pushed, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance)
+            distance, pushed_out = _requery(points, pushed, distance, is_root, query)
+            points, changed = pushed, changed | pushed_out
+        crossings = _recheck(points, segments, is_root, query, distance, crossings, changed)
+    return points, crossings, inside, pulled, distance
 
 
 def _whole_runs(rows: np.ndarray, welded: np.ndarray | None, is_root: np.ndarray) -> np.ndarray:
@@ -241,7 +270,7 @@ def _whole_runs(rows: np.ndarray, welded: np.ndarray | None, is_root: np.ndarray
 def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery,
                       clearance: float, offsets: np.ndarray, body: str | None = None,
                       distance: np.ndarray | None = None,
-                      welded: np.ndarray | None = None) -> tuple[np.ndarray, dict, SegmentCrossings]:
+                      welded: np.ndarray | None = None) -> tuple[np.ndarray, dict, SegmentCrossings, np.ndarray]:
     """Push away the segments a method left through the body, or refuse the result.
 
     Rounds of :func:`push_segment_ends` for the segments that sag into the body from one side, and of
@@ -279,24 +308,33 @@ def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
         ``tails_moved``: strands whose tails were taken back across a thin part (:func:`pull_tails`).
     crossings : SegmentCrossings
         None cross at the returned points: the last check's (empty) result.
+    distance : (N,) float64
+        Each particle's signed distance at the returned points (0 at the roots): ``distance`` itself when given
+        and nothing moved; only the particles that moved were queried again.
 
     Raises
     ------
     PenetrationRemaining
         Some segment still passes through the body after :data:`SEGMENT_PUSH_ROUNDS` rounds.
     """
+    is_root = np.asarray(is_root, dtype=bool)
+    if distance is None:
+        free = np.flatnonzero(~is_root)
+        distance = np.zeros(len(points))
+        distance[free] = query.signed_distance(points[free]).distance if len(free) else 0.0
+    distance = np.where(is_root, 0.0, np.asarray(distance, dtype=np.float64))
     crossings = crossing_segments(points, segments, is_root, query, distance)
     resolved = {"segments": crossings.count, "deepest_m": crossings.report(segments, offsets)["deepest_m"],
                 "tails_moved": 0}
     if crossings.count == 0:
-        return points, resolved, crossings
+        return points, resolved, crossings, distance
     # two orders of the same moves, each from the method's result: the first that clears every segment wins
     for classify in (True, False):
-        moved, after, inside, pulled = _move_out(points, segments, is_root, query, clearance, offsets, welded,
-                                                 crossings, classify)
+        moved, after, inside, pulled, moved_distance = _move_out(points, segments, is_root, query, clearance, offsets,
+                                                                 welded, crossings, distance, classify)
         if after.count == 0 and len(inside) == 0:
             resolved["tails_moved"] = int(len(pulled))
-            return moved, resolved, after
+            return moved, resolved, after, moved_distance
     crossings = after
     left = crossings.report(segments, offsets)
     raise PenetrationRemaining(

@@ -127,6 +127,13 @@ class SegmentCrossings:
         return SegmentCrossings(self.rows[keep], self.depth[keep], self.deepest_point[keep], self.deepest_at[keep],
                                 self.normal[keep])
 
+    def joined(self, other: "SegmentCrossings") -> "SegmentCrossings":
+        """These crossings and ``other``'s (of other rows), rows ascending."""
+        order = np.argsort(np.concatenate([self.rows, other.rows]), kind="stable")
+        return SegmentCrossings(*(np.concatenate([mine, theirs])[order] for mine, theirs in (
+            (self.rows, other.rows), (self.depth, other.depth), (self.deepest_point, other.deepest_point),
+            (self.deepest_at, other.deepest_at), (self.normal, other.normal))))
+
     def report(self, segments: np.ndarray, offsets: np.ndarray) -> dict:
         """``{"count", "deepest_m", "deepest_strand", "deepest_segment"}`` for the metrics: the deepest crossing
         segment as its strand and its index along it (from the root); None when none crosses.
@@ -183,7 +190,7 @@ def segment_entries(points: np.ndarray, segments: np.ndarray, is_root: np.ndarra
 
 
 def crossing_segments(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery,
-                      distance: np.ndarray | None = None) -> SegmentCrossings:
+                      distance: np.ndarray | None = None, among: np.ndarray | None = None) -> SegmentCrossings:
     """The segments between two particles outside the body that pass through it, and how deep.
 
     Segments with an end inside the body are the particles' check's (:mod:`.penetration`), not counted here.
@@ -200,6 +207,8 @@ def crossing_segments(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
         Every particle's signed distance to the body (roots: anything), when the caller has it. Only
         segments shorter than the sum of their ends' distances can reach the body (every point of a
         segment is within half its length of an end), so only those are cast.
+    among : (C,) int64, optional
+        Rows of ``segments`` to check, ascending (all by default); the rest are not counted.
     """
     points = np.asarray(points, dtype=np.float64)
     segments = np.asarray(segments, dtype=np.int64).reshape(-1, 2)
@@ -211,9 +220,11 @@ def crossing_segments(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
         free = ends[~is_root[ends]]
         distance[free] = query.signed_distance(points[free]).distance if len(free) else 0.0
     distance = np.where(is_root, 0.0, distance)
-    ends_out = (distance[segments] >= 0.0).all(axis=1)
-    length = np.linalg.norm(points[segments[:, 1]] - points[segments[:, 0]], axis=1)
-    near = np.flatnonzero(ends_out & (distance[segments].sum(axis=1) < length))
+    rows = np.arange(len(segments)) if among is None else np.asarray(among, dtype=np.int64)
+    ends = segments[rows]
+    ends_out = (distance[ends] >= 0.0).all(axis=1)
+    length = np.linalg.norm(points[ends[:, 1]] - points[ends[:, 0]], axis=1)
+    near = rows[ends_out & (distance[ends].sum(axis=1) < length)]
     candidates = near[segment_entries(points, segments[near], is_root, query)]
     return _depths(points, segments, candidates, query)
 

@@ -108,7 +108,7 @@ def test_a_segment_sagging_into_a_shoulder_has_its_ends_lifted_by_its_depth_plus
     segments, before = strand_crossings(points, offsets, sphere)
     assert before.rows.tolist() == [1]
     is_root = np.array([True, False, False])
-    out, resolved, after = resolve_crossings(points, segments, is_root, sphere, EPS_C, offsets, "shoulder")
+    out, resolved, after, _ = resolve_crossings(points, segments, is_root, sphere, EPS_C, offsets, "shoulder")
     assert resolved == {"segments": 1, "deepest_m": pytest.approx(before.depth[0]), "tails_moved": 0}
     assert after.count == 0
     lift = np.linalg.norm(out - points, axis=1)
@@ -125,7 +125,7 @@ def test_a_strand_through_a_thin_plate_has_its_tail_taken_back_across_it():
     past_the_edge = np.array([[0.04, 0.0, 0.05], [0.045, 0.0, 0.0115], [0.049, 0.0, -0.0115], [0.09, 0.0, -0.008]])
     segments, before = strand_crossings(past_the_edge, offsets, plate)
     assert before.rows.tolist() == [1]
-    out, resolved, after = resolve_crossings(past_the_edge, segments, is_root, plate, EPS_C, offsets, "plate")
+    out, resolved, after, _ = resolve_crossings(past_the_edge, segments, is_root, plate, EPS_C, offsets, "plate")
     assert resolved["segments"] == 1 and resolved["tails_moved"] == 1 and after.count == 0
     assert (plate.signed_distance(out[1:]).distance > 0).all() and (out[1:3, 2] > 0).all()  # on the root's side
     # the tail keeps its shape (but for the pushes after it, tens of micrometres)
@@ -133,9 +133,30 @@ def test_a_strand_through_a_thin_plate_has_its_tail_taken_back_across_it():
 
     # a tail that goes on straight through: pulled back segment after segment, it ends folded on the near side
     straight_through = np.array([[0.0, 0.0, 0.05], [0.0, 0.0, 0.0115], [0.004, 0.0, -0.0115], [0.008, 0.0, -0.04]])
-    out, resolved, after = resolve_crossings(straight_through, segments, is_root, plate, EPS_C, offsets, "plate")
+    out, resolved, after, _ = resolve_crossings(straight_through, segments, is_root, plate, EPS_C, offsets, "plate")
     assert after.count == 0 and resolved["segments"] == 1
     assert (out[1:, 2] > 0.0015).all() and (plate.signed_distance(out[1:]).distance > 0).all()
+
+
+def test_the_check_returns_the_distances_at_its_result_querying_only_what_moved(monkeypatch):
+    """The rounds query again only the particles they moved; the distances handed back are a fresh query's."""
+    plate = collision_query(*boxes(([-0.05, -0.05, -0.0015], [0.05, 0.05, 0.0015])), "plate")
+    offsets = np.array([0, 5])
+    is_root = np.array([True, False, False, False, False])
+    # a particle far above that no round moves, then a tail through the plate
+    points = np.array([[0.04, 0.0, 0.05], [0.04, 0.0, 0.08], [0.045, 0.0, 0.0115], [0.049, 0.0, -0.0115],
+                       [0.09, 0.0, -0.008]])
+    segments, _ = strand_crossings(points, offsets, plate)
+    asked = []
+    signed_distance = plate.signed_distance
+    monkeypatch.setattr(plate, "signed_distance", lambda p: asked.append(np.array(p)) or signed_distance(p))
+    out, resolved, after, distance = resolve_crossings(points, segments, is_root, plate, EPS_C, offsets, "plate")
+    assert resolved["segments"] == 1 and after.count == 0
+    np.testing.assert_array_equal(out[:2], points[:2])  # the root and the particle above stay
+    assert distance[0] == 0.0
+    np.testing.assert_array_equal(distance[1:], signed_distance(out[1:]).distance)
+    # one query of every free particle, then of the moved ones only: the particle above is asked about once
+    assert len(asked[0]) == 4 and sum(int((query == points[1]).all(axis=1).sum()) for query in asked) == 1
 
 
 def test_a_segment_the_rounds_do_not_clear_refuses_the_result(monkeypatch):
@@ -161,7 +182,7 @@ def test_welded_particles_at_a_crossing_segments_end_move_together():
     points = np.vstack([[0.0, 0.0, 0.2], chord[0], chord[1], chord[1]])  # the chord's end repeated
     segments = np.array([[0, 1], [1, 2], [2, 3]])
     welded = np.array([False, False, True, False])
-    out, _, after = resolve_crossings(points, segments, np.array([True, False, False, False]), sphere, EPS_C,
+    out, _, after, _ = resolve_crossings(points, segments, np.array([True, False, False, False]), sphere, EPS_C,
                                       np.array([0, 4]), "ball", welded=welded)
     assert after.count == 0 and np.linalg.norm(out[2] - points[2]) > 1e-4
     np.testing.assert_array_equal(out[3], out[2])

@@ -80,3 +80,24 @@ def test_a_segment_with_an_end_inside_is_the_particle_checks_not_this_one(sphere
     segments = np.array([[0, 1], [1, 2]])
     assert segment_entries(points, segments, np.zeros(3, dtype=bool), sphere).tolist() == [True, True]
     assert crossing_segments(points, segments, np.zeros(3, dtype=bool), sphere).rows.tolist() == [0]
+
+
+def test_a_check_among_some_segments_joined_with_the_rest_is_the_whole_check(sphere):
+    """``among`` casts only those rows; the crossings of two disjoint parts, joined, are those of the whole."""
+    rng = np.random.default_rng(7)
+    n = 600
+    centres = rng.normal(size=(n, 3))
+    centres = (RADIUS + rng.uniform(0.0, 0.004, n))[:, None] * centres / np.linalg.norm(centres, axis=1, keepdims=True)
+    offsets = rng.normal(size=(n, 3)) * rng.uniform(0.002, 0.02, n)[:, None]
+    points = np.vstack([centres - offsets, centres + offsets])
+    segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
+    is_root = np.zeros(2 * n, dtype=bool)
+    whole = crossing_segments(points, segments, is_root, sphere)
+    some = np.flatnonzero(rng.random(n) < 0.4)
+    rest = np.setdiff1d(np.arange(n), some)
+    first = crossing_segments(points, segments, is_root, sphere, among=some)
+    second = crossing_segments(points, segments, is_root, sphere, among=rest)
+    assert 0 < first.count < whole.count and set(first.rows) <= set(some)
+    joined = second.joined(first)
+    for name in ("rows", "depth", "deepest_point", "deepest_at", "normal"):
+        np.testing.assert_array_equal(getattr(joined, name), getattr(whole, name))
