@@ -26,7 +26,13 @@ from hairport.solver.adaptation.loop.active_set import NewtonStep, StepOutcome
 from hairport.solver.adaptation.loop.options import MERIT_PENALTY_FACTOR, SolveOptions
 from hairport.solver.adaptation.problem.constraints import BodyDistance, QueryAnchors, linearised_clearance, reaching
 from hairport.solver.adaptation.problem.energies import EnergyWeights
-from hairport.solver.adaptation.problem.strand_problem import NewtonSystem, StrandProblem, group_energies, newton_system
+from hairport.solver.adaptation.problem.strand_problem import (
+    NewtonSystem,
+    StrandProblem,
+    group_energies,
+    newton_system,
+    strand_energies,
+)
 
 
 class NumpyLevel:
@@ -79,12 +85,14 @@ class NumpyLevel:
         np.maximum.at(largest, group, np.abs(multipliers))
         self.penalty[open_groups] = np.maximum(self.penalty[open_groups], MERIT_PENALTY_FACTOR * largest)
         particle_penalty = self.penalty[open_groups][group]
-        merit_now = group_energies(sub, p, weights, group, k, particle_penalty, dist, options.eps_c)
         model_change = np.sum(step * (system.gradient + 0.5 * system.matvec(step)), axis=1)
         strand_predicted = np.bincount(sub.strand_of, model_change, minlength=sub.n_strands)
-        # uncoupled, a group is a strand: the per-strand merits are the group merits
-        strand_merit_now = merit_now if not coupled else group_energies(
-            sub, p, weights, sub.strand_of, sub.n_strands, particle_penalty, dist, options.eps_c)
+        if coupled:
+            strand_merit_now = self._strand_merits(p, dist)
+            merit_now = np.array([strand_merit_now.sum()])
+        else:  # a group is a strand: the per-strand merits are the group merits
+            merit_now = strand_merit_now = group_energies(sub, p, weights, group, k, particle_penalty, dist,
+                                                          options.eps_c)
         self.sub, self.index, self.group, self.k, self.p, self.step = sub, index, group, k, p, step
         self.dist, self.normal_at, self.near_at = dist, normal, near
         self.particle_penalty, self.strand_merit_now = particle_penalty, strand_merit_now
@@ -133,10 +141,16 @@ class NumpyLevel:
         self.trial[todo] = moved
         self.trial_dist[todo], self.trial_normal[todo], self.trial_near[todo] = d, nrm, nr
         self.queried[todo] = asked
-        self.strand_merit_trial = group_energies(
+        self.strand_merit_trial = self._strand_merits(self.trial, self.trial_dist) if self.coupled else group_energies(
             sub, self.trial, self.weights, sub.strand_of, sub.n_strands, self.particle_penalty, self.trial_dist,
             options.eps_c)
         return self.strand_merit_trial
+
+    def _strand_merits(self, points: np.ndarray, distance: np.ndarray) -> np.ndarray:
+        """Coupled: each strand's merit ``(S,)`` at ``points (N, 3)`` by the compiled kernel (one penalty for all:
+        the group's)."""
+        return strand_energies(self.problem, points, self.weights, float(self.penalty[0]), distance,
+                               self.options.eps_c)
 
     def keep(self, accepted: np.ndarray) -> None:
         """Nothing: the trial points stay in the trial arrays until :meth:`settle`."""
@@ -149,8 +163,7 @@ class NumpyLevel:
             trial[stay], trial_dist[stay] = self.p[stay], self.dist[stay]
             self.trial_normal[stay], self.trial_near[stay] = self.normal_at[stay], self.near_at[stay]
             strand_merit_trial = np.where(stays, self.strand_merit_now, strand_merit_trial) if not self.coupled \
-                else group_energies(sub, trial, self.weights, sub.strand_of, sub.n_strands, self.particle_penalty,
-                                    trial_dist, self.options.eps_c)
+                else self._strand_merits(trial, trial_dist)
         # coupled, the group failed when every strand stayed
         failed = stays if not self.coupled else np.array([stays.all()])
         moved = ~stays[sub.strand_of]

@@ -35,6 +35,7 @@ from hairport.solver.adaptation.loop.options import (
     SolveOptions,
     SolveReport,
 )
+from hairport.solver.adaptation.problem import merit_kernels
 from hairport.solver.adaptation.problem.constraints import BodyDistance
 from hairport.solver.adaptation.problem.energies import (
     NEGATIVE_CURVATURE_SHARE,
@@ -234,11 +235,11 @@ class CompiledLevel:
 
     def _merits(self, strands: np.ndarray, first_rows: np.ndarray, positions: np.ndarray, distance: np.ndarray,
                 out: np.ndarray) -> None:
-        """:func:`.line_search_kernels.strand_merits` of ``strands`` whose rows start at ``first_rows`` of
+        """:func:`.merit_kernels.strand_merits` of ``strands`` whose rows start at ``first_rows`` of
         ``positions`` and ``distance``, into ``out``."""
-        line_search_kernels.strand_merits(strands, self.offsets, first_rows, positions, distance, *self.problem_arrays,
-                                          self.fixed, self.alpha, self.beta, *self.spacing, self.penalty, self.eps_c,
-                                          MIN_SEGMENT_LENGTH, WELD_LENGTH_M, out)
+        merit_kernels.strand_merits(strands, self.offsets, first_rows, positions, distance, *self.problem_arrays,
+                                    self.fixed, self.alpha, self.beta, *self.spacing, self.penalty, self.eps_c,
+                                    MIN_SEGMENT_LENGTH, WELD_LENGTH_M, out)
 
     def trial_merits(self, fraction: np.ndarray, accepted: np.ndarray) -> np.ndarray:
         eps_c, offsets = self.eps_c, self.offsets

@@ -1,7 +1,6 @@
-"""Compiled kernels of the uncoupled loop's line search (:mod:`.fine_solve`): merits, trial points, commits.
+"""Compiled kernels of the uncoupled loop's line search (:mod:`.fine_solve`): trial points, commits (the merits
+are :mod:`~hairport.solver.adaptation.problem.merit_kernels`').
 
-* :func:`strand_merit`, :func:`strand_merits`: a strand's merit, Eq. 1 plus its own l1
-  clearance penalty (:func:`.strand_problem.group_energies`), at the iterate or at trial points;
 * :func:`gather_trial_points`: the trial points ``p + fraction * step`` of the strands still
   backtracking, packed back to back for one batched distance query;
 * :func:`commit_trial_points`: the accepted ones written back with their step length and
@@ -21,65 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hairport.solver.adaptation.problem.spacing import band_excess
 from hairport.solver.jit import kernel, warms
-
-
-@kernel
-def strand_merit(first, count, points, distance, rows, source_directions, initial, pull_weight, features, gamma,
-                 rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c,
-                 min_length, weld_length) -> float:
-    """One strand's merit: Eq. 1 and the spacing term plus ``penalty`` times its clearance short of ``eps_c``
-    (:func:`.strand_problem.group_energies`).
-
-    Parameters
-    ----------
-    first, count : int
-        The strand's first particle in the chunk's arrays and its particle count.
-    points : (P, 3) float64
-        Positions, the strand's at rows ``rows + j`` (the chunk's, or packed trial points).
-    distance : (P,) float64
-        Signed distances of those rows.
-    rows : int
-        The strand's first row in ``points`` and ``distance``.
-    source_directions, initial, features : (N, 3) float64
-    pull_weight, gamma, rest_lengths : (N,) float64
-    fixed : (N,) bool
-    alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c : float
-    min_length, weld_length : float
-        :data:`.polyline.MIN_SEGMENT_LENGTH`, :data:`.energies.WELD_LENGTH_M` (the spring of a welded
-        segment: one whose source direction is 0).
-    """
-    total = 0.0
-    for j in range(count):
-        i = first + j
-        r = rows + j
-        value = 0.0
-        if j + 1 < count:
-            e0 = points[r + 1, 0] - points[r, 0]
-            e1 = points[r + 1, 1] - points[r, 1]
-            e2 = points[r + 1, 2] - points[r, 2]
-            d = source_directions[i]
-            if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0:  # welded: || e ||^2 / w^2, no spacing term
-                value = (e0 * e0 + e1 * e1 + e2 * e2) / (weld_length * weld_length)
-            else:
-                length = max(np.sqrt(e0 * e0 + e1 * e1 + e2 * e2), min_length)
-                value = (e0 / length - d[0]) ** 2 + (e1 / length - d[1]) ** 2 + (e2 / length - d[2]) ** 2
-                rest = rest_lengths[i] if spacing != 0.0 else 0.0  # unread without the term (may be a stub)
-                if rest > 0.0:
-                    value += spacing * band_excess(length / rest, spacing_low, spacing_high) ** 2
-        w = pull_weight[i]
-        inter = 0.0
-        body = 0.0
-        for a in range(3):
-            inter += (w * points[r, a] - features[i, a]) ** 2
-            body += (points[r, a] - initial[i, a]) ** 2
-        value += alpha * gamma[i] * inter
-        value += beta * gamma[i] * body
-        if penalty > 0 and not fixed[i]:
-            value += penalty * max(eps_c - distance[r], 0.0)
-        total += value
-    return total
 
 
 @kernel
@@ -107,38 +48,6 @@ def gather_trial_points(strands, offsets, packed_offsets, points, step, fraction
             for a in range(3):
                 moved[r, a] = points[first + j, a] + fraction[t] * step[first + j, a]
             free[r] = not fixed[first + j]
-
-
-@kernel
-def strand_merits(strands, offsets, first_rows, positions, distance, source_directions, initial, pull_weight,
-                  features, gamma, rest_lengths, fixed, alpha, beta, spacing, spacing_low, spacing_high, penalty, eps_c,
-                  min_length, weld_length, merit):
-    """The merit (:func:`strand_merit`) of each listed strand, at the iterate or at packed trial points.
-
-    Parameters
-    ----------
-    strands : (T,) int64
-    offsets : (S+1,) int64
-    first_rows : (T,) int64
-        Where each listed strand's rows start in ``positions`` and ``distance``: ``offsets[strands]``
-        for the chunk's arrays, ``packed_offsets[:-1]`` for packed ones.
-    positions : (P, 3) float64
-    distance : (P,) float64
-    source_directions, initial, features : (N, 3) float64
-    pull_weight, gamma, rest_lengths : (N,) float64
-    fixed : (N,) bool
-    alpha, beta, spacing, spacing_low, spacing_high, eps_c, min_length, weld_length : float
-    penalty : (S,) float64
-        Each strand's clearance penalty.
-    merit : (T,) float64
-        Receives the merits.
-    """
-    for t in range(len(strands)):
-        s = strands[t]
-        merit[t] = strand_merit(offsets[s], offsets[s + 1] - offsets[s], positions, distance, first_rows[t],
-                                source_directions, initial, pull_weight, features, gamma, rest_lengths, fixed,
-                                alpha, beta, spacing, spacing_low, spacing_high, penalty[s], eps_c, min_length,
-                                weld_length)
 
 
 @kernel
@@ -296,10 +205,6 @@ def _warm() -> None:
     normal[:, 0] = 1.0
     near = np.isfinite(distance)
     strands = np.arange(2, dtype=np.int64)
-    merit = np.zeros(2)
-    strand_merits(strands, offsets, offsets[:-1], points, distance, np.tile([0.0, -1.0, 0.0], (n, 1)), points,
-                  np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed, 3e3, 1e3, 1.0, 0.9, 1.1, np.ones(2), 5e-4, 1e-9, 1e-6,
-                  merit)
     moved, free = np.empty((n, 3)), np.empty(n, dtype=np.bool_)
     gather_trial_points(strands, offsets, offsets, points, np.zeros((n, 3)), np.ones(2), fixed, moved, free)
     commit_trial_points(strands, offsets, offsets, np.ones(2, dtype=np.bool_), moved, distance, normal, near, fixed,

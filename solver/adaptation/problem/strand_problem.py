@@ -8,10 +8,11 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.adaptation.problem import banded
+from hairport.solver.adaptation.problem import banded, merit_kernels
 from hairport.solver.adaptation.problem.constraints import clearance_violation
 from hairport.solver.adaptation.problem.energies import (
     NEGATIVE_CURVATURE_SHARE,
+    WELD_LENGTH_M,
     EnergyWeights,
     ShapeModel,
     clamped_direction_hessians,
@@ -22,6 +23,7 @@ from hairport.solver.adaptation.problem.energies import (
     welded,
 )
 from hairport.solver.adaptation.problem.spacing import spacing_blocks, spacing_gradients, spacing_residuals
+from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,6 +203,32 @@ def group_energies(
     if distance is not None and np.any(np.asarray(penalty) > 0):
         per_particle += penalty * clearance_violation(distance, eps_c, problem.fixed)
     return np.bincount(group, per_particle, minlength=n_groups)
+
+
+def strand_energies(
+    problem: StrandProblem, points: np.ndarray, weights: EnergyWeights, penalty: float = 0.0,
+    distance: np.ndarray | None = None, eps_c: float = 0.0,
+) -> np.ndarray:
+    """:func:`group_energies` per strand ``(S,)`` with one ``penalty`` for every particle, by the compiled merit
+    (:func:`.merit_kernels.strand_merits`): any ``K``, its residual ``K p - L-bar`` taken once by a sparse product.
+    Equal to the reference up to the order of the sums (tested)."""
+    n = problem.n_particles
+    residual = np.ascontiguousarray(problem.coupling @ points - problem.features)
+    rest = problem.spacing_rest(weights) if weights.spacing else None
+    strands = np.arange(problem.n_strands, dtype=np.int64)
+    merit = np.zeros(problem.n_strands)
+    merit_kernels.strand_merits(
+        strands, problem.offsets, problem.offsets[:-1], np.ascontiguousarray(points, dtype=np.float64),
+        np.zeros(n) if distance is None else np.ascontiguousarray(distance, dtype=np.float64),
+        np.ascontiguousarray(problem.source_directions, dtype=np.float64),
+        np.ascontiguousarray(problem.initial, dtype=np.float64), np.zeros(n), residual,
+        np.ascontiguousarray(problem.gamma, dtype=np.float64),
+        np.zeros(1) if rest is None else np.ascontiguousarray(rest, dtype=np.float64),
+        np.ascontiguousarray(problem.fixed, dtype=np.bool_), float(weights.alpha), float(weights.beta),
+        float(weights.spacing), float(weights.spacing_band[0]), float(weights.spacing_band[1]),
+        np.full(problem.n_strands, float(penalty) if distance is not None else 0.0), float(eps_c),
+        MIN_SEGMENT_LENGTH, WELD_LENGTH_M, merit)
+    return merit
 
 
 @dataclass(frozen=True, eq=False)

@@ -37,7 +37,7 @@ def test_coupled_strands_are_one_group_whose_merit_their_shares_add_up_to(sphere
     merits = level.trial_merits(np.ones(8), np.zeros(8, dtype=bool))
     expected = group_energies(problem, level.trial, weights, problem.strand_of, 8, level.particle_penalty,
                               level.trial_dist, options.eps_c)
-    np.testing.assert_array_equal(merits, expected)
+    np.testing.assert_allclose(merits, expected, rtol=1e-12)  # compiled: the sums in another order
     # strands 0 and 1 stay where they were, the others move: one group, not failed
     stays = np.arange(8) < 2
     before = level.points.copy()

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from hairport.solver.adaptation.fine import line_search_kernels
+from hairport.solver.adaptation.problem import merit_kernels
 from hairport.solver.adaptation.problem.energies import WELD_LENGTH_M
 from hairport.solver.adaptation.problem.strand_problem import group_energies
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
@@ -32,7 +33,7 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
               problem.rest_lengths)
     penalty = rng.uniform(0.0, 10.0, problem.n_strands)
     merit = np.zeros(3)
-    line_search_kernels.strand_merits(strands, problem.offsets, packed[:-1], moved, moved_distance, *arrays,
+    merit_kernels.strand_merits(strands, problem.offsets, packed[:-1], moved, moved_distance, *arrays,
                                       problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
                                       MIN_SEGMENT_LENGTH, WELD_LENGTH_M, merit)
     trial = points.copy()
@@ -45,7 +46,7 @@ def test_line_search_kernels_gather_price_and_commit_trial_points():
     # at the iterate: the chunk's own rows
     at_iterate = np.zeros(3)
     distance = np.where(np.arange(n) % 3 == 0, np.inf, rng.normal(scale=1e-3, size=n))
-    line_search_kernels.strand_merits(strands, problem.offsets, problem.offsets[strands], points, distance, *arrays,
+    merit_kernels.strand_merits(strands, problem.offsets, problem.offsets[strands], points, distance, *arrays,
                                       problem.fixed, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, penalty, 5e-4,
                                       MIN_SEGMENT_LENGTH, WELD_LENGTH_M,
                                       at_iterate)

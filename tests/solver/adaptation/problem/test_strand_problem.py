@@ -5,11 +5,13 @@ import pytest
 import scipy.sparse as sp
 
 from hairport.solver.adaptation.problem.energies import EnergyWeights
+from hairport.solver.adaptation.problem.spacing import EVEN_SPACING_WEIGHT, SPACING_BAND
 from hairport.solver.adaptation.problem.strand_problem import (
     StrandProblem,
     group_energies,
     newton_system,
     problem_from_shape_model,
+    strand_energies,
 )
 from hairport.solver.model.hair import Hair
 from tests.solver.hair_shapes import fine_problem, model_of, outward_strands, parallel_strands, sphere_character
@@ -155,3 +157,26 @@ def test_coupled_hessian_matches_finite_differences_of_the_gradient_where_convex
         numeric = (newton_system(problem, points + h * e, weights, np.zeros(n)).gradient
                    - newton_system(problem, points - h * e, weights, np.zeros(n)).gradient) / (2 * h)
         np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
+
+
+def test_the_compiled_strand_energies_of_a_coupled_problem_equal_the_reference():
+    """Coupled ``K``, the spacing term, a welded segment, Eq. 21's gamma and the clearance penalty."""
+    hair = outward_strands(sphere_character(), n_strands=6, n_points=9, seed=5)
+    points = hair.points.copy()
+    points[3] = points[2] + 1e-12  # a segment degenerate in the source: welded
+    hair = Hair(points, hair.offsets)
+    rng = np.random.default_rng(2)
+    moved = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root,
+                                       gamma=rng.uniform(0.5, 2.0, hair.n_particles))
+    assert problem.coupled and not problem.source_directions[2].any()
+    weights = EnergyWeights(spacing=EVEN_SPACING_WEIGHT, spacing_band=SPACING_BAND)
+    distance = rng.uniform(-1e-3, 2e-3, hair.n_particles)
+    merits = []
+    for penalty, at in ((0.0, None), (7.0, distance)):
+        compiled = strand_energies(problem, moved, weights, penalty, at, 5e-4)
+        reference = group_energies(problem, moved, weights, problem.strand_of, problem.n_strands,
+                                   np.full(hair.n_particles, penalty), at, 5e-4)
+        np.testing.assert_allclose(compiled, reference, rtol=1e-12)
+        merits.append(compiled)
+    assert merits[1].sum() > merits[0].sum() + 1e-3  # some particles short of the clearance: penalised
