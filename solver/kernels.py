@@ -14,7 +14,7 @@ from __future__ import annotations
 from hairport.solver import jit, metrics
 from hairport.solver.adaptation.coupled import coupled_kernels
 from hairport.solver.adaptation.fine import band_kernels, line_search_kernels, strand_kernels
-from hairport.solver.adaptation.problem import merit_kernels, spacing
+from hairport.solver.adaptation.problem import merit_kernels, model_kernels, spacing
 from hairport.solver.adaptation.source import kdtree, neighbours
 from hairport.solver.jit import COLD_COMPILE_SECONDS, WarmUp, set_threads, threads
 from hairport.solver.mesh import bvh_build, closest_kernels, distance_grid
@@ -23,8 +23,8 @@ from hairport.solver.transfer import bone_rays, smoothing
 __all__ = ["COLD_COMPILE_SECONDS", "MODULES", "WarmUp", "set_threads", "threads", "uncached_kernels", "warm_up"]
 
 #: the modules that declare kernels
-MODULES = (coupled_kernels, band_kernels, line_search_kernels, strand_kernels, merit_kernels, spacing, kdtree, neighbours,
-           bvh_build, closest_kernels, distance_grid, metrics, bone_rays, smoothing)
+MODULES = (coupled_kernels, band_kernels, line_search_kernels, strand_kernels, merit_kernels, model_kernels, spacing,
+           kdtree, neighbours, bvh_build, closest_kernels, distance_grid, metrics, bone_rays, smoothing)
 
 
 def warm_up() -> WarmUp:

@@ -29,6 +29,7 @@ from hairport.solver.adaptation.problem.energies import EnergyWeights
 from hairport.solver.adaptation.problem.strand_problem import (
     NewtonSystem,
     StrandProblem,
+    compiled_newton_system,
     group_energies,
     newton_system,
     strand_energies,
@@ -79,7 +80,8 @@ class NumpyLevel:
         p = self.points[index]
         dist, normal, near = self.distance[index], self.normal[index], self.near[index]
         strands = np.arange(problem.n_strands) if coupled else open_groups
-        system = newton_system(sub, p, weights, damping[strands][sub.strand_of])
+        system = compiled_newton_system(sub, p, weights, damping[strands]) if coupled else \
+            newton_system(sub, p, weights, damping[strands][sub.strand_of])
         step, multipliers, rounds, cg_steps = self._contact_qp(system, sub, index, p, dist, normal, near)
         largest = np.zeros(k)
         np.maximum.at(largest, group, np.abs(multipliers))

@@ -6,6 +6,7 @@ import scipy.sparse as sp
 
 from hairport.solver.adaptation.coupled.contact_qp import Frames, solve_qp
 from hairport.solver.adaptation.fine import strand_kernels
+from hairport.solver.adaptation.problem import model_kernels
 from hairport.solver.adaptation.problem.energies import (
     NEGATIVE_CURVATURE_SHARE,
     PARALLEL_SINE,
@@ -42,13 +43,13 @@ def random_problem(rng, counts=(7, 2, 1, 12, 5)):
 
 
 def strand_blocks(problem, points, damping):
-    """:func:`strand_kernels.assemble_strand` of every strand, concatenated like :func:`newton_system`."""
+    """:func:`model_kernels.assemble_strand` of every strand, concatenated like :func:`newton_system`."""
     n = problem.n_particles
     diagonal, upper, gradient = np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3))
     w = problem.coupling.diagonal()
     for s in range(problem.n_strands):
         a, b = problem.offsets[s], problem.offsets[s + 1]
-        strand_kernels.assemble_strand(
+        model_kernels.assemble_strand(
             a, b - a, points, problem.source_directions, problem.initial, w, problem.features, problem.gamma,
             problem.rest_lengths, WEIGHTS.alpha, WEIGHTS.beta, WEIGHTS.spacing, *WEIGHTS.spacing_band, damping[s], MIN_SEGMENT_LENGTH,
             WELD_LENGTH_M, NEGATIVE_CURVATURE_SHARE, PARALLEL_SINE,
@@ -68,7 +69,7 @@ def test_clamped_direction_hessian_matches_numpy_including_parallel_directions()
     expected = clamped_direction_hessians(u, d, floor)
     block = np.empty((3, 3))
     for m in range(40):
-        strand_kernels.clamped_direction_hessian(u[m], d[m], floor[m], PARALLEL_SINE, block)
+        model_kernels.clamped_direction_hessian(u[m], d[m], floor[m], PARALLEL_SINE, block)
         np.testing.assert_allclose(block, expected[m], rtol=0, atol=1e-14)
 
 

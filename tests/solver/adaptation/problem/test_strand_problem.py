@@ -8,6 +8,7 @@ from hairport.solver.adaptation.problem.energies import EnergyWeights
 from hairport.solver.adaptation.problem.spacing import EVEN_SPACING_WEIGHT, SPACING_BAND
 from hairport.solver.adaptation.problem.strand_problem import (
     StrandProblem,
+    compiled_newton_system,
     group_energies,
     newton_system,
     problem_from_shape_model,
@@ -180,3 +181,24 @@ def test_the_compiled_strand_energies_of_a_coupled_problem_equal_the_reference()
         np.testing.assert_allclose(compiled, reference, rtol=1e-12)
         merits.append(compiled)
     assert merits[1].sum() > merits[0].sum() + 1e-3  # some particles short of the clearance: penalised
+
+
+def test_the_compiled_newton_system_of_a_coupled_problem_equals_the_reference():
+    """Coupled ``K``, the spacing term, a welded segment, Eq. 21's gamma, each strand's own radial damping."""
+    hair = outward_strands(sphere_character(), n_strands=6, n_points=9, seed=5)
+    points = hair.points.copy()
+    points[3] = points[2] + 1e-12  # a segment degenerate in the source: welded
+    hair = Hair(points, hair.offsets)
+    rng = np.random.default_rng(3)
+    moved = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)
+    problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root,
+                                       gamma=rng.uniform(0.5, 2.0, hair.n_particles))
+    weights = EnergyWeights(spacing=EVEN_SPACING_WEIGHT, spacing_band=SPACING_BAND)
+    damping = rng.uniform(1e-4, 1.0, problem.n_strands)
+    compiled = compiled_newton_system(problem, moved, weights, damping)
+    reference = newton_system(problem, moved, weights, damping[problem.strand_of])
+    scale = np.abs(reference.diagonal).max()
+    for name in ("gradient", "diagonal", "upper"):
+        np.testing.assert_allclose(getattr(compiled, name), getattr(reference, name), rtol=1e-12, atol=1e-12 * scale)
+    assert compiled.coupling is not None and (compiled.coupling != reference.coupling).nnz == 0
+    assert np.abs(reference.upper[2]).max() > 1e9  # the weld's spring is in it
