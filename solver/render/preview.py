@@ -289,5 +289,6 @@ def write_result_preview(path: str | Path, adaptable: AdaptableHairstyle, result
     the result's particles inside the target in red."""
     render_preview(path, [
         (adaptable.hair, adaptable.source, None, "source"),
-        (result.hair, target, penetrating_mask(result.hair, target), f"result ({result.metrics['method']})"),
+        (result.hair, target, penetrating_mask(result.hair, target) if result.inside is None else result.inside,
+         f"result ({result.metrics['method']})"),
     ])
