@@ -304,7 +304,7 @@ def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: Retarg
     # one query of every particle serves both checks and, when they move nothing, the metrics
     body_distance = penetration(points, hair.at_root, body, options.eps_c)
     points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, name,
-                                           particle_distances(body_distance, hair.at_root))
+                                           particle_distances(body_distance, hair.at_root), hair.short_segments)
     if resolved["particles"]:
         body_distance = penetration(points, hair.at_root, body, options.eps_c)
     if options.method not in SOLVER_METHODS:

@@ -61,7 +61,7 @@ def push_out(points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearanc
 
 
 def push_inside_out(
-    points: np.ndarray, rows: np.ndarray, query: MeshQuery, clearance: float
+    points: np.ndarray, rows: np.ndarray, query: MeshQuery, clearance: float, runs: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Move particles that are inside the body out, to a clearance beyond its surface.
 
@@ -81,6 +81,10 @@ def push_inside_out(
         The body (its collision surface, :func:`.collision.collision_query`).
     clearance : float
         Meters, >= 0: the first round's.
+    runs : (N,) int64, optional
+        Each particle's run of welded particles (:func:`.segment_crossing.weld_runs`): the rows of one run
+        move as one, by the push of its first row (pushed apart, particles a rounding apart at an edge of
+        the body could land on two faces, a weld broken by up to the clearance).
 
     Returns
     -------
@@ -89,8 +93,16 @@ def push_inside_out(
     inside : (J,) int64
         The rows still inside after the last round (none on success).
     """
-    out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 3)
     rows = np.asarray(rows, dtype=np.int64)
+    if runs is not None and rows.size:
+        run_of = np.asarray(runs)[rows]
+        _, first, slot = np.unique(run_of, return_index=True, return_inverse=True)
+        leaders = rows[first]
+        pushed, left = push_inside_out(points, leaders, query, clearance)
+        out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 3)
+        out[rows] += (pushed[leaders] - out[leaders])[slot]
+        return out, rows[np.isin(run_of, run_of[first][np.isin(leaders, left)])]
+    out = np.array(points, dtype=np.float64, copy=True).reshape(-1, 3)
     c = float(clearance)
     for _ in range(INSIDE_PUSH_ROUNDS):
         if rows.size == 0:

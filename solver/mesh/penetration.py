@@ -55,7 +55,7 @@ def inside_depths(points: np.ndarray, is_root: np.ndarray, query: MeshQuery,
 
 def resolve_penetration(
     points: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float, body: str | None = None,
-    distance: np.ndarray | None = None,
+    distance: np.ndarray | None = None, welded: np.ndarray | None = None,
 ) -> tuple[np.ndarray, dict]:
     """Push out the particles a method left inside the body, or refuse the result.
 
@@ -73,6 +73,8 @@ def resolve_penetration(
         The body's name, for the error.
     distance : (N,) float64, optional
         Every particle's signed distance at ``points`` (roots: anything), when the caller has it.
+    welded : (N,) bool, optional
+        Particles joined to the next by a degenerate segment: a run of them is pushed as one.
 
     Returns
     -------
@@ -91,7 +93,8 @@ def resolve_penetration(
     resolved = {"particles": int(len(rows)), "deepest_m": float(depth.max(initial=0.0))}
     if len(rows) == 0:
         return points, resolved
-    pushed, left = push_inside_out(points, rows, query, clearance)
+    pushed, left = push_inside_out(points, _whole_runs(rows, welded, is_root), query, clearance,
+                                   None if welded is None else weld_runs(welded))
     if len(left):
         raise PenetrationRemaining(
             f"{len(left):,} of the {len(rows):,} hair particles the method left inside the target body (deepest "
@@ -252,7 +255,8 @@ def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, que
         points = moved
         inside, _ = inside_depths(points, is_root, query, distance)
         if len(inside):
-            pushed, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance)
+            pushed, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance,
+                                             None if welded is None else weld_runs(welded))
             distance, pushed_out = _requery(points, pushed, distance, is_root, query)
             points, changed = pushed, changed | pushed_out
         crossings = _recheck(points, segments, is_root, query, distance, crossings, changed)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hairport.solver.adaptation.problem.model_kernels import warm_strands
 from hairport.solver.jit import kernel, warms
 
 
@@ -194,13 +195,9 @@ def strand_clearances(strands, offsets, distance, fixed, eps_c, shortfall, clear
 
 @warms
 def _warm() -> None:
-    """Two strands (3 and 2 particles) through every kernel."""
-    offsets = np.array([0, 3, 5], dtype=np.int64)
-    points = np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
-                       [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]])
+    """:func:`.model_kernels.warm_strands` through every kernel."""
+    offsets, points, fixed, distance = warm_strands()
     n = len(points)
-    fixed = np.array([True, False, False, True, False])
-    distance = np.array([0.0, 1e-4, np.inf, 0.0, np.inf])
     normal = np.zeros((n, 3))
     normal[:, 0] = 1.0
     near = np.isfinite(distance)

@@ -28,7 +28,7 @@ from hairport.solver.adaptation.fine.band_kernels import (
     block_matvec,
     pinned_band,
 )
-from hairport.solver.adaptation.problem.model_kernels import _cross, _normal_to, assemble_strand
+from hairport.solver.adaptation.problem.model_kernels import _cross, _normal_to, assemble_strand, warm_strands
 from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 
 
@@ -258,14 +258,10 @@ def newton_qp_steps(strands, offsets, points, distance, normal, near, source_dir
 
 @warms
 def _warm() -> None:
-    """Two strands (3 and 2 particles, the first touching the body) through every kernel."""
-    offsets = np.array([0, 3, 5], dtype=np.int64)
-    points = np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
-                       [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]])
+    """:func:`.model_kernels.warm_strands` through every kernel."""
+    offsets, points, fixed, distance = warm_strands()
     n = len(points)
     directions = np.tile([0.0, -1.0, 0.0], (n, 1))
-    fixed = np.array([True, False, False, True, False])
-    distance = np.array([0.0, 1e-4, np.inf, 0.0, np.inf])
     normal = np.zeros((n, 3))
     normal[:, 0] = 1.0
     near = np.isfinite(distance)

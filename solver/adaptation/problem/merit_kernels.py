@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hairport.solver.adaptation.problem.model_kernels import warm_strands
 from hairport.solver.adaptation.problem.spacing import band_excess
 from hairport.solver.jit import kernel, warms
 
@@ -107,13 +108,9 @@ def strand_merits(strands, offsets, first_rows, positions, distance, source_dire
 
 @warms
 def _warm() -> None:
-    """Two strands (3 and 2 particles)."""
-    offsets = np.array([0, 3, 5], dtype=np.int64)
-    points = np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
-                       [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]])
+    """:func:`.model_kernels.warm_strands` through :func:`strand_merits`."""
+    offsets, points, fixed, distance = warm_strands()
     n = len(points)
-    fixed = np.array([True, False, False, True, False])
-    distance = np.array([0.0, 1e-4, np.inf, 0.0, np.inf])
     strand_merits(np.arange(2, dtype=np.int64), offsets, offsets[:-1], points, distance,
                   np.tile([0.0, -1.0, 0.0], (n, 1)), points, np.ones(n), points, np.ones(n), np.full(n, 0.004), fixed,
                   3e3, 1e3, 1.0, 0.9, 1.1, np.ones(2), 5e-4, 1e-9, 1e-6, np.zeros(2))

@@ -7,6 +7,8 @@ of a coupled problem, whose ``K`` terms are then added by sparse products (:func
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from hairport.solver.adaptation.problem.spacing import band_excess
@@ -197,12 +199,28 @@ def assemble_strands(offsets, points, source_directions, initial, gamma, rest_le
                         gradient[first:stop])
 
 
+class WarmStrands(NamedTuple):
+    """Two tiny strands (3 and 2 particles, rooted, the first touching the body) the per-strand kernels'
+    warmers run on: ``offsets (3,) int64``, ``points (5, 3)``, ``fixed (5,) bool``, ``distance (5,)``."""
+
+    offsets: np.ndarray
+    points: np.ndarray
+    fixed: np.ndarray
+    distance: np.ndarray
+
+
+def warm_strands() -> WarmStrands:
+    """:class:`WarmStrands`, new arrays."""
+    return WarmStrands(np.array([0, 3, 5], dtype=np.int64),
+                       np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
+                                 [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]]),
+                       np.array([True, False, False, True, False]), np.array([0.0, 1e-4, np.inf, 0.0, np.inf]))
+
+
 @warms
 def _warm() -> None:
-    """Two strands (3 and 2 particles)."""
-    offsets = np.array([0, 3, 5], dtype=np.int64)
-    points = np.array([[0.0, 0.0, 0.0], [0.0, -0.004, 0.0], [0.001, -0.008, 0.0],
-                       [0.01, 0.0, 0.0], [0.01, -0.004, 0.001]])
+    """:func:`warm_strands` through :func:`assemble_strands`."""
+    offsets, points, _, _ = warm_strands()
     n = len(points)
     assemble_strands(offsets, points, np.tile([0.0, -1.0, 0.0], (n, 1)), points, np.ones(n), np.full(n, 0.004),
                      1e3, 1.0, 0.9, 1.1, np.ones(2), 1e-9, 1e-6, 0.2, 1e-12, np.zeros((n, 3, 3)), np.zeros((n, 3, 3)),

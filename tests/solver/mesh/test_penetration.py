@@ -5,10 +5,10 @@ import pytest
 import trimesh
 
 from hairport.solver.mesh import penetration
-from hairport.solver.mesh.clearance import INSIDE_PUSH_ROUNDS
+from hairport.solver.mesh.clearance import INSIDE_PUSH_ROUNDS, push_inside_out
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.penetration import inside_depths, resolve_crossings, resolve_penetration
-from hairport.solver.mesh.segment_crossing import crossing_segments
+from hairport.solver.mesh.segment_crossing import crossing_segments, weld_runs
 from hairport.solver.model.errors import InputError, PenetrationRemaining
 from tests.solver.mesh.meshes import icosphere
 from tests.solver.mesh.test_inside import open_capsule
@@ -186,3 +186,17 @@ def test_welded_particles_at_a_crossing_segments_end_move_together():
                                       np.array([0, 4]), "ball", welded=welded)
     assert after.count == 0 and np.linalg.norm(out[2] - points[2]) > 1e-4
     np.testing.assert_array_equal(out[3], out[2])
+
+
+def test_a_weld_run_pushed_out_of_a_corner_moves_as_one():
+    """Two welded particles a rounding apart inside a box, by its edge: pushed independently each takes its own
+    nearest face and the weld opens by more than the clearance; as a run they move by one push."""
+    box = collision_query(*boxes(([-0.05, -0.05, -0.05], [0.05, 0.05, 0.05])), "box")
+    points = np.array([[0.0, 0.0, 0.2], [0.049, 0.049 + 1e-11, 0.0], [0.049 + 1e-11, 0.049, 0.0]])
+    apart, _ = push_inside_out(points, np.array([1, 2]), box, EPS_C)
+    assert np.linalg.norm(apart[1] - apart[2]) > EPS_C
+    runs = weld_runs(np.array([False, True, False]))
+    together, left = push_inside_out(points, np.array([1, 2]), box, EPS_C, runs)
+    assert len(left) == 0 and (box.signed_distance(together[1:]).distance > 0).all()
+    assert np.linalg.norm(together[1] - together[2]) < 1e-10
+    np.testing.assert_array_equal(together[0], points[0])

@@ -44,14 +44,19 @@ def test_a_16_mm_chord_half_a_millimetre_off_a_5_cm_shoulder_crosses_it_and_an_8
                       "deepest_segment": 0}
 
 
-def test_the_count_equals_a_dense_sampling_of_random_segments_near_the_body(sphere):
-    rng = np.random.default_rng(4)
-    n = 4000
+def random_segments(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` segments of 4-40 mm centred 0-4 mm off the sphere, in random directions: ``points (2n, 3)``
+    (first ends, then second ends) and ``segments (n, 2)``."""
+    rng = np.random.default_rng(seed)
     centres = rng.normal(size=(n, 3))
     centres = (RADIUS + rng.uniform(0.0, 0.004, n))[:, None] * centres / np.linalg.norm(centres, axis=1, keepdims=True)
     offsets = rng.normal(size=(n, 3)) * rng.uniform(0.002, 0.02, n)[:, None]
-    points = np.vstack([centres - offsets, centres + offsets])
-    segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
+    return np.vstack([centres - offsets, centres + offsets]), np.stack([np.arange(n), np.arange(n) + n], axis=1)
+
+
+def test_the_count_equals_a_dense_sampling_of_random_segments_near_the_body(sphere):
+    n = 4000
+    points, segments = random_segments(n, seed=4)
     is_root = np.zeros(2 * n, dtype=bool)
     crossings = crossing_segments(points, segments, is_root, sphere)
     # the reference: 2,000 points along each segment, ends outside and some point inside
@@ -86,11 +91,7 @@ def test_a_check_among_some_segments_joined_with_the_rest_is_the_whole_check(sph
     """``among`` casts only those rows; the crossings of two disjoint parts, joined, are those of the whole."""
     rng = np.random.default_rng(7)
     n = 600
-    centres = rng.normal(size=(n, 3))
-    centres = (RADIUS + rng.uniform(0.0, 0.004, n))[:, None] * centres / np.linalg.norm(centres, axis=1, keepdims=True)
-    offsets = rng.normal(size=(n, 3)) * rng.uniform(0.002, 0.02, n)[:, None]
-    points = np.vstack([centres - offsets, centres + offsets])
-    segments = np.stack([np.arange(n), np.arange(n) + n], axis=1)
+    points, segments = random_segments(n, seed=7)
     is_root = np.zeros(2 * n, dtype=bool)
     whole = crossing_segments(points, segments, is_root, sphere)
     some = np.flatnonzero(rng.random(n) < 0.4)

@@ -160,24 +160,31 @@ def test_coupled_hessian_matches_finite_differences_of_the_gradient_where_convex
         np.testing.assert_allclose(system.matvec(e), numeric, rtol=1e-4, atol=1e-2 * np.abs(numeric).max())
 
 
-def test_the_compiled_strand_energies_of_a_coupled_problem_equal_the_reference():
-    """Coupled ``K``, the spacing term, a welded segment, Eq. 21's gamma and the clearance penalty."""
+def coupled_problem_with_a_weld(rng: np.random.Generator) -> tuple[StrandProblem, np.ndarray, EnergyWeights]:
+    """6 coupled strands of 9 particles, one segment welded, Eq. 21's gamma random, the spacing term on: the
+    problem, an iterate 2 mm (rms) off the source and the weights."""
     hair = outward_strands(sphere_character(), n_strands=6, n_points=9, seed=5)
     points = hair.points.copy()
     points[3] = points[2] + 1e-12  # a segment degenerate in the source: welded
     hair = Hair(points, hair.offsets)
-    rng = np.random.default_rng(2)
     moved = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)
     problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root,
                                        gamma=rng.uniform(0.5, 2.0, hair.n_particles))
     assert problem.coupled and not problem.source_directions[2].any()
-    weights = EnergyWeights(spacing=EVEN_SPACING_WEIGHT, spacing_band=SPACING_BAND)
-    distance = rng.uniform(-1e-3, 2e-3, hair.n_particles)
+    return problem, moved, EnergyWeights(spacing=EVEN_SPACING_WEIGHT, spacing_band=SPACING_BAND)
+
+
+def test_the_compiled_strand_energies_of_a_coupled_problem_equal_the_reference():
+    """Coupled ``K``, the spacing term, a welded segment, Eq. 21's gamma and the clearance penalty."""
+    rng = np.random.default_rng(2)
+    problem, moved, weights = coupled_problem_with_a_weld(rng)
+    n = problem.n_particles
+    distance = rng.uniform(-1e-3, 2e-3, n)
     merits = []
     for penalty, at in ((0.0, None), (7.0, distance)):
         compiled = strand_energies(problem, moved, weights, penalty, at, 5e-4)
         reference = group_energies(problem, moved, weights, problem.strand_of, problem.n_strands,
-                                   np.full(hair.n_particles, penalty), at, 5e-4)
+                                   np.full(n, penalty), at, 5e-4)
         np.testing.assert_allclose(compiled, reference, rtol=1e-12)
         merits.append(compiled)
     assert merits[1].sum() > merits[0].sum() + 1e-3  # some particles short of the clearance: penalised
@@ -185,15 +192,8 @@ def test_the_compiled_strand_energies_of_a_coupled_problem_equal_the_reference()
 
 def test_the_compiled_newton_system_of_a_coupled_problem_equals_the_reference():
     """Coupled ``K``, the spacing term, a welded segment, Eq. 21's gamma, each strand's own radial damping."""
-    hair = outward_strands(sphere_character(), n_strands=6, n_points=9, seed=5)
-    points = hair.points.copy()
-    points[3] = points[2] + 1e-12  # a segment degenerate in the source: welded
-    hair = Hair(points, hair.offsets)
     rng = np.random.default_rng(3)
-    moved = hair.points + rng.normal(scale=2e-3, size=hair.points.shape)
-    problem = problem_from_shape_model(model_of(hair), hair.offsets, hair.points, hair.is_root,
-                                       gamma=rng.uniform(0.5, 2.0, hair.n_particles))
-    weights = EnergyWeights(spacing=EVEN_SPACING_WEIGHT, spacing_band=SPACING_BAND)
+    problem, moved, weights = coupled_problem_with_a_weld(rng)
     damping = rng.uniform(1e-4, 1.0, problem.n_strands)
     compiled = compiled_newton_system(problem, moved, weights, damping)
     reference = newton_system(problem, moved, weights, damping[problem.strand_of])
