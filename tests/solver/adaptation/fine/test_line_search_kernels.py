@@ -4,18 +4,12 @@ import numpy as np
 import pytest
 
 from hairport.solver.adaptation.fine import line_search_kernels
-from tests.solver.adaptation.fine.test_strand_kernels import random_problem, unit
+from tests.solver.adaptation.fine.test_strand_kernels import packed_trials, unit
 
 
 def test_line_search_kernels_gather_and_commit_trial_points():
-    rng = np.random.default_rng(7)
-    problem, points = random_problem(rng)
+    rng, problem, points, step, strands, fraction, packed, index = packed_trials(7)
     n = problem.n_particles
-    step = rng.normal(scale=1e-3, size=(n, 3))
-    strands = np.array([0, 3, 4], dtype=np.int64)
-    fraction = np.array([1.0, 0.5, 0.25])
-    packed = np.concatenate([[0], np.cumsum(np.diff(problem.offsets)[strands])]).astype(np.int64)
-    index = np.concatenate([np.arange(problem.offsets[s], problem.offsets[s + 1]) for s in strands])
     moved, free = np.empty((packed[-1], 3)), np.empty(packed[-1], dtype=bool)
     line_search_kernels.gather_trial_points(strands, problem.offsets, packed, points, step, fraction, problem.fixed,
                                             moved, free)

@@ -41,6 +41,19 @@ def random_problem(rng, counts=(7, 2, 1, 12, 5)):
     return problem, points
 
 
+def packed_trials(seed: int):
+    """:func:`random_problem`, a random step, and 3 of its strands packed back to back as the line search packs its
+    trial points: ``(problem, points, step, strands (3,), fraction (3,), packed (4,), index (P,))``."""
+    rng = np.random.default_rng(seed)
+    problem, points = random_problem(rng)
+    step = rng.normal(scale=1e-3, size=(problem.n_particles, 3))
+    strands = np.array([0, 3, 4], dtype=np.int64)
+    fraction = np.array([1.0, 0.5, 0.25])
+    packed = np.concatenate([[0], np.cumsum(np.diff(problem.offsets)[strands])]).astype(np.int64)
+    index = np.concatenate([np.arange(problem.offsets[s], problem.offsets[s + 1]) for s in strands])
+    return rng, problem, points, step, strands, fraction, packed, index
+
+
 def strand_blocks(problem, points, damping):
     """:func:`model_kernels.assemble_strand` of every strand, concatenated like :func:`newton_system`."""
     n = problem.n_particles

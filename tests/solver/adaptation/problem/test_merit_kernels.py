@@ -7,18 +7,12 @@ from hairport.solver.adaptation.problem import merit_kernels
 from hairport.solver.adaptation.problem.energies import WELD_LENGTH_M
 from hairport.solver.adaptation.problem.strand_problem import group_energies
 from hairport.solver.mesh.polyline import MIN_SEGMENT_LENGTH
-from tests.solver.adaptation.fine.test_strand_kernels import WEIGHTS, random_problem
+from tests.solver.adaptation.fine.test_strand_kernels import WEIGHTS, packed_trials
 
 
 def test_strand_merits_at_packed_trial_points_and_at_the_iterate_are_the_reference():
-    rng = np.random.default_rng(7)
-    problem, points = random_problem(rng)
+    rng, problem, points, step, strands, fraction, packed, index = packed_trials(7)
     n = problem.n_particles
-    step = rng.normal(scale=1e-3, size=(n, 3))
-    strands = np.array([0, 3, 4], dtype=np.int64)
-    fraction = np.array([1.0, 0.5, 0.25])
-    packed = np.concatenate([[0], np.cumsum(np.diff(problem.offsets)[strands])]).astype(np.int64)
-    index = np.concatenate([np.arange(problem.offsets[s], problem.offsets[s + 1]) for s in strands])
     moved = points[index] + np.repeat(fraction, np.diff(packed))[:, None] * step[index]
     moved_distance = rng.normal(scale=1e-3, size=len(index))
     moved_distance[::4] = np.inf
