@@ -65,16 +65,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "bench")]  # the other benches beside this script, tests.servers
-from multihost import (  # noqa: E402
-    DONE,
-    JOB_SECONDS,
-    SETTLE_SECONDS,
-    START_SECONDS,
-    Deployment,
-    fresh_database,
-    preprocessed,
-    s3_settings,
-)
+from multihost import DONE, JOB_SECONDS, SETTLE_SECONDS, Deployment, fresh_database, preprocessed, s3_settings  # noqa: E402
 from service_load import AUTH, percentile, source_tree, wait_until  # noqa: E402
 from table4 import SOURCE, STYLE, TARGET, _machine, groom_shape  # noqa: E402
 
@@ -104,19 +95,7 @@ WITHIN_SOLVE = ("distance_grid", "coarse_solve", "fine_solve")
 class OneWorker(Deployment):
     """multihost.py's deployment with one worker process (concurrency 1), ``w1``."""
 
-    def start(self) -> None:
-        import httpx
-
-        self._spawn("redis", ["redis-server", "--port", str(self.redis_port), "--bind", "127.0.0.1", "--save", "",
-                              "--appendonly", "no", "--dir", str(self.folder)])
-        hairport = [sys.executable, "-m", "hairport.cli"]
-        self._spawn("api", hairport + ["serve", "--port", str(self.port)])
-        wait_until(lambda: self._alive() and httpx.get(f"{self.url}/healthz", timeout=5).status_code == 200,
-                   "the API", START_SECONDS)
-        self._spawn("w1", hairport + ["worker", "--concurrency", "1", "--no-warmup", "--hostname", "w1@%h",
-                                      "--loglevel", "WARNING"])
-        wait_until(lambda: self._alive() and len(self.workers_answering()) == 1, "the worker", START_SECONDS)
-        wait_until(lambda: httpx.get(f"{self.url}/readyz", timeout=5).status_code == 200, "readiness", START_SECONDS)
+    workers = 1
 
 
 # ---------------------------------------------------------------------- inputs

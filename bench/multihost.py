@@ -121,10 +121,13 @@ def s3_settings(seaweed, database_url: str, prefix: str) -> dict:
 
 
 class Deployment:
-    """redis-server, ``hairport serve`` and :data:`WORKERS` workers in ``folder``; ``shared`` settings for all.
+    """redis-server, ``hairport serve`` and :attr:`workers` workers in ``folder``; ``shared`` settings for all.
 
     With ``shared_folder`` every process has ``folder/storage`` as its storage folder (A); else each has its
     own, ``folder/<name>-cache`` (B). Logs: ``folder/<name>.log``."""
+
+    #: worker processes it starts (each of concurrency 1)
+    workers = WORKERS
 
     def __init__(self, folder: Path, shared: dict, shared_folder: bool):
         self.folder, self.shared_folder, self.processes = folder, shared_folder, {}
@@ -151,11 +154,12 @@ class Deployment:
         self._spawn("api", hairport + ["serve", "--port", str(self.port)])
         wait_until(lambda: self._alive() and httpx.get(f"{self.url}/healthz", timeout=5).status_code == 200,
                    "the API", START_SECONDS)
-        names = [f"w{number}" for number in range(1, WORKERS + 1)]
+        names = [f"w{number}" for number in range(1, self.workers + 1)]
         for name in names:
             self._spawn(name, hairport + ["worker", "--concurrency", "1", "--no-warmup", "--hostname", f"{name}@%h",
                                           "--loglevel", "WARNING"])
-        wait_until(lambda: self._alive() and len(self.workers_answering()) == WORKERS, "the workers", START_SECONDS)
+        wait_until(lambda: self._alive() and len(self.workers_answering()) == self.workers, "the workers",
+                   START_SECONDS)
         wait_until(lambda: httpx.get(f"{self.url}/readyz", timeout=5).status_code == 200, "readiness", START_SECONDS)
 
     def workers_answering(self) -> set[str]:
