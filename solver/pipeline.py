@@ -40,7 +40,7 @@ from hairport.solver.hairline.relocation import Relocation, relocate_roots
 from hairport.solver.hairline.weights import adaptive_weights
 from hairport.solver.mesh.collision import collision_query
 from hairport.solver.mesh.distance_grid import DistanceGrid
-from hairport.solver.mesh.penetration import resolve_crossings, resolve_penetration
+from hairport.solver.mesh.penetration import distances_after, resolve_crossings, resolve_penetration
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.segment_crossing import crossing_segments
 from hairport.solver.metrics import hairstyle_metrics, particle_distances, penetration, penetration_stats
@@ -301,21 +301,18 @@ def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: Retarg
     crossings : SegmentCrossings or None
         The segments through the body at ``points`` (none; None for a baseline, whose segments are not checked).
     """
-    # one query of every particle serves both checks and, when they move nothing, the metrics
-    body_distance = penetration(points, hair.at_root, body, options.eps_c)
-    points, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, name,
-                                           particle_distances(body_distance, hair.at_root), hair.short_segments)
+    # one query of every particle serves both checks and the metrics: after it, only moved particles are queried
+    distance = particle_distances(penetration(points, hair.at_root, body, options.eps_c), hair.at_root)
+    pushed, resolved = resolve_penetration(points, hair.at_root, body, options.eps_c, name, distance,
+                                           hair.short_segments)
     if resolved["particles"]:
-        body_distance = penetration(points, hair.at_root, body, options.eps_c)
-    if options.method not in SOLVER_METHODS:
-        return points, resolved, None, body_distance, None
-    points, segments_resolved, crossings, distance = resolve_crossings(
-        points, hair.segments, hair.at_root, body, options.eps_c, hair.offsets, name,
-        particle_distances(body_distance, hair.at_root), hair.short_segments)
-    if segments_resolved["segments"]:
-        # the check queried the particles it moved again: its distances are the result's
-        body_distance = penetration_stats(distance[~hair.at_root], options.eps_c)
-    return points, resolved, segments_resolved, body_distance, crossings
+        distance, _ = distances_after(points, pushed, distance, hair.at_root, body)
+    points, segments_resolved, crossings = pushed, None, None
+    if options.method in SOLVER_METHODS:
+        points, segments_resolved, crossings, distance = resolve_crossings(
+            points, hair.segments, hair.at_root, body, options.eps_c, hair.offsets, name, distance,
+            hair.short_segments)
+    return points, resolved, segments_resolved, penetration_stats(distance[~hair.at_root], options.eps_c), crossings
 
 
 def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,

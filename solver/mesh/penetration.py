@@ -93,8 +93,8 @@ def resolve_penetration(
     resolved = {"particles": int(len(rows)), "deepest_m": float(depth.max(initial=0.0))}
     if len(rows) == 0:
         return points, resolved
-    pushed, left = push_inside_out(points, _whole_runs(rows, welded, is_root), query, clearance,
-                                   None if welded is None else weld_runs(welded))
+    runs = None if welded is None else weld_runs(welded)
+    pushed, left = push_inside_out(points, _whole_runs(rows, runs, is_root), query, clearance, runs)
     if len(left):
         raise PenetrationRemaining(
             f"{len(left):,} of the {len(rows):,} hair particles the method left inside the target body (deepest "
@@ -147,11 +147,8 @@ def push_segment_ends(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
     up, down = np.zeros((len(moving), 3)), np.zeros((len(moving), 3))
     np.maximum.at(up, slot, np.maximum(push, 0.0))
     np.minimum.at(down, slot, np.minimum(push, 0.0))
-    if run is None:
-        out[moving] = out[moving] + up + down
-        return out
-    members = np.flatnonzero(np.isin(run, moving))
-    slot = np.searchsorted(moving, run[members])
+    members = moving if run is None else np.flatnonzero(np.isin(run, moving))
+    slot = np.searchsorted(moving, members if run is None else run[members])
     out[members] = out[members] + up[slot] + down[slot]
     return out
 
@@ -208,8 +205,8 @@ def pull_tails(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, cr
     return out, strand
 
 
-def _requery(before: np.ndarray, after: np.ndarray, distance: np.ndarray, is_root: np.ndarray,
-             query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
+def distances_after(before: np.ndarray, after: np.ndarray, distance: np.ndarray, is_root: np.ndarray,
+                    query: MeshQuery) -> tuple[np.ndarray, np.ndarray]:
     """``distance (N,)`` at ``after (N, 3)``, given it at ``before (N, 3)``: only the free particles that moved are
     queried (a round of the check moves a few strands of the whole hairstyle). A new array, and ``(N,) bool``:
     the particles that moved."""
@@ -230,13 +227,14 @@ def _recheck(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, quer
 
 
 def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery, clearance: float,
-              offsets: np.ndarray, welded: np.ndarray | None, crossings: SegmentCrossings, distance: np.ndarray,
-              classify: bool) -> tuple[np.ndarray, SegmentCrossings, np.ndarray, np.ndarray, np.ndarray]:
+              offsets: np.ndarray, welded: np.ndarray | None, runs: np.ndarray | None, crossings: SegmentCrossings,
+              distance: np.ndarray, classify: bool) -> tuple[np.ndarray, SegmentCrossings, np.ndarray, np.ndarray,
+                                                             np.ndarray]:
     """Up to :data:`SEGMENT_PUSH_ROUNDS` rounds of moving the crossing segments out: pushes for those that sag,
     tail moves for those through a thin part (``classify``: by
     :meth:`~.segment_crossing.SegmentCrossings.through`, else none) and, after :data:`PUSH_ONLY_ROUNDS`,
-    for all; particles pushed inside go out again. ``distance (N,)`` is every particle's signed distance at
-    ``points`` (roots: anything). Returns the points, the crossings and the particles inside after the last
+    for all; particles pushed inside go out again. ``runs``: :func:`.segment_crossing.weld_runs` of ``welded``
+    (None without it). ``distance (N,)`` is every particle's signed distance at ``points`` (roots: anything). Returns the points, the crossings and the particles inside after the last
     round, the strands whose tails moved and the signed distances at the returned points."""
     pulled = np.zeros(0, dtype=np.int64)
     inside = np.zeros(0, dtype=np.int64)
@@ -251,24 +249,23 @@ def _move_out(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, que
             moved, strands = pull_tails(moved, segments, is_root, crossings.subset(through), offsets, query,
                                         clearance)
             pulled = np.union1d(pulled, strands)
-        distance, changed = _requery(points, moved, distance, is_root, query)
+        distance, changed = distances_after(points, moved, distance, is_root, query)
         points = moved
         inside, _ = inside_depths(points, is_root, query, distance)
         if len(inside):
-            pushed, inside = push_inside_out(points, _whole_runs(inside, welded, is_root), query, clearance,
-                                             None if welded is None else weld_runs(welded))
-            distance, pushed_out = _requery(points, pushed, distance, is_root, query)
+            pushed, inside = push_inside_out(points, _whole_runs(inside, runs, is_root), query, clearance, runs)
+            distance, pushed_out = distances_after(points, pushed, distance, is_root, query)
             points, changed = pushed, changed | pushed_out
         crossings = _recheck(points, segments, is_root, query, distance, crossings, changed)
     return points, crossings, inside, pulled, distance
 
 
-def _whole_runs(rows: np.ndarray, welded: np.ndarray | None, is_root: np.ndarray) -> np.ndarray:
-    """``rows (K,) int64`` and the other free particles welded to them (one place: one push keeps them together)."""
-    if welded is None or len(rows) == 0:
+def _whole_runs(rows: np.ndarray, runs: np.ndarray | None, is_root: np.ndarray) -> np.ndarray:
+    """``rows (K,) int64`` and the other free particles welded to them (``runs``: :func:`.segment_crossing.weld_runs`;
+    None: no welds): one place, and one push keeps them together."""
+    if runs is None or len(rows) == 0:
         return rows
-    run = weld_runs(welded)
-    return np.flatnonzero(np.isin(run, run[rows]) & ~is_root)
+    return np.flatnonzero(np.isin(runs, runs[rows]) & ~is_root)
 
 
 def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndarray, query: MeshQuery,
@@ -332,10 +329,11 @@ def resolve_crossings(points: np.ndarray, segments: np.ndarray, is_root: np.ndar
                 "tails_moved": 0}
     if crossings.count == 0:
         return points, resolved, crossings, distance
+    runs = None if welded is None else weld_runs(welded)
     # two orders of the same moves, each from the method's result: the first that clears every segment wins
     for classify in (True, False):
         moved, after, inside, pulled, moved_distance = _move_out(points, segments, is_root, query, clearance, offsets,
-                                                                 welded, crossings, distance, classify)
+                                                                 welded, runs, crossings, distance, classify)
         if after.count == 0 and len(inside) == 0:
             resolved["tails_moved"] = int(len(pulled))
             return moved, resolved, after, moved_distance

@@ -28,7 +28,7 @@ from hairport.solver.adaptation.fine.band_kernels import (
     block_matvec,
     pinned_band,
 )
-from hairport.solver.adaptation.problem.model_kernels import _cross, _normal_to, assemble_strand, warm_strands
+from hairport.solver.adaptation.problem.model_kernels import assemble_strand, cross, normal_to, warm_strands
 from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 
 
@@ -36,10 +36,10 @@ from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 def contact_frame(normal, frame):
     """The rotation ``(3, 3)`` whose columns are the unit ``normal (3,)`` and two tangents (:func:`.contact_qp.normal_frames`)."""
     n0, n1, n2 = normal[0], normal[1], normal[2]
-    t0, t1, t2 = _normal_to(n0, n1, n2)
+    t0, t1, t2 = normal_to(n0, n1, n2)
     t_norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
     t0, t1, t2 = t0 / t_norm, t1 / t_norm, t2 / t_norm
-    b0, b1, b2 = _cross(n0, n1, n2, t0, t1, t2)
+    b0, b1, b2 = cross(n0, n1, n2, t0, t1, t2)
     frame[0, 0], frame[1, 0], frame[2, 0] = n0, n1, n2
     frame[0, 1], frame[1, 1], frame[2, 1] = t0, t1, t2
     frame[0, 2], frame[1, 2], frame[2, 2] = b0, b1, b2

@@ -16,13 +16,13 @@ from hairport.solver.jit import kernel, parallel_kernel, prange, warms
 
 
 @kernel
-def _cross(a0, a1, a2, b0, b1, b2):
+def cross(a0, a1, a2, b0, b1, b2):
     """``a x b`` of two vectors given by their components."""
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @kernel
-def _normal_to(v0, v1, v2):
+def normal_to(v0, v1, v2):
     """A vector normal to ``v``: ``v x e_k`` with ``k`` its smallest component (numpy's argmin: the first on ties)."""
     k = 0
     if abs(v1) < abs(v0):
@@ -30,10 +30,10 @@ def _normal_to(v0, v1, v2):
     if abs(v2) < abs(v1 if k == 1 else v0):
         k = 2
     if k == 0:
-        return _cross(v0, v1, v2, 1.0, 0.0, 0.0)
+        return cross(v0, v1, v2, 1.0, 0.0, 0.0)
     if k == 1:
-        return _cross(v0, v1, v2, 0.0, 1.0, 0.0)
-    return _cross(v0, v1, v2, 0.0, 0.0, 1.0)
+        return cross(v0, v1, v2, 0.0, 1.0, 0.0)
+    return cross(v0, v1, v2, 0.0, 0.0, 1.0)
 
 
 @kernel
@@ -43,11 +43,11 @@ def _clamped_block(u0, u1, u2, d0, d1, d2, floor, parallel_sine, out):
     e0, e1, e2 = d0 - c * u0, d1 - c * u1, d2 - c * u2
     s = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     if s < parallel_sine:
-        e0, e1, e2 = _normal_to(u0, u1, u2)
+        e0, e1, e2 = normal_to(u0, u1, u2)
     e_norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     if e_norm > 0:  # 0 only where u and d both are (a welded segment at zero length, never assembled)
         e0, e1, e2 = e0 / e_norm, e1 / e_norm, e2 / e_norm
-    w0, w1, w2 = _cross(u0, u1, u2, e0, e1, e2)
+    w0, w1, w2 = cross(u0, u1, u2, e0, e1, e2)
     low = 0.5 * (c - np.sqrt(c * c + 4.0 * s * s))
     q0, q1, q2 = s * u0 + low * e0, s * u1 + low * e1, s * u2 + low * e2
     q_norm = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2)
