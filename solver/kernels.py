@@ -18,13 +18,14 @@ from hairport.solver.adaptation.problem import merit_kernels, model_kernels, spa
 from hairport.solver.adaptation.source import kdtree, neighbours
 from hairport.solver.jit import COLD_COMPILE_SECONDS, WarmUp, set_threads, threads
 from hairport.solver.mesh import bvh_build, closest_kernels, distance_grid
+from hairport.solver.render import strands
 from hairport.solver.transfer import bone_rays, smoothing
 
 __all__ = ["COLD_COMPILE_SECONDS", "MODULES", "WarmUp", "set_threads", "threads", "uncached_kernels", "warm_up"]
 
 #: the modules that declare kernels
 MODULES = (coupled_kernels, band_kernels, line_search_kernels, strand_kernels, merit_kernels, model_kernels, spacing,
-           kdtree, neighbours, bvh_build, closest_kernels, distance_grid, metrics, bone_rays, smoothing)
+           kdtree, neighbours, bvh_build, closest_kernels, distance_grid, metrics, bone_rays, smoothing, strands)
 
 
 def warm_up() -> WarmUp:

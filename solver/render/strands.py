@@ -1,5 +1,5 @@
-"""Strands drawn as shaded hair in one preview view (numpy only; the picture is composed in
-:mod:`.preview`).
+"""Strands drawn as shaded hair in one preview view (numpy, and a compiled kernel that splats the
+samples; the picture is composed in :mod:`.preview`).
 
 Every segment is lit as a thin cylinder (Kajiya-Kay: the diffuse term is the sine of the
 angle between tangent and light, the highlight depends on tangent and half vector, so hair
@@ -11,14 +11,18 @@ pixel's colour is the mean of its samples weighted by ``exp(SOFT_DEPTH * nearnes
 nearest strands dominate without sorting), its opacity grows with the number of samples.
 Drawn at a higher resolution than shown and reduced, this gives thin anti-aliased strands.
 
-Cost: ``O(samples)`` numpy work (samples = total projected length in pixels, at most
-:data:`MAX_SAMPLES`), accumulated by ``np.bincount`` in chunks of about :data:`CHUNK_SAMPLES`
-samples (bounded memory).
+Cost: ``O(segments)`` numpy work for the shading and ``O(samples)`` compiled work for the splat
+(samples = total projected length in pixels, at most :data:`MAX_SAMPLES`), with no per-sample
+arrays. The numpy reference of the splat (:func:`_splat_numpy`, tested equal) makes the samples
+as arrays, in chunks of about :data:`CHUNK_SAMPLES` (bounded memory), and accumulates them by
+``np.bincount``; it took ~0.17 s a view of a 10^5-particle groom where the kernel takes a few ms.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from hairport.solver.jit import kernel, warms
 
 #: light direction in view coordinates (screen right, screen up, toward the camera): from the
 #: upper left and in front, the usual portrait key light
@@ -87,6 +91,7 @@ def hair_layer(
     depth: np.ndarray,
     axes: tuple[np.ndarray, np.ndarray, np.ndarray],
     surface_depth: np.ndarray,
+    compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The hair of one view as a colour image and an opacity image.
 
@@ -106,6 +111,8 @@ def hair_layer(
         The view's axes (lighting).
     surface_depth : (H, W) float64
         Depth of the body at every pixel, ``-inf`` where there is none.
+    compiled : bool
+        Splat the samples with the compiled kernel (default) or with the numpy reference.
 
     Returns
     -------
@@ -127,26 +134,75 @@ def hair_layer(
         step = max(1.0, float(extent.sum()) / MAX_SAMPLES)
         # samples per segment: one per ``step`` pixels, clipped to the image's size
         n = np.minimum(np.ceil(extent / step), 2 * (width + height)).astype(np.int64) + 1
-        cuts = np.searchsorted(np.cumsum(n), np.arange(CHUNK_SAMPLES, n.sum(), CHUNK_SAMPLES))
-        for first, last in zip(np.r_[0, cuts], np.r_[cuts, len(start)]):
-            if first == last:
-                continue
-            s = start[first:last]
-            segment = points[s + 1] - points[s]
-            length = np.linalg.norm(segment, axis=1, keepdims=True)
-            tangent = segment / np.where(length > 0, length, 1.0)
-            # depth cue and blending weight per segment, at its middle (segments are short)
-            nearness = np.clip((0.5 * (depth[s] + depth[s + 1]) - far) / (near - far), 0.0, 1.0)
-            weight = np.exp(SOFT_DEPTH * nearness)
-            lit = shade_segments(tangent, base[s], axes) * (1.0 - DEPTH_DARKEN * (1.0 - nearness))[:, None]
-            per_segment = np.concatenate([weight[:, None], weight[:, None] * lit], axis=1).T  # (4, M)
-            flat, owner = _samples(pixel, depth, s, n[first:last], surface_depth)
-            for k in range(4):
-                sums[k] += np.bincount(flat, per_segment[k][owner], minlength=height * width)
-            hits += np.bincount(flat, minlength=height * width)
+        per_segment = _segment_inks(points, depth, base, start, axes, near, far)
+        if compiled:
+            _splat(np.ascontiguousarray(pixel, dtype=np.float64), np.ascontiguousarray(depth, dtype=np.float64), start,
+                   n, per_segment, np.ascontiguousarray(surface_depth, dtype=np.float64), sums, hits)
+        else:
+            _splat_numpy(pixel, depth, start, n, per_segment, surface_depth, sums, hits)
     color = (sums[1:] / np.where(sums[0] > 0, sums[0], 1.0)).T.reshape(height, width, 3).astype(np.float32)
     alpha = (1.0 - (1.0 - SAMPLE_OPACITY) ** hits).reshape(height, width).astype(np.float32)
     return color, alpha
+
+
+def _segment_inks(points, depth, base, start, axes, near, far):
+    """What each segment ``start -> start + 1`` adds to a pixel it covers: its blending weight and its
+    weighted lit colour, ``(4, M) float64`` (weight, weight * red, green, blue).
+
+    The depth cue and the weight are taken at the segment's middle (segments are short)."""
+    segment = points[start + 1] - points[start]
+    length = np.linalg.norm(segment, axis=1, keepdims=True)
+    tangent = segment / np.where(length > 0, length, 1.0)
+    nearness = np.clip((0.5 * (depth[start] + depth[start + 1]) - far) / (near - far), 0.0, 1.0)
+    weight = np.exp(SOFT_DEPTH * nearness)
+    lit = shade_segments(tangent, base[start], axes) * (1.0 - DEPTH_DARKEN * (1.0 - nearness))[:, None]
+    return np.ascontiguousarray(np.concatenate([weight[:, None], weight[:, None] * lit], axis=1).T)
+
+
+def _splat_numpy(pixel, depth, start, n, per_segment, surface_depth, sums, hits):
+    """:func:`_splat`'s reference: the samples made in numpy, about :data:`CHUNK_SAMPLES` at a time,
+    accumulated by ``np.bincount``."""
+    size = sums.shape[1]
+    cuts = np.searchsorted(np.cumsum(n), np.arange(CHUNK_SAMPLES, n.sum(), CHUNK_SAMPLES))
+    for first, last in zip(np.r_[0, cuts], np.r_[cuts, len(start)]):
+        if first == last:
+            continue
+        flat, owner = _samples(pixel, depth, start[first:last], n[first:last], surface_depth)
+        for k in range(4):
+            sums[k] += np.bincount(flat, per_segment[k, first:last][owner], minlength=size)
+        hits += np.bincount(flat, minlength=size)
+
+
+@kernel
+def _splat(pixel, depth, start, n, per_segment, surface_depth, sums, hits):
+    """Add every visible sample of the segments ``start -> start + 1`` (``n`` evenly spaced on each, in
+    float32 as :func:`_samples`) to the pixel sums ``(4, H * W)`` and sample counts ``(H * W,)``."""
+    height, width = surface_depth.shape
+    for m in range(start.shape[0]):
+        i = start[m]
+        x0, y0, z0 = np.float32(pixel[i, 0]), np.float32(pixel[i, 1]), np.float32(depth[i])
+        dx = np.float32(pixel[i + 1, 0]) - x0
+        dy = np.float32(pixel[i + 1, 1]) - y0
+        dz = np.float32(depth[i + 1]) - z0
+        spacing = np.float32(max(n[m] - 1, 1))
+        for j in range(n[m]):
+            fraction = np.float32(j) / spacing
+            x = np.int64(np.rint(x0 + fraction * dx))
+            y = np.int64(np.rint(y0 + fraction * dy))
+            if x < 0 or x >= width or y < 0 or y >= height:
+                continue
+            if z0 + fraction * dz < surface_depth[y, x] - VISIBILITY_TOLERANCE_M:
+                continue
+            flat = y * width + x
+            for k in range(4):
+                sums[k, flat] += per_segment[k, m]
+            hits[flat] += 1.0
+
+
+@warms
+def _warm() -> None:
+    _splat(np.zeros((2, 2)), np.zeros(2), np.zeros(1, np.int64), np.full(1, 2, np.int64), np.ones((4, 1)),
+           np.zeros((2, 2)), np.zeros((4, 4)), np.zeros(4))
 
 
 def _samples(pixel, depth, start, n, surface_depth):

@@ -15,14 +15,14 @@ AXES = (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0
 RED, BLUE = np.array([200.0, 0.0, 0.0]), np.array([0.0, 0.0, 200.0])
 
 
-def layer(pixels, depths, colors, surface):
+def layer(pixels, depths, colors, surface, compiled=True):
     """hair_layer of strands given in pixels (each (P, 2)), depths (each (P,)) and one colour each."""
     pixel = np.concatenate(pixels).astype(float)
     depth = np.concatenate(depths).astype(float)
     counts = np.array([len(p) for p in pixels])
     points = np.column_stack([pixel[:, 0] * 1e-3, -pixel[:, 1] * 1e-3, depth])  # world: x right, y up
     base = np.repeat(np.array(colors, dtype=float), counts, axis=0)
-    return hair_layer(points, counts, base, pixel, depth, AXES, surface)
+    return hair_layer(points, counts, base, pixel, depth, AXES, surface, compiled=compiled)
 
 
 def test_a_segment_covers_each_pixel_of_its_line_once():
@@ -66,20 +66,40 @@ def test_hair_across_the_light_is_brighter_than_along_it():
     assert (lit[1] > 1.8 * lit[0]).all()
 
 
+def random_strands(rng, n_strands=40, per_strand=7, size=60):
+    """Strands partly off a ``size`` x ``size`` image, with their depths and colours."""
+    pixels = [rng.uniform(-10, size + 10, (per_strand, 2)) for _ in range(n_strands)]
+    depths = [rng.uniform(-0.05, 0.05, per_strand) for _ in range(n_strands)]
+    return pixels, depths, rng.uniform(0, 255, (n_strands, 3))
+
+
+def banded_surface(size=60):
+    """A band of body that hides the samples behind it."""
+    surface = np.full((size, size), -np.inf)
+    surface[20:40] = 0.0
+    return surface
+
+
 def test_chunks_of_samples_draw_the_same_picture(monkeypatch):
     from hairport.solver.render import strands
 
-    rng = np.random.default_rng(0)
-    pixels = [rng.uniform(0, 60, (7, 2)) for _ in range(40)]
-    depths = [rng.uniform(-0.05, 0.05, 7) for _ in range(40)]
-    colors = rng.uniform(0, 255, (40, 3))
-    surface = np.full((60, 60), -np.inf)
-    surface[20:40] = 0.0  # a band of body that hides the samples behind it
-    whole = layer(pixels, depths, colors, surface)
+    pixels, depths, colors = random_strands(np.random.default_rng(0))
+    surface = banded_surface()
+    whole = layer(pixels, depths, colors, surface, compiled=False)
     monkeypatch.setattr(strands, "CHUNK_SAMPLES", 50)  # tens of chunks of a few segments
-    chunked = layer(pixels, depths, colors, surface)
+    chunked = layer(pixels, depths, colors, surface, compiled=False)
     assert np.allclose(whole[0], chunked[0], atol=1e-3) and np.array_equal(whole[1], chunked[1])
     assert 0 < (whole[1] > 0).mean() < 1 and not (whole[1][25:35] > 0).all()
+
+
+def test_the_compiled_splat_draws_the_reference_picture():
+    for seed in range(3):
+        pixels, depths, colors = random_strands(np.random.default_rng(seed), n_strands=60, per_strand=6)
+        surface = banded_surface()
+        compiled = layer(pixels, depths, colors, surface)
+        reference = layer(pixels, depths, colors, surface, compiled=False)
+        assert np.array_equal(compiled[0], reference[0]) and np.array_equal(compiled[1], reference[1])
+        assert 0.2 < (compiled[1] > 0).mean() < 0.95 and not (compiled[1][25:35] > 0).all()  # some of it hidden
 
 
 def test_past_the_sample_budget_segments_are_sampled_more_sparsely(monkeypatch):
