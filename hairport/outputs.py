@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 
 from hairport import solver
 from hairport.solver import FILE_MODE
+from hairport.solver import sequence as solver_sequence
 
 #: random bytes in a temporary output's name (hex-encoded: twice as many characters)
 TEMP_NAME_BYTES = 6
@@ -101,6 +103,73 @@ def add_result(outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result:
         from hairport.solver.render.preview import write_result_preview
 
         outputs.add(preview, lambda path: write_result_preview(path, adaptable, result, target))
+
+
+#: the run of ``#`` in a per-frame file name that each frame's number replaces (zero-padded to the run's length)
+FRAME_NUMBER = re.compile(r"#+")
+
+
+def frame_path(pattern: str | os.PathLike, time: float) -> Path:
+    """``hair.####.abc`` at frame 12 is ``hair.0012.abc``; a time code between frames keeps its decimals."""
+    text = os.fspath(pattern)
+    run = FRAME_NUMBER.search(text)
+    if run is None:
+        raise ValueError(f"{text} has no #### for the frame number")
+    width = run.end() - run.start()
+    number = f"{int(round(time)):0{width}d}" if float(time).is_integer() else f"{time:0{width}g}"
+    return Path(text[:run.start()] + number + text[run.end():])
+
+
+class SequenceOutputs:
+    """Where a sequence's results go: one animated hair file (a format of ``solver_sequence.ANIMATED_FORMATS``) or one
+    file per frame (a name with ``####``), per-frame previews (a name with ``####``), and one report.
+
+    Refuses a plan it cannot carry out before any frame is solved (``bad_option``, ``unknown_format``)."""
+
+    def __init__(self, out: str | os.PathLike, preview: str | os.PathLike | None = None,
+                 report: str | os.PathLike | None = None) -> None:
+        self.out, self.preview, self.report = os.fspath(out), preview, report
+        self.per_frame = FRAME_NUMBER.search(self.out) is not None
+        self.format = solver.format_for_path(self.out)
+        if not self.per_frame and self.format not in solver_sequence.ANIMATED_FORMATS:
+            raise solver.InputError(
+                f"a sequence is written as one animated file ({', '.join(solver_sequence.ANIMATED_FORMATS)}) or one file "
+                f"per frame (a name with #### for the frame number, e.g. hair.####.{self.format}); {self.out} is "
+                "neither", self.out, "bad_option")
+        if preview is not None and FRAME_NUMBER.search(os.fspath(preview)) is None:
+            raise solver.InputError(f"a sequence's previews are one per frame: give a name with #### for the frame "
+                                    f"number (e.g. preview.####.png), not {os.fspath(preview)}", os.fspath(preview),
+                                    "bad_option")
+        self._layout: solver.Hair | None = None
+        self._points: list[np.ndarray] = []
+        self._times: list[float] = []
+
+    def add_frame(self, outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result: solver.RetargetResult,
+                  target: solver.Character, time: float, flag_guides: bool = False) -> None:
+        """One frame's result: its file and preview written now (committed with ``outputs``), its points kept for the
+        animated file."""
+        frame_files = {self.format: frame_path(self.out, time)} if self.per_frame else {}
+        add_result(outputs, adaptable, result, target, frame_files,
+                   preview=None if self.preview is None else frame_path(self.preview, time), flag_guides=flag_guides)
+        if not self.per_frame:
+            in_frame = solver.hair_in_frame(adaptable.frame, result.hair)
+            if self._layout is None:
+                layout = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else \
+                    result.hair
+                self._layout = solver.hair_in_frame(adaptable.frame, layout)
+            self._points.append(in_frame.points)
+            self._times.append(float(time))
+
+    def finish(self, outputs: OutputSet, adaptable: solver.AdaptableHairstyle, report: dict,
+               frames_per_second: float = solver_sequence.FRAMES_PER_SECOND) -> None:
+        """The animated file (every frame's points) and the report."""
+        if not self.per_frame and self._layout is not None:
+            animation = solver_sequence.Animation(np.array(self._times), self._points, frames_per_second)
+            frame, layout = adaptable.frame, self._layout
+            outputs.add(self.out, lambda path: solver_sequence.write_hair_frames(path, layout, animation, units=frame.units,
+                                                                        format=self.format, up_axis=frame.up))
+        if self.report is not None:
+            outputs.add_json(self.report, report)
 
 
 def _create_temporary(final: Path) -> Path:

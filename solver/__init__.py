@@ -7,6 +7,7 @@ names below from here, and otherwise only the solver's named public modules, eac
 - :mod:`~hairport.solver.display`: the dashboard's wire format;
 - :mod:`~hairport.solver.documents`: hairline curve documents and the scenes a dashboard draws;
 - :mod:`~hairport.solver.distributed`: a retarget's fine level solved in pieces elsewhere;
+- :mod:`~hairport.solver.sequence`: one hairstyle onto a sequence of bodies, and animated files;
 - :mod:`~hairport.solver.kernels`: the compiled kernels and their warm-up;
 - :mod:`~hairport.solver.synthetic` and :mod:`~hairport.solver.render`: demo characters and grooms, pictures.
 

@@ -417,6 +417,42 @@ def canonical_target(
     return canonical, report
 
 
+def canonical_sequence(
+    source: Character,
+    frames: list[Character],
+    *,
+    units: str | None = None,
+    up: str | None = None,
+    front: str | None = None,
+) -> tuple[list[Character], dict]:
+    """Bring the frames of a target sequence into hairport's frame, all in the frame found for the first.
+
+    One animated body keeps its units and axes from frame to frame: they are found once, on frame 0, as for a single
+    target (:func:`canonical_target`), and applied to every frame, so that no frame is fitted on its own (a pose
+    could then flip an axis).
+
+    Parameters
+    ----------
+    source : Character
+        Canonical frame.
+    frames : list of Character
+        Read as :func:`canonical_target`'s ``target``.
+    units, up, front
+        As :func:`canonical_target`'s.
+
+    Returns
+    -------
+    frames : list of Character
+        Canonical frame.
+    report : dict
+        :func:`canonical_target`'s report of frame 0.
+    """
+    first, report = canonical_target(source, frames[0], units=units, up=up, front=front)
+    frame = InputFrame(report["units"], report["up"], report["front"])
+    scale = 1.0 if units is not None else METERS_PER_UNIT[frame.units]
+    return [first] + [character_axes_in(frame, body, scale) for body in frames[1:]], report
+
+
 def _same_topology_frame(source: Character, target: Character, units: str | None, up: str | None,
                          front: str | None) -> tuple[InputFrame, float, dict]:
     """The frame of a target of the source's topology, meters per loaded unit, and how they were found: the units

@@ -96,6 +96,8 @@ OPTION_RANGES: dict[str, OptionRange] = {
     "energy_tolerance": OptionRange(0, 1, False, "", "stop a strand whose Eq. 1 fell by less than this fraction"),
     "workers": OptionRange(1, 256, True, "processes", "processes of the multi-scale fine level"),
     "chunk_particles": OptionRange(1, 10**8, True, "particles", "particles per fine-level chunk"),
+    "temporal": OptionRange(0, 1e9, False, "", "weight, as beta's, of a pull toward the previous frame's result "
+                            "moved with the body (sequences; 0: each frame's own Eq. 1)"),
 }
 
 
@@ -114,6 +116,26 @@ def option_table(names=None) -> str:
         if names is None or name in names:
             rows.append(f"| `{name}` | {spec.minimum:g} | {spec.maximum:g} | {spec.units or '-'} | {spec.description} |")
     return "\n".join(rows)
+
+
+@dataclass(frozen=True)
+class SequenceOptions:
+    """How the frames of a target sequence are solved (:mod:`~hairport.solver.sequence`).
+
+    ``warm``: each frame starts from the previous frame's result, moved as the body moved (the
+    difference of the two frames' initial transfers), instead of from its own initial transfer.
+    ``temporal``: the share of Eq. 11's weight ``beta`` that pulls each particle toward that moved
+    result instead of toward the frame's initial transfer (needs ``warm``); 0 leaves Eq. 1 as it is.
+    """
+
+    warm: bool = True
+    temporal: float = 0.0
+
+    def validate(self) -> None:
+        check_ranges(self)
+        if self.temporal and not self.warm:
+            raise InputError("option temporal anchors a frame to the previous one, which needs warm starts",
+                             code="bad_option")
 
 
 @dataclass(frozen=True)

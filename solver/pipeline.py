@@ -58,6 +58,11 @@ from hairport.solver.wrapping import WrappedTarget, needs_wrap, onto_body, requi
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
 GRID_REGION_MARGIN = 0.05
+#: outer iterations at most of a warm frame's coarse level (multi-scale): its guides start next to their solution,
+#: where the coupled loop's merit falls by a few tenths of a percent an iteration; measured on a 24-step body sweep
+#: at 10^5 particles (docs/performance.md, "Sequences"), 2 halves a frame's time against the uncapped loop, at 0.1 mm
+#: (mean) more from a cold retarget by the last frame and no popping
+WARM_COARSE_ITERATIONS = 2
 
 
 @dataclass(eq=False)
@@ -78,6 +83,9 @@ class RetargetResult:
     #: (N,) bool: the particles that start a segment passing through the target body between two particles
     #: outside it (:mod:`~hairport.solver.mesh.segment_crossing`)
     crossing: np.ndarray | None = None
+    #: (N, 3) the first iterate this target gives without an earlier frame: the initial transfer, or the hairline
+    #: edit's start (what :class:`PreviousFrame` measures the body's motion against)
+    base: np.ndarray | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -85,6 +93,73 @@ class RetargetResult:
         if self.solve is not None:
             out["solver"] = asdict(self.solve)
         return out
+
+    def as_previous(self) -> PreviousFrame:
+        """What the next frame of a sequence starts from."""
+        return PreviousFrame(self.hair.points, self.base)
+
+
+@dataclass(frozen=True, eq=False)
+class PreviousFrame:
+    """The previous frame of a sequence, for a warm start.
+
+    Attributes
+    ----------
+    points : (N, 3) float64
+        Its result.
+    base : (N, 3) float64
+        Its :attr:`RetargetResult.base`.
+    """
+
+    points: np.ndarray
+    base: np.ndarray
+
+    def carried(self, base: np.ndarray) -> np.ndarray:
+        """The previous result moved as the body moved: ``points + (base - self.base)`` (``base : (N, 3)``, this
+        frame's); a root lands on this frame's root, as both bases hold their frame's roots."""
+        return self.points + (base - self.base)
+
+
+def warm_start(initial: np.ndarray, start: np.ndarray | None, weights: EnergyWeights, previous: PreviousFrame | None,
+               temporal: float) -> tuple[np.ndarray | None, np.ndarray, EnergyWeights]:
+    """The solve's first iterate, Eq. 11's anchor and the weights: ``(start, initial, weights)`` as they are without a
+    previous frame, else the previous result carried to this frame, the anchor with the temporal term joined
+    (:func:`temporal_anchor`) and ``beta`` raised by it.
+
+    Parameters
+    ----------
+    initial : (N, 3) float64
+        The initial transfer.
+    start : (N, 3) float64 or None
+        The first iterate without a previous frame (a hairline edit's).
+    """
+    if previous is None:
+        return start, initial, weights
+    carried = previous.carried(initial if start is None else start)
+    anchor, beta = temporal_anchor(initial, carried, weights.beta, temporal)
+    return carried, anchor, replace(weights, beta=beta)
+
+
+def temporal_anchor(initial: np.ndarray, carried: np.ndarray, beta: float, temporal: float) -> tuple[np.ndarray, float]:
+    """Eq. 11 with a second anchor: ``beta || p - p-hat ||^2 + temporal || p - carried ||^2`` equals, up to a constant,
+    ``(beta + temporal) || p - anchor ||^2`` with ``anchor = (beta p-hat + temporal carried) / (beta + temporal)``.
+
+    Parameters
+    ----------
+    initial, carried : (N, 3) float64
+    beta, temporal : float
+        Non-negative weights (per m^2).
+
+    Returns
+    -------
+    anchor : (N, 3) float64
+    weight : float
+        ``beta + temporal``, Eq. 11's weight with the anchor.
+    """
+    weight = beta + temporal
+    if temporal == 0.0 or weight == 0.0:
+        return initial, beta
+    return initial + (temporal / weight) * (carried - initial), weight
 
 
 @contextmanager
@@ -178,6 +253,8 @@ def retarget(
     fine_runner: FineRunner = solve_here,
     collision_surface: np.ndarray | None = None,
     wrapped: WrappedTarget | None = None,
+    previous: PreviousFrame | None = None,
+    temporal: float = 0.0,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -204,6 +281,12 @@ def retarget(
     wrapped : WrappedTarget, optional
         The wrap of this source onto this target from an earlier retarget (:attr:`RetargetResult.wrapped`,
         a cache keyed by :func:`~hairport.solver.wrapping.wrap_key`); wrapped here when needed and omitted.
+    previous : PreviousFrame, optional
+        The previous frame of a sequence (:mod:`~hairport.solver.sequence`): the solvers start from its result moved
+        as the body moved, not from this target's initial transfer.
+    temporal : float
+        With ``previous``: the weight (per m^2, as Eq. 11's ``beta``) of a pull toward that moved result
+        (:func:`temporal_anchor`; :class:`~hairport.solver.options.SequenceOptions`).
     """
     options.validate()
     progress = progress or no_progress
@@ -227,12 +310,14 @@ def retarget(
         roots = relocation.roots
         timings["hairline"] = relocation.report["seconds"]
 
+    base = initial if start is None else start
     weights = options.energy_weights()
     if options.method in SOLVER_METHODS:
         claims_outside = True
+        start, anchor, solve_weights = warm_start(initial, start, weights, previous, temporal)
         with timed(timings, "solve"):
-            points, solve_report = adapt_shape(adaptable, body, initial, options, weights, timings, gamma,
-                                               start, progress, should_stop, fine_runner)
+            points, solve_report = adapt_shape(adaptable, body, anchor, options, solve_weights, timings, gamma,
+                                               start, progress, should_stop, fine_runner, warm=previous is not None)
     else:
         solve_report = None
         with timed(timings, "baseline"):
@@ -263,23 +348,17 @@ def retarget(
                                                    particle_distances(body_distance, hair.at_root))
         metrics = hairstyle_metrics(points, hair, initial, roots, adaptable.neighbours, contact_query, options.eps_c,
                                     weights, body=body, penetration_stats=body_distance, crossings=crossings)
-        metrics["method"] = options.method
-        for name, value in (("penetration_resolved", resolved), ("segments_resolved", segments_resolved)):
-            if value is not None:
-                metrics[name] = value
-        if relocation is not None:
-            metrics["hairline"] = relocation.report
-        if wrapped is not None:
-            metrics["wrap"] = wrapped.report
-        metrics["smoothed_particles"] = int(unsmooth.sum())
-        metrics["anchoring"] = adaptable.options.anchoring
-        metrics["fallback_anchors"] = int(adaptable.anchors.fallback.sum())
+        metrics.update(method=options.method, smoothed_particles=int(unsmooth.sum()),
+                       anchoring=adaptable.options.anchoring, fallback_anchors=int(adaptable.anchors.fallback.sum()))
+        metrics.update({name: value for name, value in (
+            ("penetration_resolved", resolved), ("segments_resolved", segments_resolved),
+            ("hairline", relocation and relocation.report), ("wrap", wrapped and wrapped.report)) if value is not None})
         if adaptable.input_report or target_input:
             metrics["input"] = {**adaptable.input_report, **({"target": target_input} if target_input else {})}
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped, crossings.starts(hair.segments, hair.n_particles),
+        wrapped, crossings.starts(hair.segments, hair.n_particles), base,
     )
 
 
@@ -362,6 +441,7 @@ def adapt_shape(
     progress: ProgressFn = no_progress,
     should_stop: Callable[[], bool] | None = None,
     fine_runner: FineRunner = solve_here,
+    warm: bool = False,
 ) -> tuple[np.ndarray, SolveReport | MultiscaleReport]:
     """Eq. 1 under Eq. 12-13, by the multi-scale solve (Sec. 5) or over all strands coupled.
 
@@ -375,6 +455,9 @@ def adapt_shape(
         Eq. 20's weights after a hairline edit.
     start : (N, 3) float64, optional
         The first iterate (``initial`` by default).
+    warm : bool
+        ``start`` is a sequence's previous frame carried to this one: the multi-scale coarse level runs
+        :data:`WARM_COARSE_ITERATIONS` at most.
 
     Returns
     -------
@@ -398,6 +481,7 @@ def adapt_shape(
         weights, solve_options, gamma=gamma, start=start, workers=options.workers or 1,
         chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
         progress=solver_progress, should_stop=should_stop, fine_runner=fine_runner,
+        coarse_iterations=WARM_COARSE_ITERATIONS if warm else None,
     )
     timings["coarse_solve"] = report.coarse_seconds
     timings["fine_solve"] = report.fine_seconds

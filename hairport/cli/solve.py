@@ -10,6 +10,7 @@ from hairport.outputs import OutputSet, add_result
 from hairport.settings import get_settings
 from hairport.solver import InputError, documents
 from hairport.solver import options as solver_options
+from hairport.solver import sequence as solver_sequence
 
 from .common import (
     StageProgress,
@@ -27,6 +28,7 @@ from .common import (
     preprocess_options,
     target_refusals,
 )
+from .sequence import cmd_retarget_sequence
 
 _DEFAULTS = solver.RetargetOptions()
 
@@ -44,15 +46,30 @@ def add_retarget(sub) -> None:
     p = sub.add_parser("retarget", help="retarget a hairstyle from a source to a target character")
     p.add_argument("--adaptable", help="adaptable hairstyle from `hairport preprocess` (instead of --source/--hair)")
     add_source_arguments(p, required=False)
-    p.add_argument("--target", required=True,
-                   help="target character mesh: of the source's topology, or of another (see --wrap)")
-    p.add_argument("--out", required=True, help="output hair file; the format follows the extension")
+    p.add_argument("--target", required=True, nargs="+", metavar="MESH",
+                   help="target character mesh: of the source's topology, or of another (see --wrap); several meshes "
+                        "(one topology) are the frames of a sequence, retargeted in order, each from the one before")
+    p.add_argument("--frames", metavar="START:END[:STEP]",
+                   help="retarget a sequence: these frames (both ends included) of an animated USD target (time "
+                        "codes of its time-sampled mesh points), or of the --target meshes (numbered from 0)")
+    p.add_argument("--morph-weights", metavar="FILE.json",
+                   help="a glTF target's morph-target weights of each frame ([[w1, w2, ...], ...], frames numbered "
+                        "from 0) instead of its animation")
+    p.add_argument("--temporal", type=option_type("temporal"), default=solver_sequence.SequenceOptions.temporal,
+                   help=option_help("temporal", "sequences only; 1e4-1e5 holds each frame to the one before"))
+    p.add_argument("--no-warm-start", dest="warm_start", action="store_false",
+                   help="solve every frame of a sequence cold, from its own initial transfer")
+    p.add_argument("--out", required=True,
+                   help="output hair file; the format follows the extension. A sequence: one animated file "
+                        f"({', '.join(solver_sequence.ANIMATED_FORMATS)}) or one file per frame (a name with #### for "
+                        "the frame number, e.g. hair.####.npz)")
     p.add_argument("--target-skeleton", help="skeleton JSON of the target (default: sidecar, glTF skin, else transferred)")
     p.add_argument("--method", default=_DEFAULTS.method,
                    help=f"one of {', '.join(solver_options.METHODS)}; baselines accept the suffix +pushout "
                         f"(default: {_DEFAULTS.method})")
     p.add_argument("--report", help="write metrics and per-stage timings as JSON here")
-    p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red)")
+    p.add_argument("--preview", help="write a PNG preview (source vs result, penetrating particles in red); a "
+                                     "sequence: one per frame, a name with #### (e.g. preview.####.png)")
     p.add_argument("--flag-guides", action="store_true",
                    help=f"write the guides the solve used as the per-strand attribute {solver_options.GUIDE_FLAG} "
                         "(1 guide, 0 other; Unreal's convention)")
@@ -135,18 +152,19 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 
 def cmd_retarget(args: argparse.Namespace) -> int:
+    if len(args.target) > 1 or args.frames is not None or args.morph_weights is not None:
+        return cmd_retarget_sequence(args, retarget_options(args))
+    if args.temporal or not args.warm_start:
+        raise InputError("--temporal and --no-warm-start apply to a sequence (several --target meshes, or --frames)",
+                         code="bad_option")
+    args.target = args.target[0]
     settings = get_settings()
     progress = StageProgress(args.quiet)
     check_source_arguments(args)
     out_format = solver.format_for_path(args.out)  # refuse unknown formats and options before any work
     if args.hair:
         solver.format_for_path(args.hair)
-    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, spacing=args.spacing, carry=args.carry,
-                                     eps_c=args.eps_c,
-                                     max_iterations=args.max_iterations, energy_tolerance=args.energy_tolerance,
-                                     workers=args.workers,
-                                     qp_backend=args.qp_backend, hairline=hairline_edit(args), wrap=args.wrap)
-    options.validate()
+    options = retarget_options(args)
     adaptable, preprocess_seconds = adaptable_from_args(args, settings, progress)
     inputs = {"adaptable": args.adaptable} if args.adaptable else {"source": args.source, "hair": args.hair}
     target, target_input = load_target(args, settings, adaptable, progress)
@@ -179,6 +197,16 @@ def cmd_retarget(args: argparse.Namespace) -> int:
               f"{100 * h['max_travel_m']:.2f} cm), density change L1 {h['density_change_l1']:.3f} "
               f"Linf {h['density_change_linf']:.3f}, relocation {h['seconds']:.2f} s")
     return 0
+
+
+def retarget_options(args: argparse.Namespace) -> solver.RetargetOptions:
+    """The retarget's options from the command line, checked (the hairline in the groom's axes, landmarks not yet)."""
+    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, spacing=args.spacing,
+                                     carry=args.carry, eps_c=args.eps_c, max_iterations=args.max_iterations,
+                                     energy_tolerance=args.energy_tolerance, workers=args.workers,
+                                     qp_backend=args.qp_backend, hairline=hairline_edit(args), wrap=args.wrap)
+    options.validate()
+    return options
 
 
 def wrap_line(report: dict) -> str:

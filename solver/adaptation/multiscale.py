@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from multiprocessing import get_context
 
 import numpy as np
@@ -403,6 +403,7 @@ def solve_multiscale(
     should_stop: Callable[[], bool] | None = None,
     engine: str = ENGINE_COMPILED,
     fine_runner: FineRunner = solve_here,
+    coarse_iterations: int | None = None,
 ) -> tuple[np.ndarray, MultiscaleReport]:
     """Eq. 1 by the two levels of Sec. 5.
 
@@ -445,6 +446,8 @@ def solve_multiscale(
     fine_runner : FineRunner
         Solves the fine level once the guides are adapted (:func:`solve_here` by default; a
         service hands its chunks to other workers).
+    coarse_iterations : int, optional
+        Outer iterations at most of the coarse level, below ``options.max_iterations`` (a warm start's).
 
     Returns
     -------
@@ -464,7 +467,9 @@ def solve_multiscale(
 
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(
-        coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights, options,
+        coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights,
+        options if coarse_iterations is None else replace(options, max_iterations=min(coarse_iterations,
+                                                                                        options.max_iterations)),
         gamma=None if gamma is None else gamma[guide_particles], backend=backend, start=first[guide_particles],
         grid=grid, band=CONTACT_BAND,
         progress=coarse_progress, should_stop=should_stop,

@@ -34,9 +34,9 @@ CHILD_SECONDS = 60
 #: the child's exit status when it reports an input error (its code and message on stdout, JSON)
 CHILD_INPUT_ERROR = 3
 #: the parsers a child may import (a module path from the command line is never imported blindly)
-PARSERS = ("hairport.solver.io.hair.sandboxed", "hairport.solver.io.character.usd")
+PARSERS = ("hairport.solver.io.hair.sandboxed", "hairport.solver.io.character.usd", "hairport.solver.io.character.alembic")
 #: the functions a child may call: a hair parser's strands, a character parser's mesh
-FUNCTIONS = ("strands_arrays", "mesh_arrays")
+FUNCTIONS = ("strands_arrays", "mesh_arrays", "mesh_frames")
 
 
 def run_in_child(parser: str, function: str, source: str, size: int, arguments: dict, name: str,

@@ -185,7 +185,7 @@ def test_particles_a_method_leaves_inside_are_pushed_out_and_reported(toy_bodies
     source, target = toy_bodies["bust"]
     hair = sunk(toy_long, 0.06)
     adaptable = pipeline.preprocess(source, hair)
-    monkeypatch.setattr(pipeline, "adapt_shape", lambda adaptable, body, initial, *rest: (initial.copy(), None))
+    monkeypatch.setattr(pipeline, "adapt_shape", lambda adaptable, body, initial, *rest, **keywords: (initial.copy(), None))
     result = pipeline.retarget(adaptable, target)
     body = collision_query(target.vertices, target.faces)
     initial = body.signed_distance(result.initial.points[~hair.is_root]).distance

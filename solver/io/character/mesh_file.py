@@ -131,3 +131,13 @@ def check_mesh_arrays(
     if not np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]).any():
         raise InputError(f"empty mesh: every face ({len(faces):,}) has zero area (code empty_mesh)", source,
                          "empty_mesh")
+
+
+def fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """(T, 3) int64: every face of ``counts[f]`` corners (from ``indices``, faces concatenated) as a fan
+    ``(v0, vi, vi+1)``, faces in order; faces of fewer than three corners give none."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    fans = np.maximum(counts - 2, 0)
+    first = np.repeat(starts, fans)
+    step = np.arange(int(fans.sum()), dtype=np.int64) - np.repeat(np.cumsum(fans) - fans, fans)
+    return np.stack([indices[first], indices[first + step + 1], indices[first + step + 2]], axis=1)

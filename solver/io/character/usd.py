@@ -28,6 +28,7 @@ Other files: a stage naming any file (sublayer, reference, payload, clip, asset 
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ import scipy.sparse as sp
 
 from hairport.solver.body.skinning import normalise_weight_rows
 from hairport.solver.io.character.bones import bone_tails, unique_names
-from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts
+from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts, fan_triangles
 from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
@@ -65,16 +66,73 @@ def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | 
 def mesh_arrays(source: str, name: str, max_vertices: int, max_faces: int, mesh_name: str | None,
                 allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> dict[str, np.ndarray]:
     """In the child: the stage's mesh and skin as arrays (read back by :func:`read_usd`)."""
-    Usd, UsdGeom, _, _, Tf = pxr_modules()
+    with _chosen_mesh(source, name, mesh_name, allow_external_files) as (_, prim, units, ctx):
+        return {"units": np.array(units), "label": np.array(str(prim.GetPath())),
+                **_mesh(prim, ctx, max_vertices, max_faces)}
+
+
+@contextmanager
+def _chosen_mesh(source: str, name: str, mesh_name: str | None, allow_external_files: bool):
+    """The stage, its chosen mesh prim, its units and the read context; a damaged value met on reading any of it is
+    ``bad_header``."""
+    _, _, _, _, Tf = pxr_modules()
     ctx = ReadContext(name, ReadLimits(), "m")
     stage = open_stage(source, ctx, allow_external_files)
     try:
         units = stage_units(stage, ctx)
-        prim = _select_mesh(stage, mesh_name, ctx)
-        return {"units": np.array(units), "label": np.array(str(prim.GetPath())),
-                **_mesh(prim, ctx, max_vertices, max_faces)}
-    except Tf.ErrorException as error:  # a damaged value met on reading it
+        yield stage, _select_mesh(stage, mesh_name, ctx), units, ctx
+    except Tf.ErrorException as error:
         raise ctx.error(f"damaged USD data: {usd_reason(error, ctx)}", "bad_header") from None
+
+
+def read_usd_frames(path: Path, times: list[float], *, max_vertices: int, max_faces: int, mesh_name: str | None,
+                    allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> tuple[list[MeshFile], float]:
+    """The mesh of a USD stage at each time code of ``times`` (its points time-sampled: an animated or swept body),
+    parsed in a limited child, with no skin (a bind pose does not follow the points), and the stage's time codes
+    per second.
+
+    Raises
+    ------
+    InputError
+        ``not_animated`` for a mesh whose points have fewer than two time samples (UsdSkel animations and blend
+        shapes are not evaluated: bake them to points), ``bad_frames`` for times outside its samples.
+    """
+    source = str(path)
+    arguments = {"name": path.name, "times": [float(t) for t in times], "max_vertices": max_vertices,
+                 "max_faces": max_faces, "mesh_name": mesh_name, "allow_external_files": allow_external_files}
+    found = run_in_child(__name__, "mesh_frames", source, os.path.getsize(source), arguments, source, "USD")
+    label, units = str(found["label"]), str(found["units"])
+    frames = [MeshFile(points, found["faces"], None, f"{label}@{time:g}", units)
+              for points, time in zip(found["frames"], times, strict=True)]
+    return frames, float(found["frames_per_second"])
+
+
+def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, max_faces: int, mesh_name: str | None,
+                allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> dict[str, np.ndarray]:
+    """In the child: the stage's mesh at each time code, in world space (read back by :func:`read_usd_frames`)."""
+    Usd, UsdGeom, _, _, _ = pxr_modules()
+    with _chosen_mesh(source, name, mesh_name, allow_external_files) as (stage, prim, units, ctx):
+        where = str(prim.GetPath())
+        attribute = UsdGeom.Mesh(prim).GetPointsAttr()
+        samples = attribute.GetTimeSamples()
+        if len(samples) < 2:
+            raise ctx.error(f"{where}: its points have {len(samples)} time sample{'s' if len(samples) != 1 else ''}, "
+                            "so it is not animated (UsdSkel animations and blend shapes are not evaluated: bake "
+                            "them to time-sampled points)", "not_animated")
+        if min(times) < samples[0] or max(times) > samples[-1]:
+            raise ctx.error(f"{where}: frames {min(times):g} to {max(times):g} reach past its time samples "
+                            f"({samples[0]:g} to {samples[-1]:g})", "bad_frames")
+        first = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(times[0]), skin=False)
+        frames = np.empty((len(times), len(first["vertices"]), 3))
+        frames[0] = first["vertices"]
+        for number, time in enumerate(times[1:], start=1):
+            vertices = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(time), skin=False)["vertices"]
+            if vertices.shape != frames[0].shape:
+                raise ctx.error(f"{where}: at time {time:g} it has {len(vertices):,} points, at {times[0]:g} "
+                                f"{len(frames[0]):,}: the frames of a sequence must be one mesh", "sequence_topology")
+            frames[number] = vertices
+        return {"units": np.array(units), "label": np.array(where), "faces": first["faces"], "frames": frames,
+                "frames_per_second": np.array(stage.GetTimeCodesPerSecond())}
 
 
 def _skinned(prim) -> bool:
@@ -105,22 +163,14 @@ def _select_mesh(stage, mesh_name: str | None, ctx: ReadContext):
     return best[0]
 
 
-def fan_triangles(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """(T, 3) int64: every face of ``counts[f]`` corners (from ``indices``, faces concatenated) as a fan
-    ``(v0, vi, vi+1)``, faces in order; faces of fewer than three corners give none."""
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-    fans = np.maximum(counts - 2, 0)
-    first = np.repeat(starts, fans)
-    step = np.arange(int(fans.sum()), dtype=np.int64) - np.repeat(np.cumsum(fans) - fans, fans)
-    return np.stack([indices[first], indices[first + step + 1], indices[first + step + 2]], axis=1)
-
-
 def _matrix(value) -> np.ndarray:
     return np.array(value, dtype=np.float64).reshape(4, 4)
 
 
-def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int) -> dict[str, np.ndarray]:
-    """Vertices (bind pose, world), fan triangles and the skin of one Mesh prim."""
+def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int, time=None, skin: bool = True
+          ) -> dict[str, np.ndarray]:
+    """Vertices (bind pose, world), fan triangles and the skin of one Mesh prim, at ``time`` (a ``Usd.TimeCode``;
+    the default time when None); ``skin`` False reads the points through the mesh's world transform alone."""
     Usd, UsdGeom, _, _, _ = pxr_modules()
     from pxr import UsdSkel
 
@@ -128,7 +178,8 @@ def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int) -> dict[str
     where = str(prim.GetPath())
     counts = np.array(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     indices = np.array(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
-    points = np.array(mesh.GetPointsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
+    time = Usd.TimeCode.Default() if time is None else time
+    points = np.array(mesh.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
     check_counts(len(points), int(np.maximum(counts - 2, 0).sum()), ctx.source, max_vertices, max_faces)
     if (counts < 0).any() or counts.sum() != len(indices):
         raise ctx.error(f"{where}: faceVertexCounts add up to {int(counts.sum()):,} corners, the mesh has "
@@ -136,9 +187,8 @@ def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int) -> dict[str
     if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
         raise ctx.error(f"{where}: a face refers to a point outside its {len(points):,} points", "bad_faces")
     faces = fan_triangles(counts, indices)
-    time = Usd.TimeCode.Default()
     binding = UsdSkel.BindingAPI(prim)
-    skeleton = binding.GetInheritedSkeleton() if _skinned(prim) else None
+    skeleton = binding.GetInheritedSkeleton() if skin and _skinned(prim) else None
     if skeleton is None:
         world = _matrix(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
         return {"vertices": points @ world[:3, :3] + world[3, :3], "faces": faces}

@@ -70,9 +70,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
+import numpy as np
+
 from hairport.solver.io.hair.alembic import FORMAT as ALEMBIC
 from hairport.solver.io.hair.common import (
     ERROR_CODES,
+    Animation,
     HairFormat,
     HairIOWarning,
     ReadContext,
@@ -112,6 +115,8 @@ __all__ = [
 
 #: every format, by name, in the order the API and the docs list them
 FORMATS: dict[str, HairFormat] = {spec.name: spec for spec in (DATA, YUKSEL_HAIR, PLY, NPZ, OBJ, *USD_FORMATS, ALEMBIC)}
+#: the formats that hold a hairstyle's points time-sampled (:func:`write_hair_frames`)
+ANIMATED_FORMATS = tuple(name for name, spec in FORMATS.items() if spec.write_frames is not None)
 SUPPORTED_FORMATS: tuple[str, ...] = tuple(FORMATS)
 EXTENSIONS: dict[str, str] = {spec.extension: name for name, spec in FORMATS.items()}
 # the formats with a text variant, as the writer names them when ascii=True is misused
@@ -303,6 +308,43 @@ def write_hair(
     atomic_write(path, writer)
 
 
+def write_hair_frames(
+    path: str | os.PathLike[str],
+    hair: Hair,
+    animation: Animation,
+    *,
+    units: str = "m",
+    format: str | None = None,
+    up_axis: str = "+y",
+) -> None:
+    """Write a hairstyle's layout with time-sampled points, atomically, in a format that holds animation
+    (:data:`ANIMATED_FORMATS`).
+
+    Parameters
+    ----------
+    path : str or PathLike
+    hair : Hair
+        The layout, thickness, colour and attributes (meters); its points are not written.
+    animation : Animation
+        Every frame's points (meters) and time code.
+    units, format, up_axis
+        As :func:`write_hair`'s.
+
+    Raises
+    ------
+    InputError
+        ``unknown_format`` for a format that holds one frame, or any of :func:`write_hair`'s.
+    """
+    fmt = format_for_path(path, format)
+    if FORMATS[fmt].write_frames is None:
+        raise InputError(f"a {fmt!r} file holds one frame: write an animation as {', '.join(ANIMATED_FORMATS)}, or "
+                         "one file per frame", os.fspath(path), "unknown_format")
+    for points in animation.points:
+        if np.shape(points) != hair.points.shape:
+            raise ValueError(f"a frame has points of shape {np.shape(points)}, the hairstyle {hair.points.shape}")
+    atomic_write(path, _writer(fmt, hair, units, False, os.fspath(path), up_axis, animation))
+
+
 def hair_to_bytes(hair: Hair, format: str, *, units: str = "m", ascii: bool = False, up_axis: str = "+y") -> bytes:
     """The bytes :func:`write_hair` would write (for downloads)."""
     fmt = format_for_path("<bytes>", format)
@@ -351,7 +393,7 @@ def _emit_warnings(report: ReadReport) -> None:
 
 
 def _writer(
-    fmt: str, hair: Hair, units: str, ascii: bool, target: str, up_axis: str = "+y"
+    fmt: str, hair: Hair, units: str, ascii: bool, target: str, up_axis: str = "+y", animation: Animation | None = None
 ) -> Callable[[BinaryIO], None]:
     """A function that writes ``hair`` to a binary file; checks everything it can first."""
     if not isinstance(hair, Hair):
@@ -379,4 +421,6 @@ def _writer(
         kept = {name: attribute for name, attribute in hair.attributes.items() if name not in left_out}
         hair = Hair(hair.points, hair.offsets, hair.thickness, hair.color, kept)
     options = WriteOptions(units, scale, ascii, parse_axis(up_axis, "up axis"))
+    if animation is not None:
+        return lambda f: spec.write_frames(f, hair, animation, options)
     return lambda f: spec.write(f, hair, options)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import tempfile
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import BinaryIO
 
@@ -230,6 +230,38 @@ class WriteOptions:
     up_axis: str = "+y"
 
 
+#: frames per second of an animated file's time codes when nothing else says (USD's own default)
+FRAMES_PER_SECOND = 24.0
+
+
+@dataclass(frozen=True, eq=False)
+class Animation:
+    """Time-sampled points of one hairstyle layout.
+
+    Attributes
+    ----------
+    times : (F,) float64
+        Each frame's time code (frame number), increasing.
+    points : sequence of (N, 3) float64
+        Each frame's points, in meters, in the order of ``times``.
+    frames_per_second : float
+        Time codes per second.
+    """
+
+    times: np.ndarray
+    points: Sequence[np.ndarray]
+    frames_per_second: float = FRAMES_PER_SECOND
+
+    def __post_init__(self) -> None:
+        times = np.asarray(self.times, dtype=np.float64)
+        object.__setattr__(self, "times", times)
+        if len(times) != len(self.points) or len(times) == 0:
+            raise ValueError(f"an animation needs one points array per time: {len(times)} times, "
+                             f"{len(self.points)} arrays")
+        if len(times) > 1 and not (np.diff(times) > 0).all():
+            raise ValueError("an animation's times must increase")
+
+
 Reader = Callable[[bytes | memoryview, ReadContext], Strands]
 Writer = Callable[[BinaryIO, Hair, WriteOptions], None]
 
@@ -270,6 +302,9 @@ class HairFormat:
     recorded_units: Callable[[str], str | None] | None = None
     keeps_attribute: Callable[[str, HairAttribute], bool] = lambda name, attribute: False
     has_prims: bool = False
+    #: ``write_frames(binary_file, hair, animation, options)``: the hairstyle's layout with time-sampled points
+    #: (formats that hold animation; None for the others)
+    write_frames: Callable[[BinaryIO, Hair, Animation, WriteOptions], None] | None = None
 
     @property
     def extension(self) -> str:

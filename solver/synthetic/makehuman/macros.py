@@ -124,6 +124,17 @@ class MakeHumanParams:
         return dict(self.targets)
 
 
+def blend_params(first: MakeHumanParams, last: MakeHumanParams, t: float) -> MakeHumanParams:
+    """The parameters ``t`` of the way from ``first`` to ``last`` (``t`` in [0, 1]): every macro and every extra
+    target's weight (0 where one side lacks it; a weight of 0 left out) moved linearly, as a character customiser's
+    sliders move."""
+    macros = {name: (1.0 - t) * getattr(first, name) + t * getattr(last, name)
+              for name in ("gender", "age", "muscle", "weight", "height", "proportions", *RACES)}
+    ours, theirs = first.target_weights, last.target_weights
+    targets = {name: (1.0 - t) * ours.get(name, 0.0) + t * theirs.get(name, 0.0) for name in sorted({*ours, *theirs})}
+    return MakeHumanParams(**macros, targets={name: weight for name, weight in targets.items() if weight > 0.0})
+
+
 def _two_sided(value: float, low: str, mid: str | None, high: str) -> dict[str, float]:
     """Weights of a variable with anchors 0 (low), 0.5 (mid), 1 (high)."""
     low_w = max(0.0, 1.0 - 2.0 * value)

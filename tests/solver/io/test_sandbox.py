@@ -36,4 +36,5 @@ def test_every_parser_the_child_may_import_is_a_module_with_one_of_its_functions
     found = {parser: [name for name in FUNCTIONS if callable(getattr(importlib.import_module(parser), name, None))]
              for parser in PARSERS}
     assert found == {"hairport.solver.io.hair.sandboxed": ["strands_arrays"],
-                     "hairport.solver.io.character.usd": ["mesh_arrays"]}
+                     "hairport.solver.io.character.usd": ["mesh_arrays", "mesh_frames"],
+                     "hairport.solver.io.character.alembic": ["mesh_frames"]}

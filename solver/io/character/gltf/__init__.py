@@ -77,11 +77,7 @@ def read_gltf(
 def _read_gltf(path: Path, max_vertices: int, max_faces: int, mesh_name: str | None,
                allow_external_files: bool) -> MeshFile:
     source = str(path)
-    document, binary = read_gltf_container(path)
-    if not allow_external_files:
-        refuse_external_uris(document, source)
-    reader = GltfReader(document, binary, path, allow_external_files)
-    node_index, mesh_index, skin_index, label = _select_gltf_mesh(document, mesh_name, reader, source)
+    document, reader, (node_index, mesh_index, skin_index, label) = open_gltf(path, mesh_name, allow_external_files)
     mesh = document["meshes"][mesh_index]
     primitives = mesh.get("primitives", [])
     counts = [reader.count(p.get("attributes", {}).get("POSITION"), "POSITION") for p in primitives]
@@ -131,7 +127,17 @@ def _read_gltf(path: Path, max_vertices: int, max_faces: int, mesh_name: str | N
     return MeshFile(vertices, faces, skin, label, GLTF_UNITS)
 
 
-def _select_gltf_mesh(document: dict, mesh_name: str | None, reader: GltfReader, source: str):
+def open_gltf(path: Path, mesh_name: str | None, allow_external_files: bool) -> tuple[dict, GltfReader, tuple]:
+    """The document, its reader and the mesh to load (:func:`select_gltf_mesh`); a document naming files beside it is
+    refused unless ``allow_external_files``."""
+    document, binary = read_gltf_container(path)
+    if not allow_external_files:
+        refuse_external_uris(document, str(path))
+    reader = GltfReader(document, binary, path, allow_external_files)
+    return document, reader, select_gltf_mesh(document, mesh_name, reader, str(path))
+
+
+def select_gltf_mesh(document: dict, mesh_name: str | None, reader: GltfReader, source: str):
     """(node index or None, mesh index, skin index or None, label) of the mesh to load."""
     nodes = document.get("nodes", [])
     meshes = document.get("meshes", [])

@@ -34,7 +34,7 @@ import numpy as np
 
 from hairport import __version__
 from hairport.solver.io.hair.alembic.params import imath_array, numpy_copy, read_param, writable_dtype, write_param
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, write_through_file
+from hairport.solver.io.hair.common import Animation, HairFormat, ReadContext, Strands, WriteOptions, write_through_file
 from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child
 from hairport.solver.model.errors import InputError
@@ -219,14 +219,33 @@ def write_archive(out: BinaryIO, hair, options: WriteOptions) -> None:
     write_through_file(out, ".abc", lambda path: _write_file(path, hair, options))
 
 
-def _write_file(path: str, hair, options: WriteOptions) -> None:
+def write_animated_archive(out: BinaryIO, hair, animation: Animation, options: WriteOptions) -> None:
+    """:func:`write_archive` with the curves' positions sampled at the animation's times (acyclic time sampling, in
+    seconds: time code over frames per second); widths, colour and attributes are the first sample's."""
+    require_alembic()
+    write_through_file(out, ".abc", lambda path: _write_file(path, hair, options, animation))
+
+
+def _write_file(path: str, hair, options: WriteOptions, animation: Animation | None = None) -> None:
     # every array stays in a local until its sample is set: a sample holds a pointer to the array's
     # memory, not a reference to the array
     Abc, AbcGeom, imath = _modules()
     archive = Abc.OArchive(path)
-    curves = AbcGeom.OCurves(AbcGeom.OXform(archive.getTop(), GROOM_OBJECT), CURVES_OBJECT)
+    parent = AbcGeom.OXform(archive.getTop(), GROOM_OBJECT)
+    if animation is None:
+        curves = AbcGeom.OCurves(parent, CURVES_OBJECT)
+    else:
+        from alembic3d import AbcCoreAbstract
+
+        seconds = AbcCoreAbstract.TimeVector()
+        for time in animation.times / animation.frames_per_second:
+            seconds.append(float(time))
+        sampling = AbcCoreAbstract.TimeSampling(
+            AbcCoreAbstract.TimeSamplingType(AbcCoreAbstract.AcyclicFlag()), seconds)
+        curves = AbcGeom.OCurves(parent, CURVES_OBJECT, archive.addTimeSampling(sampling))
     schema = curves.getSchema()
-    positions = imath_array((hair.points / options.scale).astype(np.float32), "V3fArray")
+    first = hair.points if animation is None else np.asarray(animation.points[0])
+    positions = imath_array((first / options.scale).astype(np.float32), "V3fArray")
     counts = imath_array(hair.counts.astype(np.int32), "IntArray")
     vertex, constant = AbcGeom.GeometryScope.kVertexScope, AbcGeom.GeometryScope.kConstantScope
     if hair.thickness is not None:
@@ -238,6 +257,10 @@ def _write_file(path: str, hair, options: WriteOptions) -> None:
         sample = AbcGeom.OCurvesSchemaSample(positions, counts, AbcGeom.CurveType.kLinear,
                                              AbcGeom.CurvePeriodicity.kNonPeriodic)
     schema.set(sample)
+    for frame in [] if animation is None else animation.points[1:]:
+        moved = imath_array((np.asarray(frame) / options.scale).astype(np.float32), "V3fArray")
+        schema.set(AbcGeom.OCurvesSchemaSample(moved, counts, AbcGeom.CurveType.kLinear,
+                                               AbcGeom.CurvePeriodicity.kNonPeriodic))
     arb = schema.getArbGeomParams()
     for name, value in zip((GROOM_VERSION_MAJOR, GROOM_VERSION_MINOR), GROOM_VERSION, strict=True):
         version = imath.ShortArray(1)
@@ -260,4 +283,4 @@ def keeps_attribute(name: str, attribute: HairAttribute) -> bool:
 
 
 FORMAT = HairFormat("abc", read_archive, write_archive, keeps_thickness=True, keeps_color=True,
-                    keeps_attribute=keeps_attribute, has_prims=True)
+                    keeps_attribute=keeps_attribute, has_prims=True, write_frames=write_animated_archive)

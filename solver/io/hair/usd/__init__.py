@@ -49,7 +49,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from hairport.solver.io.hair.common import HairFormat, ReadContext, Strands, WriteOptions, write_through_file
+from hairport.solver.io.hair.common import Animation, HairFormat, ReadContext, Strands, WriteOptions, write_through_file
 from hairport.solver.io.hair.curves import CurvesPart, chosen_prims, join_parts
 from hairport.solver.io.hair.sandboxed import read_bytes_in_child, read_in_child
 from hairport.solver.io.hair.usd.primvars import read_primvar, write_primvars
@@ -197,8 +197,11 @@ def recorded_units(path: str | os.PathLike[str]) -> str | None:
     return None
 
 
-def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str) -> None:
-    """One linear ``BasisCurves`` prim with widths and displayColor when present (module notes)."""
+def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str, animation: Animation | None = None
+                ) -> None:
+    """One linear ``BasisCurves`` prim with widths and displayColor when present (module notes); with an
+    ``animation``, its points and extent time-sampled at the animation's time codes (the first frame's also as the
+    default value, which readers of one frame take) and the stage's time range and rate set."""
     Usd, UsdGeom, Vt, Sdf, _ = pxr_modules()
     stage = Usd.Stage.CreateInMemory(f"groom{suffix}")
     UsdGeom.SetStageMetersPerUnit(stage, float(options.scale))
@@ -209,9 +212,20 @@ def write_stage(out: BinaryIO, hair: Hair, options: WriteOptions, suffix: str) -
     curves.CreateTypeAttr(UsdGeom.Tokens.linear)
     curves.CreateCurveVertexCountsAttr(Vt.IntArray.FromNumpy(hair.counts.astype(np.int32)))
     points = (hair.points / options.scale).astype(np.float32)
-    curves.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points))
+    points_attribute = curves.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points))
+    extent_attribute = curves.CreateExtentAttr()
     if len(points):
-        curves.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([points.min(axis=0), points.max(axis=0)])))
+        extent_attribute.Set(Vt.Vec3fArray.FromNumpy(np.stack([points.min(axis=0), points.max(axis=0)])))
+    if animation is not None:
+        stage.SetStartTimeCode(float(animation.times[0]))
+        stage.SetEndTimeCode(float(animation.times[-1]))
+        stage.SetTimeCodesPerSecond(float(animation.frames_per_second))
+        for time, frame in zip(animation.times, animation.points, strict=True):
+            frame = (np.asarray(frame) / options.scale).astype(np.float32)
+            points_attribute.Set(Vt.Vec3fArray.FromNumpy(frame), float(time))
+            if len(frame):
+                extent_attribute.Set(Vt.Vec3fArray.FromNumpy(np.stack([frame.min(axis=0), frame.max(axis=0)])),
+                                     float(time))
     if hair.thickness is not None:
         curves.CreateWidthsAttr(Vt.FloatArray.FromNumpy((hair.thickness / options.scale).astype(np.float32)))
         curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
@@ -230,6 +244,7 @@ def _format(name: str) -> HairFormat:
         name=name,
         read=lambda content, ctx: read_stage(content, ctx, suffix),
         write=lambda out, hair, options: write_stage(out, hair, options, suffix),
+        write_frames=lambda out, hair, animation, options: write_stage(out, hair, options, suffix, animation),
         keeps_thickness=True,
         keeps_color=True,
         recorded_units=recorded_units,

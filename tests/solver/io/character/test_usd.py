@@ -8,7 +8,7 @@ import pytest
 from pxr import Gf, Usd, UsdGeom, Vt
 
 from hairport.solver.io.character.load import load_character, read_character
-from hairport.solver.io.character.usd import fan_triangles
+from hairport.solver.io.character.mesh_file import fan_triangles
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic import toy
 from tests.solver.io.character.usd_samples import Y_UP_TO_Z_UP, write_scene

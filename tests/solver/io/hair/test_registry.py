@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from hairport.solver.io.hair import (
+    ANIMATED_FORMATS,
     ERROR_CODES,
     EXTENSIONS,
     FORMATS,
@@ -25,7 +26,9 @@ from hairport.solver.io.hair import (
     read_hair_bytes,
     read_hair_report,
     write_hair,
+    write_hair_frames,
 )
+from hairport.solver.io.hair.common import Animation
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.hair import Hair
 from tests.solver.io.hair.samples import (
@@ -432,3 +435,63 @@ def test_files_without_a_strand_of_two_points_are_refused(fmt, data):
     assert str(err).startswith(f"empty.{fmt}: no ") and str(err).endswith("there is no hair to retarget (code "
                                                                           "empty_hair)")
     assert caught == []  # the error says it all: no warning about skipped strands first
+
+
+def _animation_frames(hair: Hair, n_frames: int) -> list[np.ndarray]:
+    """Each frame the groom bent a little further about the origin (every point moves differently)."""
+    frames = []
+    for number in range(n_frames):
+        angle = 0.05 * number
+        turn = np.array([[np.cos(angle), 0.0, np.sin(angle)], [0.0, 1.0, 0.0], [-np.sin(angle), 0.0, np.cos(angle)]])
+        frames.append(hair.points @ turn.T + [0.0, 0.002 * number, 0.0])
+    return frames
+
+
+@pytest.mark.parametrize("fmt", ANIMATED_FORMATS)
+def test_an_animation_reads_back_with_its_time_samples_and_attributes(tmp_path, fmt):
+    from hairport.solver.model.hair import HairAttribute
+
+    hair = helix_hair()
+    hair = Hair(hair.points, hair.offsets, np.full(hair.n_particles, 8e-5), np.full((hair.n_particles, 3), 0.25),
+                {"groom_guide": HairAttribute(np.arange(hair.n_strands, dtype=np.int32) % 2, "strand")})
+    frames = _animation_frames(hair, 4)
+    path = tmp_path / f"anim.{fmt}"
+    write_hair_frames(path, hair, Animation(np.array([1001.0, 1002.0, 1003.0, 1005.0]), frames, 30.0), units="cm")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HairIOWarning)  # an Alembic archive's samples: the first is read
+        first = read_hair(path, units="cm")
+    assert np.abs(first.points - frames[0]).max() < 1e-6  # a reader of one frame takes the first
+    assert np.allclose(first.thickness, 8e-5) and np.array_equal(first.attributes["groom_guide"].values,
+                                                                  hair.attributes["groom_guide"].values)
+    samples, seconds = _time_samples(path, fmt)
+    assert np.allclose(seconds, np.array([1001.0, 1002.0, 1003.0, 1005.0]) / 30.0)
+    for sample, frame in zip(samples, frames, strict=True):
+        assert np.abs(sample * 0.01 - frame).max() < 1e-6  # centimetres
+
+
+def _time_samples(path, fmt) -> tuple[list[np.ndarray], np.ndarray]:
+    """Every time sample of the written curves' points (file units) and its time in seconds, read by the library."""
+    if fmt == "abc":
+        from alembic3d import Abc, AbcGeom
+
+        curves = Abc.IArchive(str(path)).getTop().getChild("groom").getChild("hair")
+        schema = AbcGeom.ICurves(curves, Abc.WrapExistingFlag.kWrapExisting).getSchema()
+        seconds = np.array([schema.getTimeSampling().getSampleTime(i) for i in range(schema.getNumSamples())])
+        return [np.array(schema.getValue(Abc.ISampleSelector(t)).getPositions()) for t in seconds], seconds
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(path))
+    attribute = UsdGeom.BasisCurves(stage.GetPrimAtPath("/Groom/hair")).GetPointsAttr()
+    times = attribute.GetTimeSamples()
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (times[0], times[-1])
+    return [np.array(attribute.Get(t)) for t in times], np.array(times) / stage.GetTimeCodesPerSecond()
+
+
+def test_a_format_of_one_frame_refuses_an_animation(tmp_path):
+    hair = helix_hair()
+    with pytest.raises(InputError) as caught:
+        write_hair_frames(tmp_path / "anim.npz", hair, Animation(np.arange(2.0), _animation_frames(hair, 2)))
+    assert caught.value.code == "unknown_format" and "one frame" in caught.value.problem
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError):
+        Animation(np.array([2.0, 1.0]), _animation_frames(hair, 2))

@@ -61,3 +61,14 @@ def test_age_weights_follow_makehuman():
     assert weights["child"] == pytest.approx(0.1 / 0.1875)
     weights = macro_variable_weights(MakeHumanParams(age=0.75))["age"]
     assert weights == pytest.approx({"baby": 0.0, "child": 0.0, "young": 0.5, "old": 0.5})
+
+
+def test_blended_parameters_move_every_slider_linearly():
+    from hairport.solver.synthetic.makehuman.builder import PRESETS
+    from hairport.solver.synthetic.makehuman.macros import blend_params
+
+    first, last = PRESETS["average-female"], PRESETS["heavy-male"]
+    assert blend_params(first, last, 0.0) == first and blend_params(first, last, 1.0) == last
+    middle = blend_params(first, last, 0.25)
+    assert middle.weight == pytest.approx(0.75 * first.weight + 0.25 * last.weight)
+    assert middle.target_weights["head/head-round"] == pytest.approx(0.25 * 0.5)  # only the heavy male has it

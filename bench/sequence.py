@@ -1,0 +1,123 @@
+"""A hairstyle onto a sequence of bodies: what a warm frame costs against a cold retarget, and how it differs.
+
+The sequence is a MakeHuman morph sweep: the average female (the groom's source) to the heavy male in ``--steps``
+steps of every slider (``makehuman.macros.blend_params``), as a character customiser's sliders move; its largest
+vertex step is printed. For each groom size (a "long" groom, as ``bench/table4.py``'s), in a fresh process:
+
+* the sequence retargeted frame by frame (``solver.sequence.retarget_sequence``: warm frames, no temporal term unless
+  ``--temporal``), each frame's wall-clock seconds;
+* a cold retarget (``solver.retarget``) of every ``--cold-every``-th frame, its seconds, and the mean distance
+  between the two results of that frame;
+* per frame: particles inside the body, and the coherence figures (the largest particle jump from the previous
+  frame against twice the body's largest motion near the hair plus 1 mm).
+
+The kernels are warmed first, and one retarget runs before anything is timed. Medians: the later frames' (all but
+the first, which is the source's own body) and the cold retargets'; their ratio is the figure the issue's target
+names (at most 0.25).
+
+    python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0]
+
+Prints a table; not a test. Times are wall-clock seconds on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from table4 import SOURCE, STYLE, TARGET, _machine, groom_shape  # noqa: E402
+
+
+def sweep(steps: int):
+    """The ``steps + 1`` bodies of the sweep, the first the source."""
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+    from hairport.solver.synthetic.makehuman.macros import blend_params
+
+    first, last = PRESETS[SOURCE], PRESETS[TARGET]
+    return [build_character(blend_params(first, last, k / steps), name=f"sweep {k}/{steps}") for k in range(steps + 1)]
+
+
+def measure(particles: int, steps: int, cold_every: int, temporal: float) -> dict:
+    """In this process: the sequence and the cold retargets of one groom size."""
+    from hairport import solver
+    from hairport.solver import kernels, sequence
+    from hairport.solver.synthetic.groom import generate_groom
+
+    kernels.warm_up()
+    bodies = sweep(steps)
+    adaptable = solver.preprocess(bodies[0], generate_groom(bodies[0], STYLE, *groom_shape(particles), seed=0))
+    solver.retarget(adaptable, bodies[1])  # the first retarget of an artifact builds what it keeps
+    frames = []
+    options = solver.RetargetOptions()
+    for result in sequence.retarget_sequence(adaptable, bodies, options, sequence.SequenceOptions(temporal=temporal)):
+        number = result.metrics["frame"]
+        row = {"frame": number, "seconds": result.timings["frame"],
+               "inside": int(result.metrics["penetrating_particles"]),
+               "crossing": int(result.metrics["crossing_segments"]["count"]), **result.metrics.get("coherence", {})}
+        row.pop("pops", None)
+        if number % cold_every == 0 and number > 0:
+            began = time.perf_counter()
+            cold = solver.retarget(adaptable, bodies[number], options)
+            row["cold_seconds"] = time.perf_counter() - began
+            row["mean_to_cold_m"] = float(np.linalg.norm(result.hair.points - cold.hair.points, axis=1).mean())
+            row["cold_inside"] = int(cold.metrics["penetrating_particles"])
+        frames.append(row)
+    step = max(float(np.linalg.norm(bodies[k + 1].vertices - bodies[k].vertices, axis=1).max()) for k in range(steps))
+    return {"particles": adaptable.hair.n_particles, "frames": frames, "largest_vertex_step_m": step}
+
+
+def table(result: dict) -> str:
+    frames = result["frames"]
+    lines = [f"{result['particles']:,} particles, {len(frames)} frames (largest vertex step "
+             f"{1e3 * result['largest_vertex_step_m']:.1f} mm)",
+             "| frame | warm s | cold s | warm / cold | mean to cold mm | inside | crossing | jump mm | bound mm | beyond |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for row in frames:
+        cold = row.get("cold_seconds")
+        compared = ["", "", ""] if cold is None else [f"{cold:.2f}", f"{row['seconds'] / cold:.2f}",
+                                                      f"{1e3 * row['mean_to_cold_m']:.3f}"]
+        lines.append(
+            f"| {row['frame']} | {row['seconds']:.2f} | {' | '.join(compared)} | {row['inside']} | {row['crossing']} | "
+            f"{1e3 * row.get('largest_jump_m', 0.0):.1f} | {1e3 * row.get('jump_bound_m', 0.0):.1f} | "
+            f"{row.get('particles_beyond', 0)} |")
+    later = [row["seconds"] for row in frames[1:]]
+    cold = [row["cold_seconds"] for row in frames if "cold_seconds" in row]
+    to_cold = [row["mean_to_cold_m"] for row in frames if "mean_to_cold_m" in row]
+    pops = sum(row.get("particles_beyond", 0) > 0 for row in frames)
+    lines.append(f"later frames: median {statistics.median(later):.2f} s (p90 {np.quantile(later, 0.9):.2f}); cold "
+                 f"retargets: median {statistics.median(cold):.2f} s; ratio {statistics.median(later) / statistics.median(cold):.2f}; "
+                 f"mean distance to cold at most {1e3 * max(to_cold):.3f} mm; inside at most "
+                 f"{max(row['inside'] for row in frames)}; frames that pop {pops}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", nargs="+", type=float, default=[1e5, 1e6])
+    parser.add_argument("--steps", type=int, default=24)
+    parser.add_argument("--cold-every", type=int, default=4)
+    parser.add_argument("--temporal", type=float, default=0.0)
+    parser.add_argument("--one", type=float, help=argparse.SUPPRESS)  # the child: one size, JSON out
+    args = parser.parse_args(argv)
+    if args.one is not None:
+        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal)))
+        return 0
+    print(f"# {_machine()}; temporal {args.temporal:g}")
+    for size in args.sizes:
+        child = subprocess.run([sys.executable, __file__, "--one", str(size), "--steps", str(args.steps),
+                                "--cold-every", str(args.cold_every), "--temporal", str(args.temporal)],
+                               check=True, capture_output=True, text=True)
+        print(table(json.loads(child.stdout.strip().splitlines()[-1])), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,213 @@
+"""One hairstyle onto a sequence of bodies: morph sweeps and animated characters, frame by frame.
+
+The frames share one mesh topology (their own; the source's may differ, as for any target). Each
+frame is a retarget (:func:`~hairport.solver.pipeline.retarget`) of its own, but for the solvers
+it starts where the previous frame ended: the previous result moved as the body moved from that
+frame to this one (the difference of the two frames' initial transfers,
+:class:`~hairport.solver.pipeline.PreviousFrame`), so a sequence of close bodies costs less per
+frame than a cold retarget and lands in the same valley from frame to frame. The optional
+temporal term (:class:`~hairport.solver.options.SequenceOptions`) also anchors each particle to
+that moved result, for sequences that must not flicker.
+
+Coherence, per frame after the first: the largest particle jump from the previous frame, beside
+the body's largest motion near the hair (vertices in the cells of :data:`NEAR_HAIR_M` that hold
+hair or touch one that does). A frame whose jump exceeds ``JUMP_MOTION_FACTOR`` times that motion
+plus :data:`JUMP_ALLOWANCE_M` pops.
+
+Convention: meters, hairport's frame (Y up, face +Z), as every solver module.
+
+A public module of the solver (``from hairport.solver import sequence``): besides the sequence's solve and report,
+it hands out what reading and writing a sequence takes (frame ranges, the frames of a target, animated hair files).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator, Sequence
+
+import numpy as np
+
+from hairport.solver.adaptable import AdaptableHairstyle
+from hairport.solver.inputs import canonical_sequence as canonical_sequence
+from hairport.solver.io.character.frames import TargetFrames as TargetFrames
+from hairport.solver.io.character.frames import read_character_frames as read_character_frames
+from hairport.solver.io.character.frames import read_morph_weights as read_morph_weights
+from hairport.solver.io.hair import ANIMATED_FORMATS as ANIMATED_FORMATS
+from hairport.solver.io.hair import write_hair_frames as write_hair_frames
+from hairport.solver.io.hair.common import FRAMES_PER_SECOND as FRAMES_PER_SECOND
+from hairport.solver.io.hair.common import Animation as Animation
+from hairport.solver.model.character import Character
+from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame_range import FrameRange as FrameRange
+from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
+from hairport.solver.options import SOLVER_METHODS, RetargetOptions
+from hairport.solver.options import SequenceOptions as SequenceOptions
+from hairport.solver.pipeline import RetargetResult, retarget
+
+#: the cell size of "near the hair" (m): a vertex within this of a particle is near it (and some up to
+#: twice the cells' diagonal away)
+NEAR_HAIR_M = 0.05
+#: a frame pops when its largest particle jump exceeds this times the body's largest motion near the hair ...
+JUMP_MOTION_FACTOR = 2.0
+#: ... plus this (m)
+JUMP_ALLOWANCE_M = 1e-3
+def require_one_topology(frames: Sequence[Character]) -> None:
+    """Refuse (``sequence_topology``) frames that are not one mesh: the same vertex count and faces as frame 0."""
+    if not frames:
+        raise InputError("the target sequence has no frames", "frames", "bad_frames")
+    first = frames[0]
+    for number, frame in enumerate(frames[1:], start=1):
+        if frame.n_vertices != first.n_vertices or not np.array_equal(frame.faces, first.faces):
+            raise InputError(f"frame {number} ({frame.name}) has {frame.n_vertices:,} vertices and "
+                             f"{len(frame.faces):,} faces, frame 0 ({first.name}) {first.n_vertices:,} and "
+                             f"{len(first.faces):,}: the frames of a sequence must be one mesh", frame.name,
+                             "sequence_topology")
+
+
+def retarget_sequence(
+    adaptable: AdaptableHairstyle,
+    frames: Sequence[Character],
+    options: RetargetOptions = RetargetOptions(),
+    sequence: SequenceOptions = SequenceOptions(),
+    progress: ProgressFn | None = None,
+    should_stop: Callable[[], bool] | None = None,
+    **retarget_arguments,
+) -> Iterator[RetargetResult]:
+    """Retarget the hairstyle onto every frame in order, each warm from the one before (module notes).
+
+    Parameters
+    ----------
+    adaptable : AdaptableHairstyle
+    frames : sequence of Character
+        Canonical frame, one topology (:func:`require_one_topology`).
+    options : RetargetOptions
+        Every frame's (a baseline method retargets each frame on its own: it has no solve to start warm).
+    sequence : SequenceOptions
+    progress : callable(stage, fraction, message), optional
+        Frame ``i`` of ``F`` reports in ``[i / F, (i + 1) / F]``, its stages named ``frame i: stage``.
+    should_stop : callable() -> bool, optional
+    retarget_arguments
+        Passed to every frame's :func:`~hairport.solver.pipeline.retarget` (``fine_runner``, ...).
+
+    Yields
+    ------
+    result : RetargetResult
+        One per frame, in order; ``result.metrics["coherence"]`` from the second on (:func:`frame_coherence`),
+        ``result.timings["frame"]`` the frame's seconds.
+    """
+    options.validate()
+    sequence.validate()
+    if sequence.temporal and options.method not in SOLVER_METHODS:
+        raise InputError(f"option temporal pulls a solve toward the previous frame; the baseline {options.method} "
+                         "solves nothing (it retargets each frame on its own)", code="bad_option")
+    require_one_topology(frames)
+    progress = progress or no_progress
+    previous: RetargetResult | None = None
+    for number, body in enumerate(frames):
+        frame_progress = _numbered(rescaled(progress, number / len(frames), (number + 1) / len(frames)), number)
+        carry = previous.as_previous() if previous is not None and sequence.warm else None
+        began = time.perf_counter()
+        result = retarget(adaptable, body, options, progress=frame_progress, should_stop=should_stop,
+                          previous=carry, temporal=sequence.temporal, **retarget_arguments)
+        if previous is not None:
+            result.metrics["coherence"] = frame_coherence(previous.hair.points, result.hair.points,
+                                                          frames[number - 1].vertices, body.vertices)
+        result.metrics["frame"] = number
+        result.timings["frame"] = time.perf_counter() - began
+        yield result
+        previous = result
+
+
+def _numbered(progress: ProgressFn, number: int) -> ProgressFn:
+    def report(stage: str, fraction: float, message: str) -> None:
+        progress(f"frame {number}: {stage}", fraction, message)
+
+    return report
+
+
+def body_motion_near_hair(points: np.ndarray, before: np.ndarray, after: np.ndarray,
+                          reach: float = NEAR_HAIR_M) -> float:
+    """The body's largest vertex motion near the hair (m).
+
+    Parameters
+    ----------
+    points : (N, 3) float64
+        The hair.
+    before, after : (V, 3) float64
+        The body's vertices in two frames.
+    reach : float
+        Cell size (m): vertices in a cell that holds a particle, or in one of its 26 neighbours, count.
+
+    Returns
+    -------
+    motion : float
+        0 when no vertex is near the hair.
+    """
+    if len(points) == 0 or len(before) == 0:
+        return 0.0
+    hair_cells = np.unique(_cell_keys(np.floor(points / reach).astype(np.int64)))
+    vertex_cells = np.floor(before / reach).astype(np.int64)
+    near = np.zeros(len(before), dtype=bool)
+    for offset in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3):
+        near |= np.isin(_cell_keys(vertex_cells + offset), hair_cells)
+    if not near.any():
+        return 0.0
+    return float(np.linalg.norm(after[near] - before[near], axis=1).max())
+
+
+def _cell_keys(cells: np.ndarray) -> np.ndarray:
+    """One int64 per integer cell ``(n, 3)`` (coordinates within +-2^20 cells: +-52 km at 5 cm)."""
+    shifted = cells + (1 << 20)
+    return (shifted[:, 0] << 42) | (shifted[:, 1] << 21) | shifted[:, 2]
+
+
+def frame_coherence(previous_points: np.ndarray, points: np.ndarray, previous_vertices: np.ndarray,
+                    vertices: np.ndarray) -> dict:
+    """How far a frame's hair moved against how far its body moved near it.
+
+    Parameters
+    ----------
+    previous_points, points : (N, 3) float64
+        The hair in the previous frame and in this one.
+    previous_vertices, vertices : (V, 3) float64
+        The body in the previous frame and in this one.
+
+    Returns
+    -------
+    coherence : dict
+        ``largest_jump_m``, ``body_motion_near_hair_m``, ``jump_bound_m`` (``JUMP_MOTION_FACTOR`` times the motion
+        plus ``JUMP_ALLOWANCE_M``), ``pops`` (a jump beyond the bound) and ``particles_beyond`` (how many).
+    """
+    jumps = np.linalg.norm(points - previous_points, axis=1)
+    motion = body_motion_near_hair(previous_points, previous_vertices, vertices)
+    bound = JUMP_MOTION_FACTOR * motion + JUMP_ALLOWANCE_M
+    beyond = jumps > bound
+    return {"largest_jump_m": float(jumps.max()) if len(jumps) else 0.0, "body_motion_near_hair_m": motion,
+            "jump_bound_m": bound, "pops": bool(beyond.any()), "particles_beyond": int(beyond.sum())}
+
+
+def sequence_report(results: Sequence[RetargetResult], times: Sequence[float]) -> dict:
+    """The sequence's report: every frame's metrics and timings, and a summary (JSON-ready).
+
+    Parameters
+    ----------
+    results : sequence of RetargetResult
+        From :func:`retarget_sequence`, in order.
+    times : sequence of float
+        Each frame's number (time code).
+    """
+    frames = [{"time": float(time), "metrics": result.metrics, "timings_s": result.timings}
+              for result, time in zip(results, times)]
+    coherence = [result.metrics["coherence"] for result in results[1:]]
+    seconds = [result.timings["frame"] for result in results]
+    return {
+        "frames": frames,
+        "summary": {
+            "frames": len(results),
+            "penetrating_particles_max": max((int(r.metrics["penetrating_particles"]) for r in results), default=0),
+            "largest_jump_m": max((c["largest_jump_m"] for c in coherence), default=0.0),
+            "frames_that_pop": sum(bool(c["pops"]) for c in coherence),
+            "first_frame_s": seconds[0] if seconds else 0.0,
+            "later_frames_median_s": float(np.median(seconds[1:])) if len(seconds) > 1 else None,
+        },
+    }
