@@ -132,10 +132,10 @@ class SequenceOutputs:
         self.per_frame = FRAME_NUMBER.search(self.out) is not None
         self.format = solver.format_for_path(self.out)
         if not self.per_frame and self.format not in solver_sequence.ANIMATED_FORMATS:
+            animated = ", ".join(solver_sequence.ANIMATED_FORMATS)
             raise solver.InputError(
-                f"a sequence is written as one animated file ({', '.join(solver_sequence.ANIMATED_FORMATS)}) or one file "
-                f"per frame (a name with #### for the frame number, e.g. hair.####.{self.format}); {self.out} is "
-                "neither", self.out, "bad_option")
+                f"a sequence is written as one animated file ({animated}) or one file per frame (a name with #### for "
+                f"the frame number, e.g. hair.####.{self.format}); {self.out} is neither", self.out, "bad_option")
         if preview is not None and FRAME_NUMBER.search(os.fspath(preview)) is None:
             raise solver.InputError(f"a sequence's previews are one per frame: give a name with #### for the frame "
                                     f"number (e.g. preview.####.png), not {os.fspath(preview)}", os.fspath(preview),
@@ -157,7 +157,8 @@ class SequenceOutputs:
                 layout = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else \
                     result.hair
                 self._layout = solver.hair_in_frame(adaptable.frame, layout)
-            self._points.append(in_frame.points)
+            # float32, as the animated formats write them: half the memory of a long sequence
+            self._points.append(in_frame.points.astype(np.float32))
             self._times.append(float(time))
 
     def finish(self, outputs: OutputSet, adaptable: solver.AdaptableHairstyle, report: dict,
@@ -166,8 +167,8 @@ class SequenceOutputs:
         if not self.per_frame and self._layout is not None:
             animation = solver_sequence.Animation(np.array(self._times), self._points, frames_per_second)
             frame, layout = adaptable.frame, self._layout
-            outputs.add(self.out, lambda path: solver_sequence.write_hair_frames(path, layout, animation, units=frame.units,
-                                                                        format=self.format, up_axis=frame.up))
+            outputs.add(self.out, lambda path: solver_sequence.write_hair_frames(
+                path, layout, animation, units=frame.units, format=self.format, up_axis=frame.up))
         if self.report is not None:
             outputs.add_json(self.report, report)
 

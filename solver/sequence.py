@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -186,13 +187,13 @@ def frame_coherence(previous_points: np.ndarray, points: np.ndarray, previous_ve
             "jump_bound_m": bound, "pops": bool(beyond.any()), "particles_beyond": int(beyond.sum())}
 
 
-def sequence_report(results: Sequence[RetargetResult], times: Sequence[float]) -> dict:
+def sequence_report(results: Sequence[RetargetResult | FrameRecord], times: Sequence[float]) -> dict:
     """The sequence's report: every frame's metrics and timings, and a summary (JSON-ready).
 
     Parameters
     ----------
-    results : sequence of RetargetResult
-        From :func:`retarget_sequence`, in order.
+    results : sequence of RetargetResult or FrameRecord
+        From :func:`retarget_sequence`, in order (only their metrics and timings are read).
     times : sequence of float
         Each frame's number (time code).
     """
@@ -211,3 +212,16 @@ def sequence_report(results: Sequence[RetargetResult], times: Sequence[float]) -
             "later_frames_median_s": float(np.median(seconds[1:])) if len(seconds) > 1 else None,
         },
     }
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """What a sequence's report keeps of a frame: its metrics and timings, not its arrays (a long sequence of a large
+    groom would hold every frame's hair otherwise)."""
+
+    metrics: dict
+    timings: dict
+
+    @classmethod
+    def of(cls, result: RetargetResult) -> FrameRecord:
+        return cls(result.metrics, result.timings)

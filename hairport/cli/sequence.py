@@ -1,4 +1,5 @@
-"""``hairport retarget`` onto a sequence: several --target meshes, or --frames of an animated USD stage."""
+"""``hairport retarget`` onto a sequence: several --target meshes, or --frames of one animated target (a USD stage's
+time-sampled points, a glTF's morph targets, an Alembic mesh)."""
 
 from __future__ import annotations
 
@@ -24,10 +25,12 @@ from .common import (
 
 
 def cmd_retarget_sequence(args: argparse.Namespace, options: solver.RetargetOptions) -> int:
-    """Retarget onto every frame in order (``solver_sequence.retarget_sequence``) and write the frames as one animated file
-    or one file per frame, previews per frame, and one report."""
+    """Retarget onto every frame in order (``sequence.retarget_sequence``) and write the frames as one animated file or
+    one file per frame, previews per frame, and one report."""
     settings = get_settings()
     progress = StageProgress(args.quiet)
+    if args.landmarks is not None:
+        raise InputError("--landmarks name points of one target: a sequence's frames move them", code="bad_option")
     if args.target_skeleton is not None:
         raise InputError("--target-skeleton names one target's skeleton: a sequence's meshes each take their own "
                          "sidecar (<mesh>.skeleton.json), an animated stage's frames the source's rig",
@@ -51,11 +54,11 @@ def cmd_retarget_sequence(args: argparse.Namespace, options: solver.RetargetOpti
     options.validate()
     results = []
     with OutputSet() as outputs, target_refusals(options.wrap, bodies[0], found):
-        for result, body, time in zip(solver_sequence.retarget_sequence(adaptable, bodies, options, sequence,
-                                                               progress=progress, target_input=found),
-                                      bodies, times, strict=True):
+        solved = solver_sequence.retarget_sequence(adaptable, bodies, options, sequence, progress=progress,
+                                                   target_input=found)
+        for result, body, time in zip(solved, bodies, times, strict=True):
             plan.add_frame(outputs, adaptable, result, body, time, flag_guides=args.flag_guides)
-            results.append(_light(result))
+            results.append(solver_sequence.FrameRecord.of(result))
         report = solver_sequence.sequence_report(results, times)
         report["timings_s"] = {"preprocess": preprocess_seconds}
         report["inputs"] = {"target": list(args.target), "frames": None if frames is None else frames.text(),
@@ -71,11 +74,6 @@ def cmd_retarget_sequence(args: argparse.Namespace, options: solver.RetargetOpti
           f"first frame {summary['first_frame_s']:.1f} s" + ("" if later is None else f", later ones {later:.1f} s "
                                                                "(median)"))
     return 0
-
-
-def _light(result: solver.RetargetResult) -> solver.RetargetResult:
-    """The result without its arrays beyond the points (a sequence keeps every frame's metrics)."""
-    return solver.RetargetResult(result.hair, result.hair, result.metrics, result.timings)
 
 
 def _listed(paths: list) -> str:

@@ -76,6 +76,8 @@ def test_the_report_sums_up_the_frames(sweep):
     assert summary["largest_jump_m"] == max(r.metrics["coherence"]["largest_jump_m"] for r in sweep["warm"][1:])
     assert [frame["time"] for frame in report["frames"]] == [10.0, 11.0, 12.0, 13.0, 14.0]
     assert summary["first_frame_s"] == sweep["warm"][0].timings["frame"] > 0
+    records = [sequence.FrameRecord.of(result) for result in sweep["warm"]]
+    assert sequence.sequence_report(records, [10.0, 11.0, 12.0, 13.0, 14.0]) == report
 
 
 def test_a_temporal_term_pulls_each_frame_toward_the_previous_one(sweep):

@@ -24,6 +24,7 @@ from hairport.solver.io.hair.alembic import require_alembic
 from hairport.solver.io.hair.alembic.params import numpy_copy
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
+from hairport.solver.model.errors import InputError
 
 
 def read_alembic_frames(path: Path, times_s: list[float], *, max_vertices: int, max_faces: int,
@@ -73,9 +74,9 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
             raise ctx.error(f"{where}: frames at {min(times):g} to {max(times):g} s reach past its samples "
                             f"({sample_times[0]:g} to {sample_times[-1]:g} s)", "bad_frames")
         faces, frames = _frames(obj, schema, sample_times, times, ctx, max_vertices, max_faces, Abc, AbcGeom)
-    except Exception as error:
-        if hasattr(error, "code"):
-            raise
+    except InputError:
+        raise
+    except Exception as error:  # damage met while reading values
         raise ctx.error(f"damaged Alembic data: {_first_line(error)}", "bad_header") from None
     return {"label": np.array(where), "faces": faces, "frames": frames}
 
@@ -95,20 +96,20 @@ def _frames(obj, schema, sample_times, times, ctx, max_vertices, max_faces, Abc,
         index = int(np.clip(np.searchsorted(sample_times, time, side="right") - 1, 0, len(sample_times) - 2))
         span = sample_times[index + 1] - sample_times[index]
         weight = float(np.clip((time - sample_times[index]) / span, 0.0, 1.0)) if span > 0 else 0.0
-        before, after = (_positions(schema, sample_times, i, n_points, obj, ctx, Abc) for i in (index, index + 1))
+        before, after = (_positions(schema, sample_times, i, counts, n_points, obj, ctx, Abc) for i in (index, index + 1))
         points = before + weight * (after - before)
         world = _world_matrix(obj, time, Abc, AbcGeom)
         frames[number] = points @ world[:3, :3] + world[3, :3]
     return faces, frames
 
 
-def _positions(schema, sample_times: np.ndarray, index: int, n_points: int, obj, ctx, Abc) -> np.ndarray:
+def _positions(schema, sample_times: np.ndarray, index: int, counts: np.ndarray, n_points: int, obj, ctx,
+               Abc) -> np.ndarray:
+    """Sample ``index``'s positions ``(n_points, 3)``; ``sequence_topology`` for other points or face counts."""
     # by its time: the bindings read an int given to ISampleSelector as a time in seconds, not as an index
     sample = schema.getValue(Abc.ISampleSelector(float(sample_times[index])))
     points = numpy_copy(sample.getPositions()).astype(np.float64).reshape(-1, 3)
-    first = schema.getValue(Abc.ISampleSelector(float(sample_times[0])))
-    if len(points) != n_points or not np.array_equal(numpy_copy(sample.getFaceCounts()),
-                                                      numpy_copy(first.getFaceCounts())):
+    if len(points) != n_points or not np.array_equal(numpy_copy(sample.getFaceCounts()), counts):
         raise ctx.error(f"{obj.getFullName()}: sample {index} has {len(points):,} points or other faces than sample 0: "
                         "the frames of a sequence must be one mesh", "sequence_topology")
     return points

@@ -97,6 +97,7 @@ def test_an_animated_stage_is_retargeted_at_its_frames(capsys, world, sweep, out
     (("--temporal", "-1"), "hair.usda", ("temporal",)),
     (("--no-warm-start", "--temporal", "10"), "hair.usda", ("warm",)),
     (("--target-skeleton", "x.json"), "hair.usda", ("sidecar",)),
+    (("--landmarks", "marks.json"), "hair.usda", ("landmarks",)),
 ])
 def test_a_plan_that_cannot_be_carried_out_exits_2_and_writes_nothing(capsys, world, sweep, out, extra, name, words):
     extra = [str(out / value) if value.endswith(".png") else value for value in extra]
