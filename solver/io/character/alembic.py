@@ -20,11 +20,10 @@ import numpy as np
 
 from hairport.solver.io.character.mesh_file import MeshFile, check_counts, fan_triangles
 from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
-from hairport.solver.io.hair.alembic import require_alembic
+from hairport.solver.io.hair.alembic import opened_archive, require_alembic
 from hairport.solver.io.hair.alembic.params import numpy_copy
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
-from hairport.solver.model.errors import InputError
 
 
 def read_alembic_frames(path: Path, times_s: list[float], *, max_vertices: int, max_faces: int,
@@ -55,11 +54,7 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
     from alembic3d import Abc, AbcGeom
 
     ctx = ReadContext(name, ReadLimits(), "m")
-    try:
-        archive = Abc.IArchive(source)
-    except Exception as error:  # the bindings raise a bare RuntimeError or Exception for any damage
-        raise ctx.error(f"not a readable Alembic archive: {_first_line(error)}", "bad_header") from None
-    try:
+    with opened_archive(source, ctx) as archive:
         meshes = []
         _collect(archive.getTop(), meshes, AbcGeom)
         obj = _chosen(meshes, mesh_name, ctx, Abc, AbcGeom)
@@ -74,10 +69,6 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
             raise ctx.error(f"{where}: frames at {min(times):g} to {max(times):g} s reach past its samples "
                             f"({sample_times[0]:g} to {sample_times[-1]:g} s)", "bad_frames")
         faces, frames = _frames(obj, schema, sample_times, times, ctx, max_vertices, max_faces, Abc, AbcGeom)
-    except InputError:
-        raise
-    except Exception as error:  # damage met while reading values
-        raise ctx.error(f"damaged Alembic data: {_first_line(error)}", "bad_header") from None
     return {"label": np.array(where), "faces": faces, "frames": frames}
 
 
@@ -155,7 +146,3 @@ def _chosen(meshes: list, mesh_name: str | None, ctx: ReadContext, Abc, AbcGeom)
                         "ambiguous_mesh")
     return best[0]
 
-
-def _first_line(error: Exception) -> str:
-    text = str(error).strip().splitlines()
-    return text[0][:200] if text else type(error).__name__

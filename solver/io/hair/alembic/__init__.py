@@ -28,6 +28,7 @@ a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`), like USD'
 from __future__ import annotations
 
 import importlib.util
+from contextlib import contextmanager
 from typing import BinaryIO
 
 import numpy as np
@@ -89,12 +90,8 @@ def read_archive(content: bytes | memoryview, ctx: ReadContext) -> Strands:
 
 def parse_file(path: str, ctx: ReadContext) -> Strands:
     """The archive's strands (module notes); run by :mod:`~hairport.solver.io.sandbox` in its child."""
-    Abc, AbcGeom, _ = _modules()
-    try:
-        archive = Abc.IArchive(path)
-    except Exception as error:  # the bindings raise a bare RuntimeError or Exception for any damage
-        raise ctx.error(f"not a readable Alembic archive: {_first_line(error)}", "bad_header") from None
-    try:
+    _, AbcGeom, _ = _modules()
+    with opened_archive(path, ctx) as archive:
         found = []
         _collect_curves(archive.getTop(), found, AbcGeom)
         if not found:
@@ -102,11 +99,24 @@ def parse_file(path: str, ctx: ReadContext) -> Strands:
         found = chosen_prims(found, [[obj.getName(), obj.getFullName()] for obj in found], "ICurves object", ctx)
         totals = [0, 0]
         parts = [_read_curves(curves, ctx, totals) for curves in found]
+    return join_parts(parts, "curves objects", ("widths", GROOM_COLOR, "parameter"))
+
+
+@contextmanager
+def opened_archive(path: str, ctx: ReadContext):
+    """The archive at ``path`` (in the sandbox's child); a file the bindings cannot open, or damage met while the
+    block reads it, is ``bad_header`` (an :class:`InputError` the block raises passes as it is)."""
+    Abc, _, _ = _modules()
+    try:
+        archive = Abc.IArchive(path)
+    except Exception as error:  # the bindings raise a bare RuntimeError or Exception for any damage
+        raise ctx.error(f"not a readable Alembic archive: {_first_line(error)}", "bad_header") from None
+    try:
+        yield archive
     except InputError:
         raise
     except Exception as error:  # damage met while reading values
         raise ctx.error(f"damaged Alembic data: {_first_line(error)}", "bad_header") from None
-    return join_parts(parts, "curves objects", ("widths", GROOM_COLOR, "parameter"))
 
 
 def _first_line(error: Exception) -> str:
