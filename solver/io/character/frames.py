@@ -156,12 +156,7 @@ def _stage_frames(path: Path, frames: FrameRange, units: str | None, limits: dic
         raise parser_failure(error, source) from None
     mesh_units = units if units is not None else meshes[0].units
     scale = unit_scale(mesh_units or "m")
-    characters = []
-    for mesh in meshes:
-        check_mesh_arrays(mesh.vertices, mesh.faces, source, limits["max_vertices"], limits["max_faces"])
-        characters.append(Character(mesh.vertices * scale, mesh.faces, name=f"{path.name}@{mesh.name.rsplit('@', 1)[1]}"))
-    _check_total(characters)
-    return TargetFrames(characters, times, mesh_units, frames_per_second)
+    return TargetFrames(_characters(meshes, times, path, scale, limits), times, mesh_units, frames_per_second)
 
 
 def _morph_frames(paths: list[Path], frames: FrameRange | None, units: str | None, limits: dict,
@@ -183,12 +178,7 @@ def _morph_frames(paths: list[Path], frames: FrameRange | None, units: str | Non
                                mesh_name=limits["mesh_name"], allow_external_files=limits["allow_external_files"],
                                **kwargs)
     scale = unit_scale(units or meshes[0].units)
-    characters = []
-    for mesh, time in zip(meshes, times, strict=True):
-        check_mesh_arrays(mesh.vertices, mesh.faces, str(path), limits["max_vertices"], limits["max_faces"])
-        characters.append(Character(mesh.vertices * scale, mesh.faces, name=f"{path.name}@{time:g}"))
-        _check_total(characters)
-    return TargetFrames(characters, times, units or meshes[0].units)
+    return TargetFrames(_characters(meshes, times, path, scale, limits), times, units or meshes[0].units)
 
 
 def read_morph_weights(path: str | os.PathLike) -> np.ndarray:
@@ -223,12 +213,7 @@ def _alembic_frames(path: Path, frames: FrameRange, units: str | None, limits: d
     except PARSER_FAILURES as error:
         raise parser_failure(error, str(path)) from None
     scale = unit_scale(units or "m")
-    characters = []
-    for mesh, time in zip(meshes, times, strict=True):
-        check_mesh_arrays(mesh.vertices, mesh.faces, str(path), limits["max_vertices"], limits["max_faces"])
-        characters.append(Character(mesh.vertices * scale, mesh.faces, name=f"{path.name}@{time:g}"))
-        _check_total(characters)
-    return TargetFrames(characters, times, units)
+    return TargetFrames(_characters(meshes, times, path, scale, limits), times, units)
 
 
 def _checked_weights(weights, source: str) -> np.ndarray:
@@ -241,6 +226,17 @@ def _checked_weights(weights, source: str) -> np.ndarray:
         raise InputError(f"morph weights must be 1 to {MAX_FRAMES:,} lists of finite numbers of one length, one a "
                          f"frame; got shape {weights.shape}", source, "bad_frames")
     return weights
+
+
+def _characters(meshes: list, times: list[float], path: Path, scale: float, limits: dict) -> list[Character]:
+    """One animated file's frames as characters (``scale`` meters per file unit), each checked as a mesh, and all of
+    them against :data:`MAX_SEQUENCE_VERTICES`; named ``<file>@<frame>``."""
+    characters = []
+    for mesh, time in zip(meshes, times, strict=True):
+        check_mesh_arrays(mesh.vertices, mesh.faces, str(path), limits["max_vertices"], limits["max_faces"])
+        characters.append(Character(mesh.vertices * scale, mesh.faces, name=f"{path.name}@{time:g}"))
+        _check_total(characters)
+    return characters
 
 
 def _check_total(characters: list[Character]) -> None:
