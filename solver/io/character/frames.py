@@ -150,8 +150,8 @@ def _stage_frames(path: Path, frames: FrameRange, units: str | None, limits: dic
     times = [float(t) for t in frames.times()]
     try:
         meshes, frames_per_second = read_usd_frames(path, times, max_vertices=limits["max_vertices"],
-                                        max_faces=limits["max_faces"], mesh_name=limits["mesh_name"],
-                                        allow_external_files=limits["allow_external_files"])
+                                                    max_faces=limits["max_faces"], mesh_name=limits["mesh_name"],
+                                                    allow_external_files=limits["allow_external_files"])
     except PARSER_FAILURES as error:
         raise parser_failure(error, source) from None
     mesh_units = units if units is not None else meshes[0].units

@@ -125,8 +125,8 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
         first = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(times[0]), skin=False)
         frames = np.empty((len(times), len(first["vertices"]), 3))
         frames[0] = first["vertices"]
-        for number, time in enumerate(times[1:], start=1):
-            vertices = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(time), skin=False)["vertices"]
+        for number, time in enumerate(times[1:], start=1):  # the faces are frame 0's: only the points move
+            vertices = _world_points(prim, Usd.TimeCode(time))
             if vertices.shape != frames[0].shape:
                 raise ctx.error(f"{where}: at time {time:g} it has {len(vertices):,} points, at {times[0]:g} "
                                 f"{len(frames[0]):,}: the frames of a sequence must be one mesh", "sequence_topology")
@@ -167,6 +167,16 @@ def _matrix(value) -> np.ndarray:
     return np.array(value, dtype=np.float64).reshape(4, 4)
 
 
+def _world_points(prim, time, points: np.ndarray | None = None) -> np.ndarray:
+    """``(P, 3)``: a Mesh prim's points at ``time`` (a ``Usd.TimeCode``; or ``points`` already read at it) through its
+    world transform at that time."""
+    _, UsdGeom, _, _, _ = pxr_modules()
+    if points is None:
+        points = np.array(UsdGeom.Mesh(prim).GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+    world = _matrix(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
+    return points @ world[:3, :3] + world[3, :3]
+
+
 def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int, time=None, skin: bool = True
           ) -> dict[str, np.ndarray]:
     """Vertices (bind pose, world), fan triangles and the skin of one Mesh prim, at ``time`` (a ``Usd.TimeCode``;
@@ -190,8 +200,7 @@ def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int, time=None, 
     binding = UsdSkel.BindingAPI(prim)
     skeleton = binding.GetInheritedSkeleton() if skin and _skinned(prim) else None
     if skeleton is None:
-        world = _matrix(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
-        return {"vertices": points @ world[:3, :3] + world[3, :3], "faces": faces}
+        return {"vertices": _world_points(prim, time, points), "faces": faces}
     geom_bind = binding.GetGeomBindTransformAttr().Get()
     geom_bind = np.eye(4) if geom_bind is None else _matrix(geom_bind)
     skeleton_world = _matrix(UsdGeom.Xformable(skeleton.GetPrim()).ComputeLocalToWorldTransform(time))
