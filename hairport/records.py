@@ -239,6 +239,32 @@ class FineRun(BaseModel):
     chunks: list[FineChunk]
 
 
+#: a job's output that is the lossless copy of its result (other formats are converted from it; a sequence's is its
+#: frame 0, the layout of every frame)
+LOSSLESS_OUTPUT = "npz"
+#: a sequence job's output holding every frame (:class:`hairport.solver.sequence.SolvedFrames`)
+FRAMES_OUTPUT = "frames"
+
+#: where a sequence job's frames come from: its target character's animation, or several characters in order
+FramesFrom = Literal["animation", "characters"]
+FRAMES_FROM: tuple[str, ...] = get_args(FramesFrom)
+FROM_ANIMATION, FROM_CHARACTERS = FRAMES_FROM
+
+
+class SequencePlan(BaseModel):
+    """A job onto a sequence of bodies: where its frames come from and how each is solved from the one before."""
+
+    frames_from: FramesFrom = FROM_ANIMATION
+    #: ``START:END[:STEP]`` (None: every frame of a list of characters, or every row of ``morph_weights``)
+    frames: str | None = None
+    #: the characters of the sequence in order (``frames_from`` characters; the job's target is the first)
+    character_ids: list[str] = Field(default_factory=list)
+    #: one glTF target's morph-target weights per frame, instead of its animation
+    morph_weights: list[list[float]] | None = None
+    warm_start: bool = True
+    temporal: float = 0.0
+
+
 class JobRecord(Record, RunInfo):
     KIND: ClassVar[str] = "jobs"
     id: str
@@ -272,6 +298,11 @@ class JobRecord(Record, RunInfo):
     fine: FineRun | None = None
     #: the batch the job is a pair of
     batch_id: str | None = None
+    #: a job onto a sequence of bodies (:class:`SequencePlan`), None for one body
+    sequence: SequencePlan | None = None
+    #: a sequence job's frame count, once its frames are read, and how many of them are solved
+    frames: int | None = None
+    frames_done: int = 0
 
 
 class IdempotencyRecord(Record):

@@ -132,7 +132,7 @@ PROBLEM_STATUSES: dict[int, tuple[str, tuple[str, ...]]] = {
                         "bad_idempotency_key", "idempotency_conflict", "units_mismatch", "hair_off_body",
                         "topology_mismatch", "truncated", "bad_header", "bad_mesh", "non_finite", "bad_attribute",
                         "unknown_prim", "no_guide_flags", "too_many_jobs", "duplicate_ids", "unknown_pair",
-                        "external_reference", "stray_strands", "bad_landmarks")),
+                        "external_reference", "stray_strands", "bad_landmarks", "bad_frames")),
     500: ("an unexpected error (a defect, not the request's fault): the body's `request_id`, also in the "
           "`X-Request-ID` header, names the server's log entry and its traceback", ("internal",)),
     503: ("the task queue or the storage is unavailable, or every upload validation process stayed busy: nothing "

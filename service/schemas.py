@@ -12,11 +12,14 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints
 
 from hairport import solver
 from hairport.records import (
+    FROM_ANIMATION,
+    FROM_CHARACTERS,
     SUCCEEDED,
     BatchState,
     CharacterRecord,
     ChunkState,
     ErrorInfo,
+    FramesFrom,
     HairstyleRecord,
     JobRecord,
     JobState,
@@ -24,6 +27,7 @@ from hairport.records import (
 )
 from hairport.solver import display
 from hairport.solver import options as solver_options
+from hairport.solver import sequence as solver_sequence
 
 HairFormat = Literal[solver.HAIR_FORMATS]
 Units = Literal[solver.UNITS]
@@ -31,10 +35,13 @@ HairlinePresetName = Literal[solver_options.HAIRLINE_PRESETS]
 Anchoring = Literal[solver_options.ANCHORINGS]
 #: the hair format of a result unless the request names one
 DEFAULT_OUTPUT_FORMAT = "data"
+#: ... and of a sequence's (one animated file)
+DEFAULT_SEQUENCE_FORMAT = "usdc"
 #: most points of a drawn hairline accepted in a request
 MAX_CURVE_POINTS = 10_000
 _RETARGET = solver.RetargetOptions()
 _PREPROCESS = solver.PreprocessOptions()
+_SEQUENCE = solver_sequence.SequenceOptions()
 _HAIRLINE = solver.HairlineEdit(preset=solver_options.HAIRLINE_PRESETS[0])
 _WRAP_AUTO, _WRAP_ALWAYS, _WRAP_OFF = solver_options.WRAP_MODES
 
@@ -193,6 +200,38 @@ class LandmarksIn(BaseModel):
     target: LandmarkSide = Field(description="the same names on the target character: {name: [x, y, z]}")
 
 
+FrameRangeText = Annotated[str, StringConstraints(min_length=3, max_length=64)]
+
+
+class SequenceIn(BaseModel):
+    """Retarget onto a sequence of bodies, frame by frame, each frame solved from the one before: one job and one
+    animated result per sequence."""
+
+    model_config = ConfigDict(extra="forbid")
+    frames_from: FramesFrom = Field(FROM_ANIMATION, description=(
+        f"{FROM_ANIMATION}: each target character is an animated file (a USD stage with time-sampled mesh points, a "
+        f"glTF with morph targets, an Alembic animated mesh) and its job's frames are its own; {FROM_CHARACTERS}: "
+        "the target characters, in order, are the frames of one sequence (one job; the same mesh topology)"))
+    frames: FrameRangeText | None = Field(None, description=(
+        "START:END[:STEP], both ends included: the time codes of a USD stage, frames at 24 a second of a glTF "
+        "animation or an Alembic mesh, rows of morph_weights, indices of the characters. Needed for an animation "
+        "unless morph_weights are given; default: every row or character"), json_schema_extra={"examples": ["0:48"]})
+    morph_weights: list[Annotated[list[Annotated[float, Field(allow_inf_nan=False)]], Field(min_length=1)]] | None = (
+        Field(None, min_length=1, max_length=solver_sequence.MAX_FRAMES, description=(
+            "one glTF target's morph-target weights, one list per frame and one number per morph target, instead "
+            "of the file's animation")))
+    warm_start: bool = Field(True, description="solve each frame from the previous frame's result moved with the "
+                                               "body (false: every frame cold, on its own)")
+    temporal: float = ranged("temporal", _SEQUENCE.temporal)
+
+
+class SequenceOut(SequenceIn):
+    """A sequence job's sequence, as requested, with the characters of its frames."""
+
+    character_ids: list[str] = Field(default_factory=list, description=(
+        f"frames_from {FROM_CHARACTERS}: the characters of the frames, in order (the job's target is the first)"))
+
+
 class RetargetIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -202,7 +241,11 @@ class RetargetIn(BaseModel):
     hairline: HairlineIn | None = None
     landmarks: LandmarksIn | None = Field(None, description=(
         "help the wrap of a target of another topology (one target per request: the points are on it)"))
-    output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
+    sequence: SequenceIn | None = Field(None, description="retarget onto a sequence of bodies (morph sweeps, animated "
+                                                          "characters): one animated result per sequence")
+    output_format: HairFormat | None = Field(None, description=(
+        f"the result's hair format (default {DEFAULT_OUTPUT_FORMAT}, and {DEFAULT_SEQUENCE_FORMAT} for a sequence, "
+        f"whose result is one animated file: {listed(solver_sequence.ANIMATED_FORMATS)})"))
     flag_guides: bool = Field(False, description=f"write the guides the solve used as the per-strand attribute "
                                                  f"{solver_options.GUIDE_FLAG} (1 guide, 0 other: Unreal's convention) in "
                                                  "formats with attributes")
@@ -284,6 +327,9 @@ class JobOut(BaseModel):
     error: ErrorInfo | None = None
     chunks: list[ChunkOut] | None = Field(None, description=(
         "the chunks of the multi-scale fine level when it ran over several workers (none: in the job's own run)"))
+    sequence: SequenceOut | None = Field(None, description="a job onto a sequence of bodies: the request's sequence")
+    frames: int | None = Field(None, description="a sequence job's frame count, once its frames are read")
+    frames_done: int = Field(0, description="a sequence job's frames solved so far (its stage names the frame running)")
     links: dict[str, str] = Field(default_factory=dict)
 
     @classmethod
@@ -294,12 +340,14 @@ class JobOut(BaseModel):
             links.update(result=f"{base}/result", preview=f"{base}/preview.png", report=f"{base}/report")
         chunks = None if record.fine is None else [
             ChunkOut(**chunk.model_dump(include=_CHUNK_OUT_FIELDS)) for chunk in record.fine.chunks]
-        return cls(**{name: getattr(record, name) for name in _JOB_OUT_FIELDS}, chunks=chunks, links=links)
+        sequence = None if record.sequence is None else SequenceOut(**record.sequence.model_dump())
+        return cls(**{name: getattr(record, name) for name in _JOB_OUT_FIELDS}, chunks=chunks, sequence=sequence,
+                   links=links)
 
 
 #: the fields a JobOut copies from its record (read once: pydantic's class-level ``model_fields`` is slow, and a
 #: listing builds 50 JobOuts per request)
-_JOB_OUT_FIELDS = tuple(name for name in JobOut.model_fields if name not in ("links", "chunks"))
+_JOB_OUT_FIELDS = tuple(name for name in JobOut.model_fields if name not in ("links", "chunks", "sequence"))
 _CHUNK_OUT_FIELDS = set(ChunkOut.model_fields)
 
 
@@ -335,7 +383,11 @@ class BatchIn(BaseModel):
     options: RetargetOptionsIn = Field(default_factory=RetargetOptionsIn)
     hairline: HairlineIn | None = None
     items: list[BatchItemIn] = Field(default_factory=list, description="per-pair options replacing the batch's")
-    output_format: HairFormat = DEFAULT_OUTPUT_FORMAT
+    sequence: SequenceIn | None = Field(None, description=(
+        f"every target is an animated character (frames_from {FROM_ANIMATION}): each pair's job retargets onto its "
+        "frames"))
+    output_format: HairFormat | None = Field(None, description=(
+        f"the results' hair format (default {DEFAULT_OUTPUT_FORMAT}, {DEFAULT_SEQUENCE_FORMAT} with a sequence)"))
     flag_guides: bool = Field(False, description=f"write the guides as the attribute {solver_options.GUIDE_FLAG}")
 
 

@@ -124,8 +124,8 @@ class SequenceOptions:
 
     ``warm``: each frame starts from the previous frame's result, moved as the body moved (the
     difference of the two frames' initial transfers), instead of from its own initial transfer.
-    ``temporal``: the share of Eq. 11's weight ``beta`` that pulls each particle toward that moved
-    result instead of toward the frame's initial transfer (needs ``warm``); 0 leaves Eq. 1 as it is.
+    ``temporal``: a weight, as ``beta``'s, of a pull of each particle toward that moved result, joined to
+    Eq. 11 (needs ``warm``); 0 leaves Eq. 1 as it is.
     """
 
     warm: bool = True

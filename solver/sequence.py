@@ -22,6 +22,8 @@ it hands out what reading and writing a sequence takes (frame ranges, the frames
 
 from __future__ import annotations
 
+import json
+import os
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -39,7 +41,10 @@ from hairport.solver.io.hair.common import FRAMES_PER_SECOND as FRAMES_PER_SECON
 from hairport.solver.io.hair.common import Animation as Animation
 from hairport.solver.model.character import Character
 from hairport.solver.model.errors import InputError
+from hairport.solver.model.frame import InputFrame
+from hairport.solver.model.frame_range import MAX_FRAMES as MAX_FRAMES
 from hairport.solver.model.frame_range import FrameRange as FrameRange
+from hairport.solver.model.hair import Hair
 from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import SOLVER_METHODS, RetargetOptions
 from hairport.solver.options import SequenceOptions as SequenceOptions
@@ -72,6 +77,7 @@ def retarget_sequence(
     sequence: SequenceOptions = SequenceOptions(),
     progress: ProgressFn | None = None,
     should_stop: Callable[[], bool] | None = None,
+    frame_arguments: Callable[[int, Character], dict] | None = None,
     **retarget_arguments,
 ) -> Iterator[RetargetResult]:
     """Retarget the hairstyle onto every frame in order, each warm from the one before (module notes).
@@ -87,6 +93,9 @@ def retarget_sequence(
     progress : callable(stage, fraction, message), optional
         Frame ``i`` of ``F`` reports in ``[i / F, (i + 1) / F]``, its stages named ``frame i: stage``.
     should_stop : callable() -> bool, optional
+    frame_arguments : callable(number, body) -> dict, optional
+        More arguments of one frame's :func:`~hairport.solver.pipeline.retarget` (its ``collision_surface`` from a
+        cache, ...), called just before the frame is solved.
     retarget_arguments
         Passed to every frame's :func:`~hairport.solver.pipeline.retarget` (``fine_runner``, ...).
 
@@ -108,8 +117,9 @@ def retarget_sequence(
         frame_progress = _numbered(rescaled(progress, number / len(frames), (number + 1) / len(frames)), number)
         carry = previous.as_previous() if previous is not None and sequence.warm else None
         began = time.perf_counter()
+        own = frame_arguments(number, body) if frame_arguments is not None else {}
         result = retarget(adaptable, body, options, progress=frame_progress, should_stop=should_stop,
-                          previous=carry, temporal=sequence.temporal, **retarget_arguments)
+                          previous=carry, temporal=sequence.temporal, **retarget_arguments, **own)
         if previous is not None:
             result.metrics["coherence"] = frame_coherence(previous.hair.points, result.hair.points,
                                                           frames[number - 1].vertices, body.vertices)
@@ -225,3 +235,99 @@ class FrameRecord:
     @classmethod
     def of(cls, result: RetargetResult) -> FrameRecord:
         return cls(result.metrics, result.timings)
+
+
+#: the arrays of a saved :class:`SolvedFrames` (``.npz``), beside its ``meta`` (JSON bytes)
+SOLVED_FRAME_ARRAYS = ("times", "points", "inside", "crossing", "body_vertices")
+
+
+@dataclass
+class SolvedFrames:
+    """Every frame of a solved sequence, as a service keeps it: what the animated result files are written from (in
+    any animated format, or one frame in any format) and what a viewer plays.
+
+    Attributes
+    ----------
+    times : (F,) float64
+        Each frame's time code.
+    points : (F, N, 3) float32
+        Each frame's hair, hairport's frame (meters); float32, as the animated formats store points.
+    inside, crossing : (F, ceil(N / 8)) uint8
+        Each frame's particles inside the body and those starting a segment through it, as packed bits
+        (the display scene's ``inside`` and ``crossing``).
+    body_vertices : (F, V, 3) float32
+        Each frame's body, hairport's frame.
+    groom : InputFrame
+        The groom file's units and axes (the result files are written in them).
+    frames_per_second : float
+    """
+
+    times: np.ndarray
+    points: np.ndarray
+    inside: np.ndarray
+    crossing: np.ndarray
+    body_vertices: np.ndarray
+    groom: InputFrame
+    frames_per_second: float = FRAMES_PER_SECOND
+
+    @classmethod
+    def empty(cls, times: Sequence[float], n_particles: int, n_vertices: int, groom: InputFrame,
+              frames_per_second: float = FRAMES_PER_SECOND) -> SolvedFrames:
+        """Room for ``len(times)`` frames, filled by :meth:`put` (allocated once: no copy of every frame at the end)."""
+        count, packed = len(times), (n_particles + 7) // 8
+        return cls(np.asarray(times, dtype=np.float64), np.zeros((count, n_particles, 3), np.float32),
+                   np.zeros((count, packed), np.uint8), np.zeros((count, packed), np.uint8),
+                   np.zeros((count, n_vertices, 3), np.float32), groom, float(frames_per_second))
+
+    @staticmethod
+    def bytes_needed(n_frames: int, n_particles: int, n_vertices: int) -> int:
+        """What :meth:`empty` allocates (bytes)."""
+        return n_frames * (12 * n_particles + 2 * ((n_particles + 7) // 8) + 12 * n_vertices)
+
+    def put(self, number: int, result: RetargetResult, body: Character) -> None:
+        """Keep frame ``number``'s result (its ``inside`` and ``crossing`` as the pipeline measured them) and body."""
+        n_particles = result.hair.n_particles
+        self.points[number] = result.hair.points
+        for bits, mask in ((self.inside, result.inside), (self.crossing, result.crossing)):
+            bits[number] = np.packbits(np.zeros(n_particles, bool) if mask is None else np.asarray(mask, bool))
+        self.body_vertices[number] = body.vertices
+
+    def animation(self) -> Animation:
+        """Every frame's points in the groom file's axes (meters), for :func:`write_hair_frames` with
+        ``units=groom.units``."""
+        return Animation(self.times, [self.groom.axes_out(points).astype(np.float32) for points in self.points],
+                         self.frames_per_second)
+
+    def hair_at(self, layout: Hair, number: int) -> Hair:
+        """Frame ``number``'s hair in the groom file's axes (meters), with ``layout``'s strands and attributes."""
+        return layout.with_points(self.groom.axes_out(self.points[number]))
+
+    def scene_at(self, scene: dict[str, np.ndarray], number: int) -> dict[str, np.ndarray]:
+        """A display scene (:func:`~hairport.solver.documents.display_scene` of frame 0) at frame ``number``: its hair,
+        flags and body replaced by that frame's."""
+        return {**scene, "points": self.points[number], "inside": self.inside[number],
+                "crossing": self.crossing[number], "body_vertices": self.body_vertices[number]}
+
+    def save(self, path: str | os.PathLike) -> None:
+        meta = {"groom": self.groom.to_dict(), "frames_per_second": self.frames_per_second}
+        with open(path, "wb") as handle:
+            np.savez(handle, **{name: getattr(self, name) for name in SOLVED_FRAME_ARRAYS},
+                     meta=np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> SolvedFrames:
+        """What :meth:`save` wrote (a file of another kind is an ``InputError``, code ``bad_frames``)."""
+        try:
+            with np.load(path, allow_pickle=False) as stored:
+                arrays = {name: stored[name] for name in SOLVED_FRAME_ARRAYS}
+                meta = json.loads(stored["meta"].tobytes())
+        except (OSError, KeyError, ValueError) as error:
+            raise InputError(f"not a sequence's saved frames: {error}", os.fspath(path), "bad_frames") from None
+        return cls(**arrays, groom=InputFrame(**meta["groom"]), frames_per_second=meta["frames_per_second"])
+
+    def check_frame(self, number: int) -> int:
+        """``number`` if it names a frame (0 to F - 1), else ``bad_frames``."""
+        if not 0 <= number < len(self.times):
+            raise InputError(f"frame {number} is not one of the sequence's {len(self.times)} frames (0 to "
+                             f"{len(self.times) - 1})", "frame", "bad_frames")
+        return number

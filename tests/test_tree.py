@@ -26,6 +26,7 @@ TESTED_ELSEWHERE = {
     "service/services/jobs.py": "tests/service/routers/test_jobs.py",
     "service/services/batches.py": "tests/service/routers/test_batches.py",
     "service/services/display.py": "tests/service/routers/test_jobs.py",
+    "service/services/sequences.py": "tests/integration/test_sequences_api.py",
     "service/validation_child.py": "tests/service/test_validation.py",  # the children of the pool it tests
 }
 

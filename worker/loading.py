@@ -15,9 +15,15 @@ from hairport.messages import safe_detail
 from hairport.records import ArtifactRecord, BlobRef, CharacterRecord, ErrorInfo, HairstyleRecord, JobRecord
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.storage import Blob
 
 #: error code of a job or preprocessing that needed more memory than ``Settings.memory_budget_bytes``
 OVER_MEMORY_BUDGET = "over_memory_budget"
+
+
+def stored(blob: Blob, suffix: str) -> BlobRef:
+    """The reference a record keeps of a stored output."""
+    return BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size)
 
 
 def limits(settings: Settings) -> dict:

@@ -21,6 +21,7 @@ from hairport.outputs import OutputSet, add_result, json_default
 from hairport.records import (
     CANCELLED,
     FAILED,
+    LOSSLESS_OUTPUT,
     QUEUED,
     READY,
     RUNNING,
@@ -40,11 +41,11 @@ from hairport.repository import Repository
 from hairport.settings import Settings
 from hairport.solver import display, distributed, documents
 from hairport.solver import options as solver_options
-from hairport.storage import Blob, retention_seconds
+from hairport.storage import retention_seconds
 
-from . import bodies, wraps
+from . import bodies, sequences, wraps
 from .fine import FineDispatch, SpreadFineLevel
-from .loading import error_info, job_inputs, read_source
+from .loading import adaptable_at, blob_path, error_info, job_inputs, read_source, stored
 from .runs import TRANSIENT_ERRORS, Heartbeat, OwnRun, run_gone, start_run
 
 #: a running job writes its progress at most this often (s)
@@ -59,10 +60,6 @@ log = logging.getLogger(__name__)
 
 class PreprocessingPending(Exception):
     """The job's hairstyle is still being preprocessed: run the job again later."""
-
-
-def stored(blob: Blob, suffix: str) -> BlobRef:
-    return BlobRef(sha256=blob.sha256, suffix=suffix, size=blob.size)
 
 
 def run_preprocess(repository: Repository, settings: Settings, hairstyle_id: str, options: dict | None = None,
@@ -191,11 +188,14 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
     began = time.perf_counter()
     try:
         with Heartbeat(run.beat, settings.heartbeat_seconds):
-            spread = SpreadFineLevel(repository, settings, job_id, run, worker, chunks)
-            outputs, result = _retarget_and_store(repository, settings, job, artifact, progress, spread)
-        timings = {**result.timings, "job": time.perf_counter() - began}
+            if job.sequence is None:
+                spread = SpreadFineLevel(repository, settings, job_id, run, worker, chunks)
+                outputs, metrics, timings = _retarget_and_store(repository, settings, job, artifact, progress, spread)
+            else:
+                outputs, metrics, timings = _sequence_and_store(repository, settings, job, artifact, progress, run)
+        timings = {**timings, "job": time.perf_counter() - began}
         run.write(state=SUCCEEDED, stage="done", progress=1.0, message="done", finished_at=now(),
-                  metrics=_jsonable(result.metrics), timings=timings, outputs=outputs)
+                  metrics=_jsonable(metrics), timings=timings, outputs=outputs)
         repository.purge_if_due(retention_seconds(settings.retention_days), PURGE_INTERVAL_SECONDS)
     except solver.Cancelled:
         run.write(state=CANCELLED, stage="cancelled", finished_at=now())
@@ -208,8 +208,18 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
             traceback.print_exc()
 
 
+def _sequence_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
+                        progress: JobProgress, run: OwnRun) -> tuple[dict[str, BlobRef], dict, dict]:
+    """A sequence job's frames solved and its outputs stored (:mod:`.sequences`): outputs, metrics, timings."""
+    adaptable = adaptable_at(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
+    try:
+        return sequences.solve_and_store(repository, settings, job, adaptable, progress, run.write)
+    except solver.InputError as error:
+        raise explained(error, job.options.get("wrap", solver_options.WRAP_MODES[0]), {}) from None
+
+
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
-                        progress: JobProgress, fine_runner) -> tuple[dict[str, BlobRef], solver.RetargetResult]:
+                        progress: JobProgress, fine_runner) -> tuple[dict[str, BlobRef], dict, dict]:
     adaptable, target, target_input = job_inputs(repository, settings, job, artifact)
     frame = adaptable.frame  # a drawn hairline is read in the groom's units and axes, as the result is written
     edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
@@ -239,7 +249,7 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
                                           "target_character_id": job.target_character_id}}
     storage = repository.storage
     with storage.work_dir() as work:
-        hair = {fmt: work / f"result.{fmt}" for fmt in sorted({"npz", job.output_format})}
+        hair = {fmt: work / f"result.{fmt}" for fmt in sorted({LOSSLESS_OUTPUT, job.output_format})}
         files = {**hair, "report": work / "report.json", "preview": work / "preview.png"}
         with OutputSet() as written:
             add_result(written, adaptable, result, target, hair, report=(files["report"], report),
@@ -249,7 +259,7 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
             outputs[name] = stored(storage.save_file(path, path.suffix), path.suffix)
         path = display.save_scene(work / "scene.npz", documents.display_scene(adaptable, result, target))
         outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
-    return outputs, result
+    return outputs, result.metrics, result.timings
 
 
 def explained(error: solver.InputError, mode: str, found: dict) -> solver.InputError:

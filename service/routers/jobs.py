@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Response
 from fastapi.responses import FileResponse
 
 from hairport.solver import display as wire
+from hairport.solver import sequence as solver_sequence
 
 from ..auth import Owner
 from ..deps import DEFAULT_PAGE, OwnedJob, PageLimit, PageOffset, QueueDep, RepositoryDep
@@ -30,6 +31,10 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 #: most strands a display request may name: each strand drawn is at least its root and its tip, and a display
 #: holds at most MAX_DISPLAY_VERTICES vertices
 MAX_DISPLAY_STRANDS = wire.MAX_DISPLAY_VERTICES // 2
+#: one frame of a sequence job (numbered from 0 in the order solved; 422 bad_frames for a job onto one body)
+Frame = Annotated[int | None, Query(ge=0, le=solver_sequence.MAX_FRAMES - 1, description=(
+    "a sequence job's frame, numbered from 0 in the order solved (default: the whole animated result, or frame 0 "
+    "to draw); 422 bad_frames for a job onto one body"))]
 
 
 @router.get("", response_model=JobPage, summary="The caller's jobs, newest first",
@@ -57,8 +62,8 @@ async def get_job(job: OwnedJob) -> JobOut:
 @router.get("/{job_id}/result", summary="The retargeted hair file", response_class=FileResponse,
             responses={200: {"description": RESULT_DESCRIPTION, "content": result_content()},
                        **problem_responses(401, 404, 409, 410, 415, 422)})
-def get_result(repository: RepositoryDep, job: OwnedJob, format: HairFormat | None = None):
-    return jobs.result_response(repository, job, format)
+def get_result(repository: RepositoryDep, job: OwnedJob, format: HairFormat | None = None, frame: Frame = None):
+    return jobs.result_response(repository, job, format, frame)
 
 
 @router.get("/{job_id}/preview.png", summary="Source next to result", response_class=FileResponse,
@@ -89,8 +94,9 @@ def get_display(
         "every stride-th particle of a strand, and its tip (default: the smallest that fits the budget)"))] = None,
     max_vertices: Annotated[int, Query(ge=1, le=wire.MAX_DISPLAY_VERTICES, description=(
         "the vertex budget when strands or stride is left out"))] = wire.DEFAULT_DISPLAY_VERTICES,
+    frame: Frame = None,
 ):
-    return Response(display.strands(repository, job, layer, strands, stride, max_vertices),
+    return Response(display.strands(repository, job, layer, strands, stride, max_vertices, frame),
                     media_type=wire.MEDIA_TYPE)
 
 
@@ -98,8 +104,9 @@ def get_display(
             response_class=Response, responses={**DISPLAY_RESPONSE, **problem_responses(401, 404, 409, 410, 422)})
 def get_body(repository: RepositoryDep, job: OwnedJob, layer: Annotated[BodyLayer, Query(description=(
         "target: the target body as solved; source: the source character's body; wrapped: the source body wrapped "
-        "onto a target of another mesh topology (409 no_wrap when the job's target was not wrapped)"))] = "target"):
-    return Response(display.body(repository, job, layer), media_type=wire.MEDIA_TYPE)
+        "onto a target of another mesh topology (409 no_wrap when the job's target was not wrapped)"))] = "target",
+             frame: Frame = None):
+    return Response(display.body(repository, job, layer, frame), media_type=wire.MEDIA_TYPE)
 
 
 @router.get("/{job_id}/hairline", response_model=HairlineOut,

@@ -21,6 +21,7 @@ from starlette.background import BackgroundTask
 
 from hairport.records import (
     BATCH_DONE,
+    FROM_ANIMATION,
     SUCCEEDED,
     BatchRecord,
     BatchTotals,
@@ -40,6 +41,7 @@ from ..deps import owned
 from ..errors import Problem
 from ..schemas import BatchIn, BatchJobOut, BatchOut, BatchPage, BatchSummary
 from . import jobs as job_service
+from . import sequences
 from .retargets import idempotent_replay, plan_job, submit_jobs
 
 MANIFEST = "manifest.json"
@@ -72,6 +74,10 @@ def create_batch(repository: Repository, queue: TaskQueue, settings: Settings, o
         if pair in overrides:
             raise Problem(422, "duplicate_ids", f"items: {pair[0]} x {pair[1]} is given more than once")
         overrides[pair] = item
+    output_format = sequences.output_format(request.output_format, request.sequence)
+    if request.sequence is not None and request.sequence.frames_from != FROM_ANIMATION:
+        raise Problem(422, "bad_frames", f"sequence.frames_from: a batch's targets are each an animated character "
+                                         f"({FROM_ANIMATION}); send the frames of characters as a retarget request")
     batch_id = new_job_id()
     planned = []
     for hairstyle in hairstyles:
@@ -80,10 +86,12 @@ def create_batch(repository: Repository, queue: TaskQueue, settings: Settings, o
             options = request.options if item is None or item.options is None else item.options
             hairline = body["hairline"] if item is None or "hairline" not in item.model_fields_set else (
                 None if item.hairline is None else item.hairline.model_dump(mode="json"))
+            plan = None if request.sequence is None else sequences.sequence_plans(
+                request.sequence, [target], hairstyle, options, settings, None)[0][1]
             planned.append(plan_job(repository, settings, owner, hairstyle, target, options, hairline,
-                                    request.output_format, request.flag_guides, batch_id))
+                                    output_format, request.flag_guides, batch_id, sequence=plan))
     batch = BatchRecord(id=batch_id, owner=owner, created_at=now(), hairstyle_ids=request.hairstyle_ids,
-                        target_character_ids=request.target_character_ids, output_format=request.output_format,
+                        target_character_ids=request.target_character_ids, output_format=output_format,
                         job_ids=[plan.job.id for plan in planned])
     repository.put(batch, batch.id)
     remember = None if replay_id is None else (replay_id, IdempotencyRecord(

@@ -9,15 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from hairport import solver
-from hairport.records import BlobRef, CharacterRecord, JobRecord
+from hairport.records import FRAMES_OUTPUT, BlobRef, CharacterRecord, JobRecord
 from hairport.repository import Repository
 from hairport.settings import Settings
 from hairport.solver import display, documents
 from hairport.solver import options as solver_options
+from hairport.solver import sequence as solver_sequence
 
 from ..errors import Problem
 from ..uploads import input_problem
-from .jobs import outputs_of
+from .jobs import outputs_of, stored_path
 
 #: scenes kept loaded per API process (a 10^6-particle scene is ~13 MB): the viewer asks several times
 SCENES_KEPT = 4
@@ -33,42 +34,53 @@ def _source_scene(path: str) -> dict[str, np.ndarray]:
     return documents.source_scene(path)
 
 
-def _blob(repository: Repository, ref: BlobRef) -> Path:
-    blob = repository.storage.blob(ref.sha256, ref.suffix)
-    if blob is None:
-        raise Problem(410, "gone", "this output was removed by the retention policy")
-    return blob.path
-
-
 def scene_path(repository: Repository, job: JobRecord) -> Path:
     """The job's saved scene (409 before it succeeded, or for a job run before scenes were saved)."""
     outputs = outputs_of(job)
     if "scene" not in outputs:
         raise Problem(409, "no_scene", f"job {job.id} ran before hairport saved what the dashboard draws; "
                                        "run the retarget again")
-    return _blob(repository, outputs["scene"])
+    return stored_path(repository, outputs["scene"])
 
 
 def artifact_path(repository: Repository, job: JobRecord) -> Path:
     artifact = repository.artifact(job.artifact_key)
     if artifact is None:
         raise Problem(410, "gone", "the preprocessed hairstyle of this job was removed by the retention policy")
-    return _blob(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))
+    return stored_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))
 
 
-def _layer_arrays(repository: Repository, job: JobRecord, layer: str, names: tuple[str, ...]) -> dict:
+@lru_cache(maxsize=SCENES_KEPT)
+def _solved_frames(path: str) -> solver_sequence.SolvedFrames:
+    return solver_sequence.SolvedFrames.load(path)
+
+
+def _layer_arrays(repository: Repository, job: JobRecord, layer: str, names: tuple[str, ...],
+                  frame: int | None = None) -> dict:
+    """The arrays of a job's ``layer`` scene; of the result, at ``frame`` of a sequence (422 ``bad_frames`` for a
+    frame of a job onto one body, of the source layer, or past the sequence's)."""
+    if frame is not None:
+        outputs_of(job)  # 409 before the job has outputs, as without a frame
+    if frame is not None and (job.sequence is None or layer != "result"):
+        raise Problem(422, "bad_frames", f"frame: job {job.id} retargeted onto one body; it has no frames"
+                      if job.sequence is None else f"frame: the {layer} layer does not move; only the result has frames")
     try:
-        if layer == "result":
-            return _scene(str(scene_path(repository, job)), names)
-        return _source_scene(str(artifact_path(repository, job)))
+        if layer != "result":
+            return _source_scene(str(artifact_path(repository, job)))
+        scene = _scene(str(scene_path(repository, job)), names)
+        if frame is None:
+            return scene
+        kept = _solved_frames(str(stored_path(repository, outputs_of(job)[FRAMES_OUTPUT])))
+        return kept.scene_at(scene, kept.check_frame(frame))
     except solver.InputError as error:
-        raise input_problem(error, "layer") from None
+        raise input_problem(error, "frame" if error.code == "bad_frames" else "layer") from None
 
 
 def strands(repository: Repository, job: JobRecord, layer: str, strand_count: int | None, stride: int | None,
-            max_vertices: int) -> bytes:
-    """The job's ``layer`` strands, decimated (422 for a plan over the display limits)."""
-    arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "crossing", "color"))
+            max_vertices: int, frame: int | None = None) -> bytes:
+    """The job's ``layer`` strands (a sequence's result at ``frame``), decimated (422 for a plan over the display
+    limits)."""
+    arrays = _layer_arrays(repository, job, layer, ("points", "offsets", "inside", "crossing", "color"), frame)
     try:
         strand_ids, stride = display.plan_display(arrays["offsets"], max_vertices, strand_count, stride)
     except solver.InputError as error:
@@ -76,11 +88,13 @@ def strands(repository: Repository, job: JobRecord, layer: str, strand_count: in
     return display.strands_payload(arrays, strand_ids, stride, layer)
 
 
-def body(repository: Repository, job: JobRecord, layer: str) -> bytes:
-    """The job's target body (as solved, hairport's frame), its source body, or the source body wrapped onto a
-    target of another topology (409 ``no_wrap`` for a job whose target was not wrapped)."""
+def body(repository: Repository, job: JobRecord, layer: str, frame: int | None = None) -> bytes:
+    """The job's target body (as solved, hairport's frame; a sequence's at ``frame``), its source body, or the source
+    body wrapped onto a target of another topology (409 ``no_wrap`` for a job whose target was not wrapped)."""
+    if frame is not None and layer != "target":
+        raise Problem(422, "bad_frames", f"frame: the {layer} body does not move; only the target has frames")
     if layer == "target":
-        arrays = _layer_arrays(repository, job, "result", ("body_vertices", "body_faces"))
+        arrays = _layer_arrays(repository, job, "result", ("body_vertices", "body_faces"), frame)
     elif layer == "wrapped":
         arrays = _wrapped_arrays(repository, job)
     else:
@@ -112,7 +126,7 @@ def hairline(repository: Repository, job: JobRecord) -> dict:
 
 def character_mesh(repository: Repository, settings: Settings, character: CharacterRecord) -> bytes:
     """A character's mesh as uploaded (its own units and axes), with the up vector to draw it with."""
-    path = _blob(repository, character.mesh)
+    path = stored_path(repository, character.mesh)
     try:
         loaded, units = solver.read_character(path, units=None if character.units in (None, solver.AUTO)
                                               else character.units, max_vertices=settings.max_vertices,

@@ -11,6 +11,8 @@ from hairport import solver
 from hairport.records import (
     CANCELLED,
     CHUNK_QUEUED,
+    FRAMES_OUTPUT,
+    LOSSLESS_OUTPUT,
     SUCCEEDED,
     TERMINAL_STATES,
     WAITING_STATES,
@@ -19,14 +21,13 @@ from hairport.records import (
     now,
 )
 from hairport.repository import Repository
+from hairport.solver import sequence as solver_sequence
 from hairport.worker.queue import TaskQueue
 
 from ..errors import Problem
 from ..schemas import RESULT_MEDIA_TYPES
 from ..uploads import input_problem
 
-#: what a lossless copy of every result is kept as (other formats are converted from it)
-LOSSLESS_FORMAT = "npz"
 #: a stored result is read back whole, whatever the configured input limits
 UNLIMITED = solver.ReadLimits(2**62, 2**62, 2**62)
 
@@ -72,49 +73,66 @@ def outputs_of(job: JobRecord) -> dict[str, BlobRef]:
 
 
 def blob_response(repository: Repository, ref: BlobRef, media_type: str, filename: str) -> FileResponse:
+    return FileResponse(stored_path(repository, ref), media_type=media_type, filename=filename)
+
+
+def stored_path(repository: Repository, ref: BlobRef) -> Path:
+    """The local path of a stored output (410 when retention removed it)."""
     blob = repository.storage.blob(ref.sha256, ref.suffix)
     if blob is None:
         raise Problem(410, "gone", "this output was removed by the retention policy")
-    return FileResponse(blob.path, media_type=media_type, filename=filename)
+    return blob.path
 
 
-def result_file(repository: Repository, job: JobRecord, fmt: str, folder: Path) -> Path:
-    """The job's result in ``fmt``: its stored file, or one converted into ``folder`` from the lossless copy
-    (410 when retention removed it; 415 for a format whose optional library this deployment lacks)."""
+def result_file(repository: Repository, job: JobRecord, fmt: str, folder: Path, frame: int | None = None) -> Path:
+    """The job's result in ``fmt``: its stored file, or one converted into ``folder`` from the lossless copy (and, of a
+    sequence, its kept frames: one frame of it in any format, or every frame in an animated format). 410 when
+    retention removed it; 415 for a format whose optional library this deployment lacks; 422 ``bad_frames`` for a
+    frame of a job that is not a sequence, or a sequence asked for whole in a format of one frame."""
     outputs = outputs_of(job)
-    if fmt in outputs:
-        blob = repository.storage.blob(outputs[fmt].sha256, outputs[fmt].suffix)
-        if blob is None:
-            raise Problem(410, "gone", "this output was removed by the retention policy")
-        return blob.path
-    lossless = outputs[LOSSLESS_FORMAT]
-    source = repository.storage.blob(lossless.sha256, lossless.suffix)
-    if source is None:
-        raise Problem(410, "gone", "this output was removed by the retention policy")
+    if frame is None and fmt in outputs:
+        return stored_path(repository, outputs[fmt])
+    if job.sequence is None and frame is not None:
+        raise Problem(422, "bad_frames", f"frame: job {job.id} retargeted onto one body; it has no frames")
+    if job.sequence is not None and frame is None and fmt not in solver_sequence.ANIMATED_FORMATS:
+        raise Problem(422, "bad_frames", f"format: a {fmt} file holds one frame; ask for one frame of the sequence "
+                                         f"(frame=K) or an animated format ({', '.join(solver_sequence.ANIMATED_FORMATS)})")
+    source = stored_path(repository, outputs[LOSSLESS_OUTPUT])
     path = folder / f"result.{fmt}"
     try:
         # the lossless copy is in the groom's units (it records them): convert in the same units
-        units = solver.recorded_hair_units(source.path) or "m"
-        lossless_copy = solver.read_hair_report(source.path, units=units, limits=UNLIMITED)
-        solver.write_hair(path, lossless_copy.hair, units=units, format=fmt, up_axis=lossless_copy.up_axis or "+y")
-    except solver.InputError as error:  # a format whose optional library this deployment lacks
-        raise input_problem(error, "format") from None
+        units = solver.recorded_hair_units(source) or "m"
+        lossless_copy = solver.read_hair_report(source, units=units, limits=UNLIMITED)
+        up_axis = lossless_copy.up_axis or "+y"
+        if job.sequence is None:
+            solver.write_hair(path, lossless_copy.hair, units=units, format=fmt, up_axis=up_axis)
+            return path
+        kept = solver_sequence.SolvedFrames.load(stored_path(repository, outputs[FRAMES_OUTPUT]))
+        if frame is None:
+            solver_sequence.write_hair_frames(path, lossless_copy.hair, kept.animation(), units=units, format=fmt,
+                                              up_axis=up_axis)
+        else:
+            solver.write_hair(path, kept.hair_at(lossless_copy.hair, kept.check_frame(frame)), units=units,
+                              format=fmt, up_axis=up_axis)
+    except solver.InputError as error:  # a frame it does not have, a format whose optional library is missing
+        raise input_problem(error, "frame" if error.code == "bad_frames" else "format") from None
     return path
 
 
-def result_response(repository: Repository, job: JobRecord, fmt: str | None) -> FileResponse:
-    """The result in ``fmt`` (default: the job's): stored, or converted from the lossless copy and
-    streamed from a scratch folder that is removed after the response."""
+def result_response(repository: Repository, job: JobRecord, fmt: str | None, frame: int | None = None) -> FileResponse:
+    """The result in ``fmt`` (default: the job's), whole or (a sequence's) one frame: stored, or converted from the
+    lossless copy and streamed from a scratch folder that is removed after the response."""
     fmt = fmt or job.output_format
     outputs = outputs_of(job)
-    if fmt in outputs:
-        return blob_response(repository, outputs[fmt], RESULT_MEDIA_TYPES[fmt], f"{job.id}.{fmt}")
+    name = f"{job.id}.{fmt}" if frame is None else f"{job.id}.{frame:04d}.{fmt}"
+    if frame is None and fmt in outputs:
+        return blob_response(repository, outputs[fmt], RESULT_MEDIA_TYPES[fmt], name)
     work = repository.storage.work_dir()
     folder = work.__enter__()
     try:
-        path = result_file(repository, job, fmt, folder)
+        path = result_file(repository, job, fmt, folder, frame)
     except BaseException:
         work.__exit__(None, None, None)
         raise
-    return FileResponse(path, media_type=RESULT_MEDIA_TYPES[fmt], filename=f"{job.id}.{fmt}",
+    return FileResponse(path, media_type=RESULT_MEDIA_TYPES[fmt], filename=name,
                         background=BackgroundTask(work.__exit__, None, None, None))

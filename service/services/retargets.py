@@ -11,11 +11,13 @@ from dataclasses import dataclass
 
 from hairport import solver
 from hairport.records import (
+    FROM_CHARACTERS,
     CharacterRecord,
     HairstyleRecord,
     IdempotencyRecord,
     JobRecord,
     PreprocessSettings,
+    SequencePlan,
     digest,
     new_job_id,
     now,
@@ -23,12 +25,14 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import sequence as solver_sequence
 from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
 from ..deps import MAX_IDEMPOTENCY_KEY, owned
 from ..errors import Problem
 from ..schemas import RetargetIn, RetargetOptionsIn
 from ..uploads import input_problem
+from . import sequences
 from .hairstyles import queue_unavailable, start_preprocessing
 
 
@@ -64,8 +68,10 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
     replay_id, previous = idempotent_replay(repository, owner, idempotency_key, body)
     if previous is not None:
         return [job for job in map(repository.job, previous.jobs) if job is not None]
-    if len(request.target_character_ids) > settings.max_targets_per_request:
-        raise Problem(422, "too_many_targets", f"at most {settings.max_targets_per_request} targets per request, "
+    frames_of_characters = request.sequence is not None and request.sequence.frames_from == FROM_CHARACTERS
+    most = solver_sequence.MAX_FRAMES if frames_of_characters else settings.max_targets_per_request
+    if len(request.target_character_ids) > most:
+        raise Problem(422, "too_many_targets", f"at most {most} targets per request, "
                                                f"got {len(request.target_character_ids)}")
     hairstyle: HairstyleRecord = owned(repository, HairstyleRecord, owner, request.hairstyle_id, "hairstyle")
     targets = [owned(repository, CharacterRecord, owner, target_id, "character")
@@ -73,8 +79,15 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
     if request.landmarks is not None and len(targets) > 1:
         raise Problem(422, "bad_landmarks", f"landmarks name points on one target; this request has {len(targets)}: "
                                             "send one request per target")
+    output_format = sequences.output_format(request.output_format, request.sequence)
+    if request.sequence is None:
+        jobs = [(target, None) for target in targets]
+    else:
+        jobs = sequences.sequence_plans(request.sequence, targets, hairstyle, request.options, settings,
+                                        body["landmarks"])
     planned = [plan_job(repository, settings, owner, hairstyle, target, request.options, body["hairline"],
-                        request.output_format, request.flag_guides, landmarks=body["landmarks"]) for target in targets]
+                        output_format, request.flag_guides, landmarks=body["landmarks"], sequence=plan)
+               for target, plan in jobs]
     remember = None if replay_id is None else (replay_id, IdempotencyRecord(
         request=digest(body), jobs=[plan.job.id for plan in planned], created_at=now()))
     submit_jobs(repository, queue, settings, planned, remember)
@@ -83,7 +96,8 @@ def create_retargets(repository: Repository, queue: TaskQueue, settings: Setting
 
 def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: HairstyleRecord,
              target: CharacterRecord, options_in: RetargetOptionsIn, hairline: dict | None, output_format: str,
-             flag_guides: bool, batch_id: str | None = None, landmarks: dict | None = None) -> PlannedJob:
+             flag_guides: bool, batch_id: str | None = None, landmarks: dict | None = None,
+             sequence: SequencePlan | None = None) -> PlannedJob:
     """The job of one pair, its options checked (422 for what the solver would refuse, named after the field)."""
     options = options_in.model_dump()
     guides = options.pop("guides")  # a guide count asks for k-means guides, even of a hairstyle with flagged ones
@@ -103,7 +117,7 @@ def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: 
         hairline=hairline, landmarks=landmarks, preprocess_options=variant, artifact_key=key,
         output_format=output_format,
         flag_guides=flag_guides, created_at=now(), updated_at=now(), task_id=new_task_id(), enqueued_at=now(),
-        batch_id=batch_id,
+        batch_id=batch_id, sequence=sequence,
     )
     return PlannedJob(job, hairstyle, variant, key)
 

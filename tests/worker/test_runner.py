@@ -79,8 +79,8 @@ def add_job(world, target="target", hairstyle="hairstyle", options=None, **field
     style = ids[hairstyle]
     job = JobRecord(id=f"{np.random.default_rng().integers(1 << 62):032x}", owner=OWNER, hairstyle_id=style.id,
                     target_character_id=ids[target].id, options={"max_iterations": 5, **(options or {})},
-                    preprocess_options=style.options, artifact_key=style.artifact_key, output_format="ply",
-                    created_at=now(), updated_at=now(), **fields)
+                    preprocess_options=style.options, artifact_key=style.artifact_key, created_at=now(),
+                    updated_at=now(), **{"output_format": "ply", **fields})
     repository.create_job(job)
     return job
 

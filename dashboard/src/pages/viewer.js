@@ -10,12 +10,57 @@ import { component, select } from "./forms.js";
 const BUDGETS = [10_000, 50_000, 200_000, 1_000_000, 2_000_000];
 const SIDE_GAP = 1.25;  // source drawn this many body widths to the left
 
-async function strands(jobId, layer, budget) {
-  return decodeDisplay(await get(`/v1/jobs/${jobId}/display?layer=${layer}&max_vertices=${budget}`, { as: "buffer" }));
+const PLAY_FPS = 24;  // a sequence plays at most this many frames a second (fewer while frames are fetched)
+
+/** `&frame=K` of a sequence job's frame, nothing for a job onto one body. */
+function frameQuery(frame) {
+  return frame === null || frame === undefined ? "" : `&frame=${frame}`;
 }
 
-async function body(jobId, layer) {
-  return decodeDisplay(await get(`/v1/jobs/${jobId}/body?layer=${layer}`, { as: "buffer" }));
+async function strands(jobId, layer, budget, frame = null) {
+  return decodeDisplay(await get(`/v1/jobs/${jobId}/display?layer=${layer}&max_vertices=${budget}${frameQuery(frame)}`,
+                                 { as: "buffer" }));
+}
+
+async function body(jobId, layer, frame = null) {
+  return decodeDisplay(await get(`/v1/jobs/${jobId}/body?layer=${layer}${frameQuery(frame)}`, { as: "buffer" }));
+}
+
+/** The play button, frame slider and label of a sequence job; `show(frame)` draws one frame. */
+function frameControls(job, show, signal) {
+  const count = job.frames;
+  const times = (job.metrics?.frames_detail ?? []).map((frame) => frame.time);
+  const slider = h("input", { type: "range", name: "frame", id: "frame", min: "0", max: String(count - 1), value: "0",
+                              step: "1" });
+  const label = h("span", { id: "frame-label" });
+  const play = h("button", { type: "button", id: "play" }, "Play");
+  let playing = false;
+  const caption = (frame) => `frame ${frame + 1} of ${count}` + (times.length ? ` (time ${times[frame]})` : "");
+  label.textContent = caption(0);
+  async function go(frame) {
+    slider.value = String(frame);
+    label.textContent = caption(frame);
+    await show(frame);
+  }
+  async function loop() {
+    while (playing && !signal.aborted) {
+      const began = performance.now();
+      await go((Number(slider.value) + 1) % count);
+      await new Promise((resolve) => setTimeout(resolve, Math.max(0, 1000 / PLAY_FPS - (performance.now() - began))));
+    }
+  }
+  play.addEventListener("click", () => {
+    playing = !playing;
+    play.textContent = playing ? "Pause" : "Play";
+    if (playing) guarded(loop);
+  });
+  slider.addEventListener("input", () => {
+    playing = false;
+    play.textContent = "Play";
+    guarded(() => go(Number(slider.value)));
+  });
+  return h("span", { class: "frames", title: "the sequence's frames: play them, or drag to one" }, play, " ", slider,
+           " ", label);
 }
 
 export async function viewerPage(main, { params: [id], query, signal }) {
@@ -60,6 +105,7 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     h("label", {}, "compare with ", compare),
     h("label", {}, "run baseline ", baseline, h("button", { type: "button", id: "run-baseline", onclick: () => guarded(runBaseline) }, "Run")),
     h("label", {}, "display budget ", budget, " vertices"),
+    job.frames ? frameControls(job, (frame) => showFrame(frame), signal) : null,
     h("a", { href: `#/jobs/${id}` }, "job page"));
   main.append(toolbar, container, stats);
   const viewer = new Viewer(container);
@@ -69,10 +115,34 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     if (window.hairportViewer === viewer) window.hairportViewer = null;
   });
   const drawn = {};
+  // a sequence job's frames: the one drawn, and those fetched (at the budget they were fetched with)
+  let frame = job.frames ? 0 : null;
+  const fetched = new Map();
+
+  function frameLayers(number, vertices) {
+    const key = `${number}:${vertices}`;
+    if (!fetched.has(key)) {
+      fetched.set(key, Promise.all([body(id, "target", number), strands(id, "result", vertices, number)]));
+    }
+    return fetched.get(key);
+  }
+
+  async function showFrame(number) {
+    const [targetBody, result] = await frameLayers(number, Number(budget.value));
+    frame = number;
+    viewer.set("body", bodyMesh(targetBody));
+    viewer.set("result", strandLines(result, LAYER_RGB.result));
+    viewer.visible("body", toggles.body.checked);
+    viewer.visible("result", toggles.result.checked);
+    drawn.result = result.header;
+    container.dataset.frame = String(number);
+    container.dataset.inside = String(result.header.inside ?? "");
+  }
 
   async function load() {
     const vertices = Number(budget.value);
-    const [targetBody, result] = await Promise.all([body(id, "target"), strands(id, "result", vertices)]);
+    const [targetBody, result] = await (frame === null
+      ? Promise.all([body(id, "target"), strands(id, "result", vertices)]) : frameLayers(frame, vertices));
     viewer.set("body", bodyMesh(targetBody));
     viewer.set("result", strandLines(result, LAYER_RGB.result));
     drawn.result = result.header;
@@ -93,6 +163,7 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     viewer.visible("result", toggles.result.checked);
     viewer.frame(viewer.box(["result", "source"]).expandByScalar(0.05));
     container.dataset.vertices = String(result.header.drawn_vertices);
+    if (frame !== null) container.dataset.frame = String(frame);
     container.dataset.loaded = "true";
   }
 

@@ -154,7 +154,8 @@ def _select_mesh(stage, mesh_name: str | None, ctx: ReadContext):
             raise ctx.error(f"no mesh named {mesh_name!r}; the stage has {names}", "bad_mesh")
         return chosen[0]
     pool = [prim for prim in meshes if _skinned(prim)] or meshes
-    sizes = [len(UsdGeom.Mesh(prim).GetPointsAttr().Get() or []) for prim in pool]
+    sizes = [len(attribute.Get(still_time(attribute)) or [])
+             for attribute in (UsdGeom.Mesh(prim).GetPointsAttr() for prim in pool)]
     best = [prim for prim, size in zip(pool, sizes, strict=True) if size == max(sizes)]
     if len(best) > 1:
         names = ", ".join(repr(str(prim.GetPath())) for prim in best)
@@ -165,6 +166,15 @@ def _select_mesh(stage, mesh_name: str | None, ctx: ReadContext):
 
 def _matrix(value) -> np.ndarray:
     return np.array(value, dtype=np.float64).reshape(4, 4)
+
+
+def still_time(attribute):
+    """The ``Usd.TimeCode`` a still read takes an attribute at: its default value, else (only time samples authored,
+    as animated exports write them) its first sample."""
+    Usd, _, _, _, _ = pxr_modules()
+    if attribute.Get(Usd.TimeCode.Default()) is None and attribute.GetNumTimeSamples() > 0:
+        return Usd.TimeCode.EarliestTime()
+    return Usd.TimeCode.Default()
 
 
 def _world_points(prim, time, points: np.ndarray | None = None) -> np.ndarray:
@@ -188,7 +198,7 @@ def _mesh(prim, ctx: ReadContext, max_vertices: int, max_faces: int, time=None, 
     where = str(prim.GetPath())
     counts = np.array(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     indices = np.array(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
-    time = Usd.TimeCode.Default() if time is None else time
+    time = still_time(mesh.GetPointsAttr()) if time is None else time
     points = np.array(mesh.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
     check_counts(len(points), int(np.maximum(counts - 2, 0).sum()), ctx.source, max_vertices, max_faces)
     if (counts < 0).any() or counts.sum() != len(indices):

@@ -91,6 +91,19 @@ def test_a_still_stage_or_a_still_format_is_not_animated(tmp_path, bodies):
     assert caught.value.code == "bad_frames"
 
 
+def test_a_stage_of_time_samples_alone_is_read_as_one_body_at_its_first_sample(tmp_path, bodies):
+    """An animated export authors no default points: a still read (an upload, a single retarget) takes frame 1001,
+    through the transform at that time."""
+    from hairport.solver.io.character.load import read_character
+
+    frames, source = bodies
+    animated_stage(tmp_path / "anim.usda", frames, source.faces)
+    character, units = read_character(tmp_path / "anim.usda")
+    first = read_character_frames([tmp_path / "anim.usda"], FrameRange.parse("1001:1001")).characters[0]
+    assert units == "cm" and character.n_vertices == source.n_vertices
+    assert np.abs(character.vertices - first.vertices).max() < 1e-9
+
+
 def test_several_meshes_are_frames_with_their_own_rigs(tmp_path, bodies):
     vertices, source = bodies
     paths = []

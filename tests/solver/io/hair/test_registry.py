@@ -463,13 +463,13 @@ def test_an_animation_reads_back_with_its_time_samples_and_attributes(tmp_path, 
     assert np.abs(first.points - frames[0]).max() < 1e-6  # a reader of one frame takes the first
     assert np.allclose(first.thickness, 8e-5) and np.array_equal(first.attributes["groom_guide"].values,
                                                                   hair.attributes["groom_guide"].values)
-    samples, seconds = _time_samples(path, fmt)
+    samples, seconds = time_samples(path, fmt)
     assert np.allclose(seconds, np.array([1001.0, 1002.0, 1003.0, 1005.0]) / 30.0)
     for sample, frame in zip(samples, frames, strict=True):
         assert np.abs(sample * 0.01 - frame).max() < 1e-6  # centimetres
 
 
-def _time_samples(path, fmt) -> tuple[list[np.ndarray], np.ndarray]:
+def time_samples(path, fmt) -> tuple[list[np.ndarray], np.ndarray]:
     """Every time sample of the written curves' points (file units) and its time in seconds, read by the library."""
     if fmt == "abc":
         from alembic3d import Abc, AbcGeom
