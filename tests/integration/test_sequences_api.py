@@ -16,6 +16,7 @@ from hairport.solver import display as wire
 from hairport.solver.io.character.obj import write_obj
 from hairport.solver.io.hair import read_hair
 from hairport.solver.synthetic import toy
+from tests.solver.io.character.test_alembic import animated_archive
 from tests.solver.io.character.test_frames import DRIFT_CM, animated_stage
 from tests.solver.io.hair.test_registry import time_samples
 from tests.solver.synthetic.toy_fixtures import PRESET_B
@@ -34,6 +35,9 @@ def sweep(service, files, uploaded, tmp_path_factory):  # noqa: F811
     source, other = toy.toy_character(name="source"), toy.toy_character(**PRESET_B)
     bodies = [source.vertices + t * (other.vertices - source.vertices) for t in np.linspace(0.0, 1.0, FRAMES)]
     animated_stage(d / "anim.usda", bodies, source.faces)
+    animated_archive(d / "anim.abc", source.faces, bodies)
+    archive = client.post("/v1/characters", headers=AUTH, files={"mesh": ("anim.abc", (d / "anim.abc").read_bytes())})
+    assert archive.status_code == 201, archive.text
     stage = client.post("/v1/characters", headers=AUTH, files={"mesh": ("anim.usda", (d / "anim.usda").read_bytes())})
     assert stage.status_code == 201, stage.text
     meshes = []
@@ -43,7 +47,7 @@ def sweep(service, files, uploaded, tmp_path_factory):  # noqa: F811
                                files={"mesh": (f"frame{number}.obj", (d / f"frame{number}.obj").read_bytes())})
         assert response.status_code == 201, response.text
         meshes.append(response.json()["id"])
-    return {"stage": stage.json()["id"], "meshes": meshes, "bodies": bodies, "dir": d}
+    return {"stage": stage.json()["id"], "archive": archive.json()["id"], "meshes": meshes, "bodies": bodies, "dir": d}
 
 
 def run_job(client, request: dict) -> dict:
@@ -95,6 +99,17 @@ def test_an_animated_stage_is_one_job_with_one_animated_result(service, uploaded
     assert [frame["time"] for frame in report["frames"]] == [1001.0, 1002.0, 1003.0]
     assert report["frames"][2]["metrics"]["coherence"]["largest_jump_m"] <= \
         report["frames"][2]["metrics"]["coherence"]["jump_bound_m"]
+
+
+def test_an_alembic_animated_mesh_uploaded_as_a_character_is_a_sequence(service, uploaded, sweep):  # noqa: F811
+    client = service["client"]
+    record = client.get(f"/v1/characters/{sweep['archive']}", headers=AUTH).json()
+    assert record["vertices"] == len(sweep["bodies"][0])  # the upload reads its first sample
+    job = run_job(client, {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": [sweep["archive"]],
+                           "sequence": {"frames": "0:2"}, "output_format": "usda", "options": {"max_iterations": 5}})
+    assert job["state"] == "succeeded" and job["frames"] == FRAMES, job
+    assert job["metrics"]["penetrating_particles_max"] == 0
+    assert [frame["time"] for frame in job["metrics"]["frames_detail"]] == [0.0, 1.0, 2.0]
 
 
 def test_characters_in_order_are_the_frames_of_one_job(service, uploaded, sweep, tmp_path):  # noqa: F811

@@ -47,10 +47,22 @@ def read_alembic_frames(path: Path, times_s: list[float], *, max_vertices: int, 
             for points, time in zip(found["frames"], times_s, strict=True)]
 
 
-def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, max_faces: int, mesh_name: str | None,
-                allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> dict[str, np.ndarray]:
-    """In the child: the mesh's faces and its world positions at each time (read back by
-    :func:`read_alembic_frames`)."""
+def read_alembic(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,
+                 allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
+    """The archive's mesh as one body: at its first sample (a still mesh's only one), parsed in a limited child; no
+    units (Alembic records none), no skin."""
+    source = str(path)
+    require_alembic(source)
+    arguments = {"name": path.name, "times": None, "max_vertices": max_vertices, "max_faces": max_faces,
+                 "mesh_name": mesh_name, "allow_external_files": allow_external_files}
+    found = run_in_child(__name__, "mesh_frames", source, os.path.getsize(source), arguments, source, "Alembic")
+    return MeshFile(found["frames"][0], found["faces"], None, str(found["label"]), None)
+
+
+def mesh_frames(source: str, name: str, times: list[float] | None, max_vertices: int, max_faces: int,
+                mesh_name: str | None, allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> dict[str, np.ndarray]:
+    """In the child: the mesh's faces and its world positions at each time, or (``times`` None) at its first sample
+    (read back by :func:`read_alembic_frames` and :func:`read_alembic`)."""
     from alembic3d import Abc, AbcGeom
 
     ctx = ReadContext(name, ReadLimits(), "m")
@@ -60,6 +72,13 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
         obj = _chosen(meshes, mesh_name, ctx, Abc, AbcGeom)
         schema = AbcGeom.IPolyMesh(obj, Abc.WrapExistingFlag.kWrapExisting).getSchema()
         where, count = obj.getFullName(), schema.getNumSamples()
+        if times is None and count > 0:
+            first = schema.getTimeSampling().getSampleTime(0)
+            faces, frames = _frames(obj, schema, np.array([first]), [first], ctx, max_vertices, max_faces, Abc,
+                                    AbcGeom)
+            return {"label": np.array(where), "faces": faces, "frames": frames}
+        if times is None:
+            raise ctx.error(f"{where}: no sample of its positions", "empty_mesh")
         if count < 2:
             raise ctx.error(f"{where}: {count} sample{'s' if count != 1 else ''} of its positions, so it is not "
                             "animated", "not_animated")
@@ -84,10 +103,12 @@ def _frames(obj, schema, sample_times, times, ctx, max_vertices, max_faces, Abc,
     faces = fan_triangles(counts, indices)[:, ::-1].copy()  # clockwise in Alembic
     frames = np.empty((len(times), n_points, 3))
     for number, time in enumerate(times):
-        index = int(np.clip(np.searchsorted(sample_times, time, side="right") - 1, 0, len(sample_times) - 2))
-        span = sample_times[index + 1] - sample_times[index]
+        index = int(np.clip(np.searchsorted(sample_times, time, side="right") - 1, 0, max(len(sample_times) - 2, 0)))
+        following = min(index + 1, len(sample_times) - 1)  # a still mesh's one sample is its own neighbour
+        span = sample_times[following] - sample_times[index]
         weight = float(np.clip((time - sample_times[index]) / span, 0.0, 1.0)) if span > 0 else 0.0
-        before, after = (_positions(schema, sample_times, i, counts, n_points, obj, ctx, Abc) for i in (index, index + 1))
+        before, after = (_positions(schema, sample_times, i, counts, n_points, obj, ctx, Abc)
+                         for i in (index, following))
         points = before + weight * (after - before)
         world = _world_matrix(obj, time, Abc, AbcGeom)
         frames[number] = points @ world[:3, :3] + world[3, :3]
@@ -146,3 +167,7 @@ def _chosen(meshes: list, mesh_name: str | None, ctx: ReadContext, Abc, AbcGeom)
                         "ambiguous_mesh")
     return best[0]
 
+
+
+#: the still read of :mod:`~hairport.solver.io.character.load`, by extension
+READERS = {".abc": read_alembic}

@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 
 from hairport.solver.body.skinning import DEFAULT_WEIGHT_SMOOTHING, derive_skin_weights
+from hairport.solver.io.character.alembic import READERS as ALEMBIC_READERS
 from hairport.solver.io.character.gltf import READERS as GLTF_READERS
 from hairport.solver.io.character.mesh_file import (
     DEFAULT_MAX_FACES,
@@ -40,7 +41,7 @@ from hairport.solver.model.errors import PARSER_FAILURES, InputError, parser_fai
 from hairport.solver.model.units import unit_scale
 
 #: the reader of every mesh format :func:`load_character` reads, by lower-case file extension
-MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS, **USD_READERS}
+MESH_READERS = {**OBJ_READERS, **PLY_READERS, **GLTF_READERS, **USD_READERS, **ALEMBIC_READERS}
 #: the mesh formats :func:`load_character` reads
 MESH_EXTENSIONS = tuple(MESH_READERS)
 

@@ -80,3 +80,21 @@ def test_a_still_or_short_archive_is_refused(tmp_path, bodies):
         with pytest.raises(InputError) as caught:
             read_character_frames([tmp_path / name], FrameRange.parse("0:2"))
         assert caught.value.code == code, caught.value.problem
+
+
+def test_an_archive_read_as_one_body_is_its_first_sample(tmp_path, bodies):
+    """A still read (an upload, a single target): the first sample through its transform, Alembic's winding turned,
+    no units (Alembic records none); an animated archive's later samples are not read."""
+    from hairport.solver.io.character.load import read_character
+
+    source, frames = bodies
+    animated_archive(tmp_path / "still.abc", source.faces, frames, still=True)
+    animated_archive(tmp_path / "late.abc", source.faces, frames, start_s=1.0)
+    for name in ("still.abc", "late.abc"):
+        character, units = read_character(tmp_path / name)
+        assert units is None and np.array_equal(character.faces, source.faces)
+        assert np.abs(character.vertices - frames[0]).max() < 1e-6
+    (tmp_path / "broken.abc").write_bytes(b"Ogawa" + bytes(200))
+    with pytest.raises(InputError) as caught:
+        read_character(tmp_path / "broken.abc")
+    assert caught.value.code == "bad_header"

@@ -88,7 +88,7 @@ def test_derived_weights_follow_the_bones(tmp_path):
 
 
 def test_registry_lists_every_format_once():
-    assert MESH_EXTENSIONS == (".obj", ".ply", ".glb", ".gltf", ".usd", ".usda", ".usdc")
+    assert MESH_EXTENSIONS == (".obj", ".ply", ".glb", ".gltf", ".usd", ".usda", ".usdc", ".abc")
     assert tuple(MESH_READERS) == MESH_EXTENSIONS
     assert MESH_READERS[".glb"] is MESH_READERS[".gltf"]
     assert MESH_READERS[".usd"] is MESH_READERS[".usda"] is MESH_READERS[".usdc"]
