@@ -112,6 +112,27 @@ def test_an_alembic_animated_mesh_uploaded_as_a_character_is_a_sequence(service,
     assert [frame["time"] for frame in job["metrics"]["frames_detail"]] == [0.0, 1.0, 2.0]
 
 
+def test_a_skeleton_animation_uploaded_as_a_character_is_a_sequence(service, uploaded, sweep):  # noqa: F811
+    """A skinned stage posed by a UsdSkel.Animation (a blend shape toward the larger toy, the root drifting 2 cm a
+    frame): the upload reads its bind pose, the job each time code's pose."""
+    from tests.solver.io.character.usd_samples import add_skel_animation, write_scene
+
+    client = service["client"]
+    source, other = toy.toy_character(name="source"), toy.toy_character(**PRESET_B)
+    path = sweep["dir"] / "skel.usda"
+    write_scene(path, source)
+    add_skel_animation(path, source, other, [1001.0, 1002.0, 1003.0], DRIFT_CM)
+    response = client.post("/v1/characters", headers=AUTH, files={"mesh": ("skel.usda", path.read_bytes())})
+    assert response.status_code == 201 and response.json()["has_skeleton"], response.text
+    job = run_job(client, {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": [response.json()["id"]],
+                           "sequence": {"frames": "1001:1003"}, "options": {"max_iterations": 5}})
+    assert job["state"] == "succeeded" and job["frames"] == FRAMES, job
+    assert job["metrics"]["penetrating_particles_max"] == 0 and job["metrics"]["frames_that_pop"] == 0
+    bodies = [wire.decode(client.get(f"/v1/jobs/{job['id']}/body?frame={k}", headers=AUTH).content)[1]["vertices"]
+              for k in (0, 2)]
+    assert np.abs(bodies[1] - bodies[0]).max() > 0.02  # posed: the body at frame 1003 is the larger toy
+
+
 def test_characters_in_order_are_the_frames_of_one_job(service, uploaded, sweep, tmp_path):  # noqa: F811
     client = service["client"]
     job = run_job(client, {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": sweep["meshes"],

@@ -16,6 +16,9 @@ tail as for a glTF skin (:func:`~hairport.solver.io.character.bones.bone_tails`)
 ``primvars:skel:jointIndices``/``jointWeights`` (``elementSize`` influences a vertex, or
 ``constant`` for all), through the mesh's own ``skel:joints`` order when it has one.
 
+A sequence's frames (:func:`read_usd_frames`): the mesh's time-sampled points, else its skeleton's
+``UsdSkel.Animation`` evaluated by UsdSkel at each time code.
+
 Units: the stage's ``metersPerUnit`` (one of hairport's units, else ``bad_header``). The up axis
 is the input frame's to find (``--up-axis`` or inference), as for every format. Parsing runs in
 a memory- and time-limited child (:mod:`~hairport.solver.io.sandbox`).
@@ -87,15 +90,18 @@ def _chosen_mesh(source: str, name: str, mesh_name: str | None, allow_external_f
 
 def read_usd_frames(path: Path, times: list[float], *, max_vertices: int, max_faces: int, mesh_name: str | None,
                     allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> tuple[list[MeshFile], float]:
-    """The mesh of a USD stage at each time code of ``times`` (its points time-sampled: an animated or swept body),
-    parsed in a limited child, with no skin (a bind pose does not follow the points), and the stage's time codes
-    per second.
+    """The mesh of a USD stage at each time code of ``times`` (an animated or swept body), parsed in a limited child,
+    with no skin (a bind pose does not follow the points), and the stage's time codes per second.
+
+    The mesh moves by its time-sampled points, or, when they have no samples and it is bound to a skeleton with a
+    ``UsdSkel.Animation``, by that animation: its blend-shape weights and joint transforms, evaluated by UsdSkel
+    (blend shapes, then linear blend skinning) into the skeleton's world space at each time.
 
     Raises
     ------
     InputError
-        ``not_animated`` for a mesh whose points have fewer than two time samples (UsdSkel animations and blend
-        shapes are not evaluated: bake them to points), ``bad_frames`` for times outside its samples.
+        ``not_animated`` for a mesh whose points have fewer than two time samples and no skeleton animation of two,
+        ``bad_frames`` for times outside its samples.
     """
     source = str(path)
     arguments = {"name": path.name, "times": [float(t) for t in times], "max_vertices": max_vertices,
@@ -113,26 +119,83 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
     Usd, UsdGeom, _, _, _ = pxr_modules()
     with _chosen_mesh(source, name, mesh_name, allow_external_files) as (stage, prim, units, ctx):
         where = str(prim.GetPath())
-        attribute = UsdGeom.Mesh(prim).GetPointsAttr()
-        samples = attribute.GetTimeSamples()
+        samples = list(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamples())
+        pose = _skel_pose(prim) if len(samples) < 2 else None
+        if pose is not None:
+            samples = pose.times
         if len(samples) < 2:
-            raise ctx.error(f"{where}: its points have {len(samples)} time sample{'s' if len(samples) != 1 else ''}, "
-                            "so it is not animated (UsdSkel animations and blend shapes are not evaluated: bake "
-                            "them to time-sampled points)", "not_animated")
+            raise ctx.error(f"{where}: its points have {len(samples)} time sample{'s' if len(samples) != 1 else ''} "
+                            "and no skeleton animation moves it, so it is not animated", "not_animated")
         if min(times) < samples[0] or max(times) > samples[-1]:
             raise ctx.error(f"{where}: frames {min(times):g} to {max(times):g} reach past its time samples "
                             f"({samples[0]:g} to {samples[-1]:g})", "bad_frames")
         first = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(times[0]), skin=False)
         frames = np.empty((len(times), len(first["vertices"]), 3))
-        frames[0] = first["vertices"]
-        for number, time in enumerate(times[1:], start=1):  # the faces are frame 0's: only the points move
-            vertices = _world_points(prim, Usd.TimeCode(time))
+        for number, time in enumerate(times):  # the faces are frame 0's: only the points move
+            vertices = (_world_points(prim, Usd.TimeCode(time)) if pose is None
+                        else pose.world_points(Usd.TimeCode(time), ctx))
             if vertices.shape != frames[0].shape:
                 raise ctx.error(f"{where}: at time {time:g} it has {len(vertices):,} points, at {times[0]:g} "
                                 f"{len(frames[0]):,}: the frames of a sequence must be one mesh", "sequence_topology")
             frames[number] = vertices
         return {"units": np.array(units), "label": np.array(where), "faces": first["faces"], "frames": frames,
                 "frames_per_second": np.array(stage.GetTimeCodesPerSecond())}
+
+
+class _SkelPose:
+    """A skinned mesh posed by its skeleton's ``UsdSkel.Animation`` (:meth:`world_points`); ``times`` are the
+    animation's time samples (joint transforms and blend-shape weights together)."""
+
+    def __init__(self, prim, cache, skeleton, skinning, animation, shapes) -> None:
+        self.prim, self.cache, self.skeleton, self.skinning, self.animation = prim, cache, skeleton, skinning, animation
+        self.shapes = shapes
+        self.times = sorted(set(animation.GetJointTransformTimeSamples())
+                            | set(animation.GetBlendShapeWeightTimeSamples()))
+        if shapes is not None:
+            self.shape_points, self.shape_offsets = (shapes.ComputeBlendShapePointIndices(),
+                                                     shapes.ComputeSubShapePointOffsets())
+
+    def world_points(self, time, ctx: ReadContext) -> np.ndarray:
+        """``(P, 3)``: the rest points with the blend shapes at ``time``, skinned by the joints at ``time``, in the
+        skeleton's world space."""
+        _, UsdGeom, _, _, _ = pxr_modules()
+        attribute = UsdGeom.Mesh(self.prim).GetPointsAttr()
+        points = attribute.Get(still_time(attribute))
+        where = str(self.prim.GetPath())
+        if self.shapes is not None:
+            weights = self.animation.ComputeBlendShapeWeights(time)
+            mapper = self.skinning.GetBlendShapeMapper()
+            if mapper is not None and not mapper.IsNull():
+                weights = mapper.Remap(weights)
+            if not self.shapes.ComputeDeformedPoints(*self.shapes.ComputeSubShapeWeights(weights), self.shape_points,
+                                                     self.shape_offsets, points):
+                raise ctx.error(f"{where}: its blend shapes do not fit its points", "bad_mesh")
+        transforms = self.skeleton.ComputeSkinningTransforms(time)
+        if transforms is None or not self.skinning.ComputeSkinnedPoints(transforms, points, time):
+            raise ctx.error(f"{where}: it could not be skinned by its skeleton's animation", "bad_skeleton")
+        world = _matrix(UsdGeom.Xformable(self.skeleton.GetPrim()).ComputeLocalToWorldTransform(time))
+        return np.array(points, dtype=np.float64).reshape(-1, 3) @ world[:3, :3] + world[3, :3]
+
+
+def _skel_pose(prim) -> _SkelPose | None:
+    """The skeleton animation that poses a skinned mesh, or None (not skinned, no ``UsdSkel.Animation``)."""
+    Usd, _, _, _, _ = pxr_modules()
+    from pxr import UsdSkel
+
+    if not _skinned(prim):
+        return None
+    root = UsdSkel.Root.Find(prim)
+    if not root:
+        return None
+    cache = UsdSkel.Cache()
+    cache.Populate(root, Usd.PrimDefaultPredicate)
+    skinning = cache.GetSkinningQuery(prim)
+    skeleton = cache.GetSkelQuery(UsdSkel.BindingAPI(prim).GetInheritedSkeleton()) if skinning else None
+    animation = skeleton.GetAnimQuery() if skeleton else None
+    if not animation:
+        return None
+    shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim)) if skinning.HasBlendShapes() else None
+    return _SkelPose(prim, cache, skeleton, skinning, animation, shapes)
 
 
 def _skinned(prim) -> bool:

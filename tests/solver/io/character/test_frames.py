@@ -91,6 +91,29 @@ def test_a_still_stage_or_a_still_format_is_not_animated(tmp_path, bodies):
     assert caught.value.code == "bad_frames"
 
 
+def test_a_skeleton_animation_with_a_blend_shape_is_evaluated_at_each_time(tmp_path, bodies):
+    """A skinned body posed by a UsdSkel.Animation (its points not time-sampled): the blend shape's weight and the
+    root joint's translation at each time code, skinned by UsdSkel, in world space (through the Xform above the rig,
+    which the stage's coordinates subtract)."""
+    from tests.solver.io.character.usd_samples import Y_UP_TO_Z_UP, add_skel_animation, write_scene
+
+    _, source = bodies
+    other = toy.toy_character(**PRESET_B)
+    write_scene(tmp_path / "skel.usda", source)
+    add_skel_animation(tmp_path / "skel.usda", source, other, [1001.0, 1002.0, 1003.0], DRIFT_CM)
+    read = read_character_frames([tmp_path / "skel.usda"], FrameRange.parse("1001:1003:0.5"))
+    assert read.times == [1001.0, 1001.5, 1002.0, 1002.5, 1003.0] and read.units == "cm"
+    for character, time in zip(read.characters, read.times, strict=True):
+        weight = (time - 1001.0) / 2.0
+        expected = (source.vertices + weight * (other.vertices - source.vertices)) @ Y_UP_TO_Z_UP
+        expected[:, 0] += 0.01 * DRIFT_CM * (time - 1001.0)
+        assert np.abs(character.vertices - expected).max() < 1e-5, time
+        assert np.array_equal(character.faces, source.faces)
+    with pytest.raises(InputError) as caught:
+        read_character_frames([tmp_path / "skel.usda"], FrameRange.parse("1001:1004"))
+    assert caught.value.code == "bad_frames"
+
+
 def test_a_stage_of_time_samples_alone_is_read_as_one_body_at_its_first_sample(tmp_path, bodies):
     """An animated export authors no default points: a still read (an upload, a single retarget) takes frame 1001,
     through the transform at that time."""

@@ -74,3 +74,36 @@ def write_scene(path, character, hair=None, *, meters_per_unit: float = 0.01, sk
         primvars.CreatePrimvar("strand_id", Sdf.ValueTypeNames.IntArray, UsdGeom.Tokens.uniform).Set(
             Vt.IntArray.FromNumpy(np.arange(hair.n_strands, dtype=np.int32)))
     stage.GetRootLayer().Save()
+
+
+def add_skel_animation(path, character, other, times, drift_cm: float) -> None:
+    """Pose the skinned body of a :func:`write_scene` stage (centimetres) by a ``UsdSkel.Animation``: a blend shape
+    toward ``other`` weighted ``0 .. 1`` over ``times``, and the root joint translated ``drift_cm`` a time sample
+    along the stage's X."""
+    stage = Usd.Stage.Open(str(path))
+    mesh = stage.GetPrimAtPath("/World/character/rig/body")
+    skeleton = UsdSkel.Skeleton(stage.GetPrimAtPath("/World/character/rig/skeleton"))
+    animation = UsdSkel.Animation.Define(stage, "/World/character/rig/skeleton/animation")
+    paths = list(skeleton.GetJointsAttr().Get())
+    heads = np.array([matrix.ExtractTranslation() for matrix in skeleton.GetRestTransformsAttr().Get()])
+    parents = character.skeleton.parents
+    local = np.array([heads[b] - (heads[parents[b]] if parents[b] >= 0 else 0.0) for b in range(len(paths))])
+    animation.CreateJointsAttr(Vt.TokenArray(paths))
+    animation.CreateBlendShapesAttr(Vt.TokenArray(["other"]))
+    animation.CreateRotationsAttr(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)] * len(paths)))
+    animation.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * len(paths)))
+    translations, weights = animation.CreateTranslationsAttr(), animation.CreateBlendShapeWeightsAttr()
+    roots = parents < 0
+    for number, (time, weight) in enumerate(zip(times, np.linspace(0.0, 1.0, len(times)), strict=True)):
+        moved = local.copy()
+        moved[roots, 0] += drift_cm * number
+        translations.Set(Vt.Vec3fArray.FromNumpy(moved.astype(np.float32)), time)
+        weights.Set(Vt.FloatArray([float(weight)]), time)
+    UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets([animation.GetPath()])
+    shape = UsdSkel.BlendShape.Define(stage, "/World/character/rig/body/other")
+    offsets = (to_stage(other.vertices, 0.01) - to_stage(character.vertices, 0.01)).astype(np.float32)
+    shape.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(offsets))
+    binding = UsdSkel.BindingAPI(mesh)
+    binding.CreateBlendShapesAttr(Vt.TokenArray(["other"]))
+    binding.CreateBlendShapeTargetsRel().SetTargets([shape.GetPath()])
+    stage.GetRootLayer().Save()
