@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import zipfile
 
 import numpy as np
@@ -210,3 +211,24 @@ def test_a_batch_of_animated_targets_zips_one_animated_result_per_pair(service, 
     (pair,) = json.loads(archive.read("manifest.json"))["pairs"]
     (tmp_path / "pair.usdc").write_bytes(archive.read(pair["files"]["result"]))
     assert np.allclose(time_samples(tmp_path / "pair.usdc", "usdc")[1] * 30.0, [1001.0, 1002.0])
+
+
+def test_a_running_sequence_shows_its_frames_and_stops_when_cancelled(service, uploaded, sweep):  # noqa: F811
+    """Slow frames (every iteration, no early stop): the job's frame counts and stage move while it runs; a cancel
+    stops it at the solver's next iteration and keeps no output."""
+    client = service["client"]
+    slow = {"method": "global", "max_iterations": 60, "step_tolerance": 0, "energy_tolerance": 0}
+    response = client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": uploaded["hairstyle"], "target_character_ids": sweep["meshes"] * 4, "options": slow,
+        "sequence": {"frames_from": "characters"}})
+    assert response.status_code == 202, response.text
+    path = f"/v1/jobs/{response.json()['jobs'][0]['id']}"
+    running = wait_for(client, path, lambda body: body["frames_done"] >= 1 or body["state"] in ENDED)
+    assert running["state"] == "running" and running["frames"] == 4 * FRAMES, running
+    assert re.match(r"frame \d+: ", running["stage"]), running["stage"]  # the frame being solved
+    assert 0 < running["progress"] < 1
+    cancelled = client.delete(path, headers=AUTH)
+    assert cancelled.status_code == 200 and cancelled.json()["cancel_requested"]
+    done = wait_for(client, path, lambda body: body["state"] in ENDED)
+    assert done["state"] == "cancelled" and done["frames_done"] < 4 * FRAMES, done
+    assert_problem(client.get(f"{path}/result", headers=AUTH), 409, "job_not_succeeded")
