@@ -542,32 +542,43 @@ def test_bad_input_through_the_page_shows_the_api_message(deployment, inputs):
 
 
 def test_a_sequence_job_is_played_and_scrubbed_in_the_viewer(deployment, inputs):
-    """A sequence of two characters (the source, then the heavy male): the viewer shows a frame slider and a play
-    button; each frame draws its own body and hair, none of it inside the body."""
+    """A sequence of two characters started from the form (the heavy male checked first, then the source: the frames
+    follow the order checked): the viewer shows a frame slider and a play button; each frame draws its own body and
+    hair, none of it inside the body."""
     base, api = deployment["base"], deployment["api"]
     source, hairstyle = upload_source(api, inputs)
     with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
         heavy = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
-    created = api.post("/v1/retargets", json={"hairstyle_id": hairstyle, "target_character_ids": [source, heavy],
-                                              "sequence": {"frames_from": "characters"}})
-    assert created.status_code == 202, created.text
-    job = wait_job(api, created.json()["jobs"][0]["id"])
-    assert job["state"] == "succeeded" and job["frames"] == 2 and job["metrics"]["penetrating_particles_max"] == 0
     with chromium() as page:
         enter_key(page, base, KEY)
         page.wait_for_selector("#key-state:text('key accepted')")
+        page.goto(f"{base}/ui/#/new")
+        page.wait_for_selector("#retarget-form")
+        page.check(f"input[name=hairstyle][value='{hairstyle}']")
+        page.check(f"input[name=target][value='{heavy}']")
+        page.check(f"input[name=target][value='{source}']")
+        assert page.inner_text("#frame-order") == f"frames in the order checked: 0: {heavy[:8]}, 1: {source[:8]}"
+        page.select_option("select[name=frames_from]", "characters")
+        page.select_option("select[name=output_format]", "usda")
+        shot(page, "40-new-sequence")
+        page.click("#retarget-form button[type=submit]")
+        page.wait_for_url(re.compile(r".*#/jobs/[0-9a-f]+$"))
+        job = wait_job(api, page.url.rsplit("/", 1)[1])
+        assert job["state"] == "succeeded" and job["frames"] == 2 and job["output_format"] == "usda", job
+        assert job["sequence"]["character_ids"] == [heavy, source] and job["sequence"]["temporal"] == 0
+        assert job["metrics"]["penetrating_particles_max"] == 0
         page.goto(f"{base}/ui/#/view/{job['id']}")
         page.wait_for_selector("#viewer[data-loaded=true]", timeout=60_000)
         assert page.get_attribute("#viewer", "data-frame") == "0"
         assert page.get_attribute("#frame", "max") == "1"
         assert page.inner_text("#frame-label") == "frame 1 of 2 (time 0)"
-        first = viewer_pixels(page, "40-viewer-sequence-frame-0")
+        first = viewer_pixels(page, "41-viewer-sequence-frame-0")
         page.fill("#frame", "1")  # a range input takes fill(): the input event the slider listens to
         page.wait_for_selector("#viewer[data-frame='1']")
         assert page.inner_text("#frame-label") == "frame 2 of 2 (time 1)"
-        second = viewer_pixels(page, "41-viewer-sequence-frame-1")
+        second = viewer_pixels(page, "42-viewer-sequence-frame-1")
         changed = np.any(first != second, axis=2).mean()
-        assert changed > 0.01, changed  # the heavy body and its hair are drawn where the source's were not
+        assert changed > 0.01, changed  # the source's body and hair are drawn where the heavy male's were not
         assert count_red(first) == count_red(second) == 0
         assert page.get_attribute("#viewer", "data-inside") == "0"
         page.click("#play")
