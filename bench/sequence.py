@@ -9,13 +9,16 @@ vertex step is printed. For each groom size (a "long" groom, as ``bench/table4.p
 * a cold retarget (``solver.retarget``) of every ``--cold-every``-th frame, its seconds, and the mean distance
   between the two results of that frame;
 * per frame: particles inside the body, and the coherence figures (the largest particle jump from the previous
-  frame against twice the body's largest motion near the hair plus 1 mm).
+  frame against twice the body's largest motion near the hair plus 1 mm);
+* with ``--tight``, the last frame also retargeted cold at a tenth of the energy and step tolerances: the mean
+  distance of the default cold retarget and of the warm frame to it (the solver's tolerance, against the warm
+  frames' own distance).
 
 The kernels are warmed first, and one retarget runs before anything is timed. Medians: the later frames' (all but
 the first, which is the source's own body) and the cold retargets'; their ratio is the figure the issue's target
 names (at most 0.25).
 
-    python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0]
+    python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0] [--tight]
 
 Prints a table; not a test. Times are wall-clock seconds on this machine.
 """
@@ -45,7 +48,11 @@ def sweep(steps: int):
     return [build_character(blend_params(first, last, k / steps), name=f"sweep {k}/{steps}") for k in range(steps + 1)]
 
 
-def measure(particles: int, steps: int, cold_every: int, temporal: float) -> dict:
+#: ``--tight``: the reference retarget's tolerances, this times the defaults (energy and step)
+TIGHT_FACTOR = 0.1
+
+
+def measure(particles: int, steps: int, cold_every: int, temporal: float, tight: bool = False) -> dict:
     """In this process: the sequence and the cold retargets of one groom size."""
     from hairport import solver
     from hairport.solver import kernels, sequence
@@ -55,7 +62,7 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float) -> dic
     bodies = sweep(steps)
     adaptable = solver.preprocess(bodies[0], generate_groom(bodies[0], STYLE, *groom_shape(particles), seed=0))
     solver.retarget(adaptable, bodies[1])  # the first retarget of an artifact builds what it keeps
-    frames = []
+    frames, last_cold = [], None
     options = solver.RetargetOptions()
     for result in sequence.retarget_sequence(adaptable, bodies, options, sequence.SequenceOptions(temporal=temporal)):
         number = result.metrics["frame"]
@@ -69,9 +76,29 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float) -> dic
             row["cold_seconds"] = time.perf_counter() - began
             row["mean_to_cold_m"] = float(np.linalg.norm(result.hair.points - cold.hair.points, axis=1).mean())
             row["cold_inside"] = int(cold.metrics["penetrating_particles"])
+            last_cold = cold if number == steps else None
         frames.append(row)
+    reference = tight_reference(adaptable, bodies[-1], options, result, last_cold) if tight else None
     step = max(float(np.linalg.norm(bodies[k + 1].vertices - bodies[k].vertices, axis=1).max()) for k in range(steps))
-    return {"particles": adaptable.hair.n_particles, "frames": frames, "largest_vertex_step_m": step}
+    return {"particles": adaptable.hair.n_particles, "frames": frames, "largest_vertex_step_m": step,
+            "tight": reference}
+
+
+def tight_reference(adaptable, body, options, warm, cold) -> dict:
+    """The last frame retargeted cold with tolerances TIGHT_FACTOR times the defaults: how far the default cold
+    retarget and the warm frame are from it (is the distance between them the solver's tolerance, or the warm
+    frames' own?), and the three results' energies (Eq. 1 per particle)."""
+    from dataclasses import replace
+
+    from hairport import solver
+
+    tight = solver.retarget(adaptable, body, replace(options, energy_tolerance=TIGHT_FACTOR * options.energy_tolerance,
+                                                     step_tolerance=TIGHT_FACTOR * options.step_tolerance))
+    cold = cold if cold is not None else solver.retarget(adaptable, body, options)
+    energy = "energy_total_per_particle"
+    return {"warm_to_tight_m": float(np.linalg.norm(warm.hair.points - tight.hair.points, axis=1).mean()),
+            "cold_to_tight_m": float(np.linalg.norm(cold.hair.points - tight.hair.points, axis=1).mean()),
+            "energies": [float(result.metrics[energy]) for result in (warm, cold, tight)]}
 
 
 def table(result: dict) -> str:
@@ -96,6 +123,11 @@ def table(result: dict) -> str:
                  f"retargets: median {statistics.median(cold):.2f} s; ratio {statistics.median(later) / statistics.median(cold):.2f}; "
                  f"mean distance to cold at most {1e3 * max(to_cold):.3f} mm; inside at most "
                  f"{max(row['inside'] for row in frames)}; frames that pop {pops}")
+    if result.get("tight"):
+        lines.append(f"last frame against a cold retarget at {TIGHT_FACTOR:g}x the tolerances: the default cold "
+                     f"{1e3 * result['tight']['cold_to_tight_m']:.3f} mm, the warm frame "
+                     f"{1e3 * result['tight']['warm_to_tight_m']:.3f} mm (mean); Eq. 1 per particle: warm "
+                     "{:.5f}, cold {:.5f}, tight {:.5f}".format(*result["tight"]["energies"]))
     return "\n".join(lines)
 
 
@@ -105,15 +137,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=24)
     parser.add_argument("--cold-every", type=int, default=4)
     parser.add_argument("--temporal", type=float, default=0.0)
+    parser.add_argument("--tight", action="store_true", help="also retarget the last frame cold at tighter tolerances")
     parser.add_argument("--one", type=float, help=argparse.SUPPRESS)  # the child: one size, JSON out
     args = parser.parse_args(argv)
     if args.one is not None:
-        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal)))
+        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal, args.tight)))
         return 0
     print(f"# {_machine()}; temporal {args.temporal:g}")
     for size in args.sizes:
         child = subprocess.run([sys.executable, __file__, "--one", str(size), "--steps", str(args.steps),
-                                "--cold-every", str(args.cold_every), "--temporal", str(args.temporal)],
+                                "--cold-every", str(args.cold_every), "--temporal", str(args.temporal),
+                                *(["--tight"] if args.tight else [])],
                                check=True, capture_output=True, text=True)
         print(table(json.loads(child.stdout.strip().splitlines()[-1])), flush=True)
     return 0

@@ -161,7 +161,15 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     await loadCompare();
     viewer.visible("body", toggles.body.checked);
     viewer.visible("result", toggles.result.checked);
-    viewer.frame(viewer.box(["result", "source"]).expandByScalar(0.05));
+    const box = viewer.box(["result", "source"]);
+    if (frame !== null && job.frames > 1) {  // a sequence: the camera holds its last frame's hair too
+      const [, last] = await frameLayers(job.frames - 1, vertices);
+      viewer.set("result", strandLines(last, LAYER_RGB.result));
+      box.union(viewer.box(["result"]));
+      viewer.set("result", strandLines(result, LAYER_RGB.result));
+      viewer.visible("result", toggles.result.checked);
+    }
+    viewer.frame(box.expandByScalar(0.05));
     container.dataset.vertices = String(result.header.drawn_vertices);
     if (frame !== null) container.dataset.frame = String(frame);
     container.dataset.loaded = "true";
