@@ -308,6 +308,20 @@ def upload_source(api: httpx.Client, inputs) -> tuple[str, str]:
     return character, hairstyle
 
 
+def upload_heavy(api: httpx.Client, inputs) -> str:
+    """The heavy male (with its rig), through the API: its id."""
+    with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
+        return api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+
+
+def open_new_form(page, base: str) -> None:
+    """The key entered, and the new-retarget form open."""
+    enter_key(page, base, KEY)
+    page.wait_for_selector("#key-state:text('key accepted')")
+    page.goto(f"{base}/ui/#/new")
+    page.wait_for_selector("#retarget-form")
+
+
 def job_state(api: httpx.Client, job_id: str) -> str:
     return api.get(f"/v1/jobs/{job_id}").json()["state"]
 
@@ -377,13 +391,9 @@ def test_a_wrap_chosen_in_the_form_is_run_and_drawn_over_the_target(deployment, 
     topology too; the job page shows the wrap's residual and the viewer draws the wrapped mesh over the target."""
     base, api = deployment["base"], deployment["api"]
     source, hairstyle = upload_source(api, inputs)
-    with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
-        target = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+    target = upload_heavy(api, inputs)
     with chromium() as page:
-        enter_key(page, base, KEY)
-        page.wait_for_selector("#key-state:text('key accepted')")
-        page.goto(f"{base}/ui/#/new")
-        page.wait_for_selector("#retarget-form")
+        open_new_form(page, base)
         assert page.input_value("select[name=wrap]") == "auto"
         assert page.inner_text("#wrap-hint") == "targets of another mesh topology are wrapped: auto"
         assert page.eval_on_selector_all("select[name=wrap] option", "options => options.map((o) => o.value)") == [
@@ -547,13 +557,9 @@ def test_a_sequence_job_is_played_and_scrubbed_in_the_viewer(deployment, inputs)
     hair, none of it inside the body."""
     base, api = deployment["base"], deployment["api"]
     source, hairstyle = upload_source(api, inputs)
-    with open(inputs / f"{HEAVY}.obj", "rb") as mesh, open(inputs / f"{HEAVY}.json", "rb") as skeleton:
-        heavy = api.post("/v1/characters", files={"mesh": mesh, "skeleton": skeleton}).json()["id"]
+    heavy = upload_heavy(api, inputs)
     with chromium() as page:
-        enter_key(page, base, KEY)
-        page.wait_for_selector("#key-state:text('key accepted')")
-        page.goto(f"{base}/ui/#/new")
-        page.wait_for_selector("#retarget-form")
+        open_new_form(page, base)
         page.check(f"input[name=hairstyle][value='{hairstyle}']")
         page.check(f"input[name=target][value='{heavy}']")
         page.check(f"input[name=target][value='{source}']")
