@@ -32,7 +32,9 @@ import numpy as np
 
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.inputs import canonical_sequence as canonical_sequence
+from hairport.solver.io.character.frames import MAX_SEQUENCE_VERTICES as MAX_SEQUENCE_VERTICES
 from hairport.solver.io.character.frames import TargetFrames as TargetFrames
+from hairport.solver.io.character.frames import check_total_vertices as check_total_vertices
 from hairport.solver.io.character.frames import read_character_frames as read_character_frames
 from hairport.solver.io.character.frames import read_morph_weights as read_morph_weights
 from hairport.solver.io.hair import ANIMATED_FORMATS as ANIMATED_FORMATS

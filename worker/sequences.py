@@ -43,7 +43,11 @@ def read_frames(repository: Repository, settings: Settings, job: JobRecord,
     plan = job.sequence
     frames = None if plan.frames is None else solver_sequence.FrameRange.parse(plan.frames)
     if plan.frames_from == FROM_CHARACTERS:
-        loaded = [load_character(repository, settings, character_id) for character_id in plan.character_ids]
+        loaded, total = [], 0
+        for character_id in plan.character_ids:  # every frame's mesh is held at once: bounded as it is read
+            loaded.append(load_character(repository, settings, character_id))
+            total += loaded[-1][0].n_vertices
+            solver_sequence.check_total_vertices(total)
         units, records = {found for _, found, _ in loaded}, [record for _, _, record in loaded]
         if None in units and len(units) > 1:  # some read in meters, the others in their files' unknown units
             raise solver.InputError(f"some of the sequence's characters state their units "

@@ -51,6 +51,10 @@ def sequence_plans(sequence: SequenceIn, targets: list[CharacterRecord], hairsty
         frames = _frame_range(sequence)
         picked = [targets[index] for index in (range(len(targets)) if frames is None else _picked(frames, len(targets)))]
         _check_memory(len(picked), hairstyle, picked[0], settings)
+        try:
+            solver_sequence.check_total_vertices(sum(target.vertices for target in picked))
+        except solver.InputError as error:
+            raise input_problem(error, "sequence") from None
         return [(picked[0], SequencePlan(**sequence.model_dump(), character_ids=[target.id for target in picked]))]
     return [(target, _animation_plan(sequence, target, hairstyle, settings)) for target in targets]
 

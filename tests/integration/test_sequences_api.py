@@ -177,8 +177,17 @@ def test_sequences_that_cannot_run_are_refused_before_any_job(service, uploaded,
     assert client.get("/v1/jobs?limit=1", headers=AUTH).json()["total"] == before
 
 
-def test_frames_of_characters_past_the_list_or_in_a_batch_are_refused(service, uploaded, sweep):  # noqa: F811
+def test_frames_of_characters_past_the_list_or_in_a_batch_are_refused(service, uploaded, sweep,  # noqa: F811
+                                                                      monkeypatch):
+    from hairport.solver.io.character import frames
+
     client = service["client"]
+    # more vertices in all than a sequence may hold (every frame's mesh is held at once): 413 before any job
+    monkeypatch.setattr(frames, "MAX_SEQUENCE_VERTICES", 2 * len(sweep["bodies"][0]))
+    assert_problem(client.post("/v1/retargets", headers=AUTH, json={
+        "hairstyle_id": uploaded["hairstyle"], "target_character_ids": sweep["meshes"],
+        "sequence": {"frames_from": "characters"}}), 413, "too_large")
+    monkeypatch.undo()
     characters = {"frames_from": "characters", "frames": "0:5"}
     assert_problem(client.post("/v1/retargets", headers=AUTH, json={
         "hairstyle_id": uploaded["hairstyle"], "target_character_ids": sweep["meshes"], "sequence": characters}),

@@ -126,12 +126,13 @@ def read_character_frames(
             return _alembic_frames(paths[0], frames, units, limits)
         return _stage_frames(paths[0], frames, units, limits)
     picked = frames.pick(len(paths)) if frames is not None else range(len(paths))
-    characters, stated = [], set()
+    characters, stated, total = [], set(), 0
     for index in picked:
         character, found = read_character(paths[index], units=units, **limits)
         characters.append(character)
         stated.add(found)
-        _check_total(characters)
+        total += character.n_vertices
+        check_total_vertices(total)
     if len(stated) > 1:
         raise InputError(f"the target meshes state different units ({', '.join(sorted(map(str, stated)))}): give "
                          "their units", str(paths[0]), "units_mismatch")
@@ -231,16 +232,17 @@ def _checked_weights(weights, source: str) -> np.ndarray:
 def _characters(meshes: list, times: list[float], path: Path, scale: float, limits: dict) -> list[Character]:
     """One animated file's frames as characters (``scale`` meters per file unit), each checked as a mesh, and all of
     them against :data:`MAX_SEQUENCE_VERTICES`; named ``<file>@<frame>``."""
+    check_total_vertices(sum(len(mesh.vertices) for mesh in meshes))
     characters = []
     for mesh, time in zip(meshes, times, strict=True):
         check_mesh_arrays(mesh.vertices, mesh.faces, str(path), limits["max_vertices"], limits["max_faces"])
         characters.append(Character(mesh.vertices * scale, mesh.faces, name=f"{path.name}@{time:g}"))
-        _check_total(characters)
     return characters
 
 
-def _check_total(characters: list[Character]) -> None:
-    total = sum(character.n_vertices for character in characters)
+def check_total_vertices(total: int) -> None:
+    """Refuse (``too_large``) frames holding ``total`` vertices in all, above :data:`MAX_SEQUENCE_VERTICES` (every
+    frame's mesh is held at once)."""
     if total > MAX_SEQUENCE_VERTICES:
         raise InputError(f"the sequence's frames hold {total:,} vertices in all, more than the {MAX_SEQUENCE_VERTICES:,} "
                          "one sequence may hold: pick fewer frames", "frames", "too_large")

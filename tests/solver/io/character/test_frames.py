@@ -144,6 +144,28 @@ def test_several_meshes_are_frames_with_their_own_rigs(tmp_path, bodies):
     assert read.times == [1.0, 3.0] and np.allclose(read.characters[0].vertices, vertices[1], atol=1e-6)
 
 
+@pytest.mark.parametrize("kind", ["meshes", "stage"])
+def test_frames_above_the_sequences_vertex_bound_are_too_large(tmp_path, bodies, monkeypatch, kind):
+    """Every frame's mesh is held at once: more vertices in all than MAX_SEQUENCE_VERTICES is refused, whether the
+    frames are files or one stage's time samples."""
+    from hairport.solver.io.character import frames as frames_module
+
+    vertices, source = bodies
+    monkeypatch.setattr(frames_module, "MAX_SEQUENCE_VERTICES", 2 * source.n_vertices)
+    if kind == "meshes":
+        for number in range(3):
+            write_obj(tmp_path / f"f{number}.obj", vertices[number], source.faces, "a frame")
+        paths, picked = [tmp_path / f"f{number}.obj" for number in range(3)], None
+    else:
+        animated_stage(tmp_path / "anim.usda", vertices, source.faces)
+        paths, picked = [tmp_path / "anim.usda"], FrameRange.parse("1001:1003")
+    assert len(read_character_frames(paths[:2] if picked is None else paths, picked if picked is None else
+                                     FrameRange.parse("1001:1002")).characters) == 2  # at the bound: read
+    with pytest.raises(InputError) as caught:
+        read_character_frames(paths, picked)
+    assert caught.value.code == "too_large" and f"{3 * source.n_vertices:,} vertices" in caught.value.problem
+
+
 def test_meshes_stating_different_units_are_refused(tmp_path, bodies):
     vertices, source = bodies
     write_character(source, tmp_path / "a.obj", tmp_path / "a.skeleton.json")  # the sidecar says meters
