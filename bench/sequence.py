@@ -10,6 +10,8 @@ vertex step is printed. For each groom size (a "long" groom, as ``bench/table4.p
   between the two results of that frame;
 * per frame: particles inside the body, and the coherence figures (the largest particle jump from the previous
   frame against twice the body's largest motion near the hair plus 1 mm);
+* ``--spacing W``: the spacing term's weight, for the warm frames and the cold retargets alike (by default a
+  sequence's own, ``solver.options.SEQUENCE_SPACING``; 0 is Eq. 1);
 * with ``--tight``, the last frame also retargeted cold at a tenth of the energy and step tolerances: the mean
   distance of the default cold retarget and of the warm frame to it (the solver's tolerance, against the warm
   frames' own distance).
@@ -18,7 +20,7 @@ The kernels are warmed first, and one retarget runs before anything is timed. Me
 the first, which is the source's own body) and the cold retargets'; their ratio is the figure the issue's target
 names (at most 0.25).
 
-    python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0] [--tight]
+    python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0] [--spacing 3] [--tight]
 
 Prints a table; not a test. Times are wall-clock seconds on this machine.
 """
@@ -52,7 +54,8 @@ def sweep(steps: int):
 TIGHT_FACTOR = 0.1
 
 
-def measure(particles: int, steps: int, cold_every: int, temporal: float, tight: bool = False) -> dict:
+def measure(particles: int, steps: int, cold_every: int, temporal: float, tight: bool = False,
+            spacing: float = 0.0) -> dict:
     """In this process: the sequence and the cold retargets of one groom size."""
     from hairport import solver
     from hairport.solver import kernels, sequence
@@ -63,7 +66,7 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float, tight:
     adaptable = solver.preprocess(bodies[0], generate_groom(bodies[0], STYLE, *groom_shape(particles), seed=0))
     solver.retarget(adaptable, bodies[1])  # the first retarget of an artifact builds what it keeps
     frames, last_cold = [], None
-    options = solver.RetargetOptions()
+    options = solver.RetargetOptions(spacing=spacing)  # the warm frames' and the cold retargets' alike
     for result in sequence.retarget_sequence(adaptable, bodies, options, sequence.SequenceOptions(temporal=temporal)):
         number = result.metrics["frame"]
         row = {"frame": number, "seconds": result.timings["frame"],
@@ -138,16 +141,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cold-every", type=int, default=4)
     parser.add_argument("--temporal", type=float, default=0.0)
     parser.add_argument("--tight", action="store_true", help="also retarget the last frame cold at tighter tolerances")
+    parser.add_argument("--spacing", type=float, default=None, help="the spacing term's weight, warm and cold alike "
+                                                                     "(default: a sequence's)")
     parser.add_argument("--one", type=float, help=argparse.SUPPRESS)  # the child: one size, JSON out
     args = parser.parse_args(argv)
+    if args.spacing is None:
+        from hairport.solver.options import SEQUENCE_SPACING
+
+        args.spacing = SEQUENCE_SPACING
     if args.one is not None:
-        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal, args.tight)))
+        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal, args.tight, args.spacing)))
         return 0
-    print(f"# {_machine()}; temporal {args.temporal:g}")
+    print(f"# {_machine()}; temporal {args.temporal:g}, spacing {args.spacing:g}")
     for size in args.sizes:
         child = subprocess.run([sys.executable, __file__, "--one", str(size), "--steps", str(args.steps),
                                 "--cold-every", str(args.cold_every), "--temporal", str(args.temporal),
-                                *(["--tight"] if args.tight else [])],
+                                "--spacing", str(args.spacing), *(["--tight"] if args.tight else [])],
                                check=True, capture_output=True, text=True)
         print(table(json.loads(child.stdout.strip().splitlines()[-1])), flush=True)
     return 0

@@ -205,7 +205,8 @@ FrameRangeText = Annotated[str, StringConstraints(min_length=3, max_length=64)]
 
 class SequenceIn(BaseModel):
     """Retarget onto a sequence of bodies, frame by frame, each frame solved from the one before: one job and one
-    animated result per sequence."""
+    animated result per sequence. Its frames take ``options.spacing`` 3 unless the request names one (it keeps
+    strands from stretching in one frame and springing back in the next)."""
 
     model_config = ConfigDict(extra="forbid")
     frames_from: FramesFrom = Field(FROM_ANIMATION, description=(

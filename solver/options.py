@@ -118,6 +118,13 @@ def option_table(names=None) -> str:
     return "\n".join(rows)
 
 
+#: the spacing term's weight of a sequence's frames unless the retarget's options name one: it keeps segments from
+#: stretching near the body in one frame and springing back in the next (single particles jumping 21-25 mm against a
+#: 17-20 mm bound at 10^6 particles without it), and it holds warm frames within 0.2 mm of cold retargets
+#: (0.5-0.8 mm without it); measured by ``bench/sequence.py --spacing`` (docs/performance.md, "Sequences")
+SEQUENCE_SPACING = 3.0
+
+
 @dataclass(frozen=True)
 class SequenceOptions:
     """How the frames of a target sequence are solved (:mod:`~hairport.solver.sequence`).

@@ -76,8 +76,9 @@ def add_retarget(sub) -> None:
     add_units(p)
     p.add_argument("--alpha", type=option_type("alpha"), default=_DEFAULTS.alpha, help=option_help("alpha"))
     p.add_argument("--beta", type=option_type("beta"), default=_DEFAULTS.beta, help=option_help("beta"))
-    p.add_argument("--spacing", type=option_type("spacing"), default=_DEFAULTS.spacing, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}; {solver_options.EVEN_SPACING_WEIGHT:g} keeps "
-                                                 "segments within 0.8-1.25 of their strand's stretch (docs/fidelity.md)"))
+    p.add_argument("--spacing", type=option_type("spacing"), default=None, help=option_help("spacing", f"default {_DEFAULTS.spacing:g}, {solver_options.SEQUENCE_SPACING:g} for a sequence; "
+                                                 f"{solver_options.EVEN_SPACING_WEIGHT:g} keeps segments within 0.8-1.25 of their strand's stretch "
+                                                 "(docs/fidelity.md)"))
     p.add_argument("--carry", type=option_type("carry"), default=_DEFAULTS.carry,
                    help=option_help("carry", f"default {_DEFAULTS.carry:g}"))
     p.add_argument("--eps-c", type=option_type("eps_c"), default=_DEFAULTS.eps_c, help=option_help("eps_c"))
@@ -153,7 +154,7 @@ def cmd_preprocess(args: argparse.Namespace) -> int:
 
 def cmd_retarget(args: argparse.Namespace) -> int:
     if len(args.target) > 1 or args.frames is not None or args.morph_weights is not None:
-        return cmd_retarget_sequence(args, retarget_options(args))
+        return cmd_retarget_sequence(args, retarget_options(args, solver_options.SEQUENCE_SPACING))
     if args.temporal or not args.warm_start:
         raise InputError("--temporal and --no-warm-start apply to a sequence (several --target meshes, or --frames)",
                          code="bad_option")
@@ -199,9 +200,11 @@ def cmd_retarget(args: argparse.Namespace) -> int:
     return 0
 
 
-def retarget_options(args: argparse.Namespace) -> solver.RetargetOptions:
-    """The retarget's options from the command line, checked (the hairline in the groom's axes, landmarks not yet)."""
-    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, spacing=args.spacing,
+def retarget_options(args: argparse.Namespace, spacing: float = _DEFAULTS.spacing) -> solver.RetargetOptions:
+    """The retarget's options from the command line, checked (the hairline in the groom's axes, landmarks not yet);
+    ``spacing`` when ``--spacing`` is not given."""
+    spacing = spacing if args.spacing is None else args.spacing
+    options = solver.RetargetOptions(method=args.method, alpha=args.alpha, beta=args.beta, spacing=spacing,
                                      carry=args.carry, eps_c=args.eps_c, max_iterations=args.max_iterations,
                                      energy_tolerance=args.energy_tolerance, workers=args.workers,
                                      qp_backend=args.qp_backend, hairline=hairline_edit(args), wrap=args.wrap)

@@ -25,6 +25,7 @@ from hairport.records import (
 )
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import options as solver_options
 from hairport.solver import sequence as solver_sequence
 from hairport.worker.queue import QueueUnavailable, TaskQueue, new_task_id
 
@@ -100,6 +101,8 @@ def plan_job(repository: Repository, settings: Settings, owner: str, hairstyle: 
              sequence: SequencePlan | None = None) -> PlannedJob:
     """The job of one pair, its options checked (422 for what the solver would refuse, named after the field)."""
     options = options_in.model_dump()
+    if sequence is not None and "spacing" not in options_in.model_fields_set:
+        options["spacing"] = solver_options.SEQUENCE_SPACING  # a sequence's own default, shown in the job's options
     guides = options.pop("guides")  # a guide count asks for k-means guides, even of a hairstyle with flagged ones
     variant = PreprocessSettings(k=options.pop("k") or hairstyle.options.k,
                                  guides=guides or hairstyle.options.guides, anchoring=hairstyle.options.anchoring,

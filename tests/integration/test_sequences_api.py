@@ -64,6 +64,7 @@ def test_an_animated_stage_is_one_job_with_one_animated_result(service, uploaded
                            "sequence": {"frames": "1001:1003"}, "options": {"max_iterations": 5}})
     assert job["state"] == "succeeded", job
     assert job["frames"] == FRAMES and job["frames_done"] == FRAMES and job["output_format"] == "usdc"
+    assert job["options"]["spacing"] == 3.0  # a sequence's own default, shown in its options
     assert job["sequence"]["frames"] == "1001:1003" and job["sequence"]["frames_from"] == "animation"
     metrics = job["metrics"]
     assert metrics["frames"] == FRAMES and metrics["penetrating_particles_max"] == 0
@@ -138,8 +139,9 @@ def test_characters_in_order_are_the_frames_of_one_job(service, uploaded, sweep,
     client = service["client"]
     job = run_job(client, {"hairstyle_id": uploaded["hairstyle"], "target_character_ids": sweep["meshes"],
                            "sequence": {"frames_from": "characters", "frames": "0:2:2", "temporal": 1e4},
-                           "output_format": "abc", "options": {"max_iterations": 5}})
+                           "output_format": "abc", "options": {"max_iterations": 5, "spacing": 0}})
     assert job["state"] == "succeeded", job
+    assert job["options"]["spacing"] == 0.0  # named in the request: kept
     assert job["target_character_id"] == sweep["meshes"][0] and job["frames"] == 2
     assert job["sequence"]["character_ids"] == [sweep["meshes"][0], sweep["meshes"][2]]
     assert job["metrics"]["penetrating_particles_max"] == 0

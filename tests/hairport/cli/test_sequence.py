@@ -56,6 +56,8 @@ def test_several_meshes_make_one_animated_file_a_report_and_a_preview_per_frame(
     report = json.loads((out / "report.json").read_text())
     assert report["summary"]["frames"] == FRAMES and report["summary"]["penetrating_particles_max"] == 0
     assert [frame["time"] for frame in report["frames"]] == [0.0, 1.0, 2.0]
+    # a sequence's frames take the spacing term unless --spacing names a weight (its energy is then reported)
+    assert all(frame["metrics"]["energy_spacing_per_particle"] >= 0 for frame in report["frames"])
     assert f"{FRAMES} frames" in printed
     stage = Usd.Stage.Open(str(out / "hair.usda"))
     points = UsdGeom.BasisCurves(stage.GetPrimAtPath("/Groom/hair")).GetPointsAttr()
@@ -68,9 +70,12 @@ def test_several_meshes_make_one_animated_file_a_report_and_a_preview_per_frame(
 
 def test_one_file_per_frame_with_the_frame_number(capsys, world, sweep, out):
     code, _, err = run(capsys, sequence_args(world, out, sweep["meshes"], "--frames", "1:2", "--temporal", "1e4",
+                                             "--spacing", "0", "--report", str(out / "report.json"),
                                              name="hair.####.npz"))
     assert code == 0, err
-    assert sorted(p.name for p in out.iterdir()) == ["hair.0001.npz", "hair.0002.npz"]
+    assert sorted(p.name for p in out.iterdir()) == ["hair.0001.npz", "hair.0002.npz", "report.json"]
+    report = json.loads((out / "report.json").read_text())
+    assert not any("energy_spacing_per_particle" in frame["metrics"] for frame in report["frames"])  # --spacing 0
     first = read_hair(out / "hair.0001.npz")
     assert first.n_particles == world["hair"].n_particles and np.isfinite(first.points).all()
 
