@@ -92,8 +92,7 @@ def add_result(outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result:
         Write the guides the solve used as the per-strand attribute :data:`hairport.solver_options.GUIDE_FLAG`.
     """
     frame = adaptable.frame
-    strands = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else result.hair
-    in_frame = solver.hair_in_frame(frame, strands)
+    in_frame = hair_as_written(adaptable, result, flag_guides)
     for name, final in hair.items():
         outputs.add(final, lambda path, name=name: solver.write_hair(path, in_frame, units=frame.units, format=name,
                                                                      up_axis=frame.up))
@@ -103,6 +102,13 @@ def add_result(outputs: OutputSet, adaptable: solver.AdaptableHairstyle, result:
         from hairport.solver.render.preview import write_result_preview
 
         outputs.add(preview, lambda path: write_result_preview(path, adaptable, result, target))
+
+
+def hair_as_written(adaptable: solver.AdaptableHairstyle, result: solver.RetargetResult,
+                    flag_guides: bool = False) -> solver.Hair:
+    """A result's hair as its files hold it: in the groom's axes (meters), with the guides flagged when asked."""
+    strands = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else result.hair
+    return solver.hair_in_frame(adaptable.frame, strands)
 
 
 #: the run of ``#`` in a per-frame file name that each frame's number replaces (zero-padded to the run's length)
@@ -152,11 +158,9 @@ class SequenceOutputs:
         add_result(outputs, adaptable, result, target, frame_files,
                    preview=None if self.preview is None else frame_path(self.preview, time), flag_guides=flag_guides)
         if not self.per_frame:
-            in_frame = solver.hair_in_frame(adaptable.frame, result.hair)
+            in_frame = hair_as_written(adaptable, result, flag_guides)
             if self._layout is None:
-                layout = solver.with_guide_flags(result.hair, adaptable.multiscale.guides) if flag_guides else \
-                    result.hair
-                self._layout = solver.hair_in_frame(adaptable.frame, layout)
+                self._layout = in_frame
             # float32, as the animated formats write them: half the memory of a long sequence
             self._points.append(in_frame.points.astype(np.float32))
             self._times.append(float(time))

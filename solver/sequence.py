@@ -72,6 +72,15 @@ def require_one_topology(frames: Sequence[Character]) -> None:
                              "sequence_topology")
 
 
+def check_sequence_options(sequence: SequenceOptions, method: str) -> None:
+    """Refuse (``bad_option``) sequence options out of range or that the retarget ``method`` cannot take: a
+    temporal term with a baseline, which solves nothing."""
+    sequence.validate()
+    if sequence.temporal and method not in SOLVER_METHODS:
+        raise InputError(f"option temporal pulls a solve toward the previous frame; the baseline {method} "
+                         "solves nothing (it retargets each frame on its own)", code="bad_option")
+
+
 def retarget_sequence(
     adaptable: AdaptableHairstyle,
     frames: Sequence[Character],
@@ -108,10 +117,7 @@ def retarget_sequence(
         ``result.timings["frame"]`` the frame's seconds.
     """
     options.validate()
-    sequence.validate()
-    if sequence.temporal and options.method not in SOLVER_METHODS:
-        raise InputError(f"option temporal pulls a solve toward the previous frame; the baseline {options.method} "
-                         "solves nothing (it retargets each frame on its own)", code="bad_option")
+    check_sequence_options(sequence, options.method)
     require_one_topology(frames)
     progress = progress or no_progress
     previous: RetargetResult | None = None

@@ -74,6 +74,19 @@ def adaptable_at(path: str) -> solver.AdaptableHairstyle:
     return solver.load_adaptable(path)
 
 
+def artifact_adaptable(repository: Repository, artifact: ArtifactRecord) -> solver.AdaptableHairstyle:
+    """The adaptable hairstyle an artifact record stores (kept loaded: :func:`adaptable_at`)."""
+    return adaptable_at(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
+
+
+def job_options(settings: Settings, job: JobRecord, frame, landmarks=None) -> solver.RetargetOptions:
+    """A job's retarget options: its request's, the worker's thread count, its hairline edit with canonical axes
+    (a drawn curve is read in the groom's ``frame``, as the result is written), and ``landmarks``."""
+    edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
+    return solver.RetargetOptions(**job.options, workers=settings.solver_workers,
+                                  hairline=solver.edit_in_canonical(frame, edit), landmarks=landmarks)
+
+
 def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
     """What a failed job or preprocessing reports: the problem of bad input, else the exception."""
     if isinstance(error, solver.InputError):
@@ -90,7 +103,7 @@ def error_info(error: BaseException, soft_time_limit: float) -> ErrorInfo:
 def job_inputs(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord
                ) -> tuple[solver.AdaptableHairstyle, solver.Character, dict]:
     """A job's adaptable hairstyle and target character (in hairport's frame), and what reading the target found."""
-    adaptable = adaptable_at(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
+    adaptable = artifact_adaptable(repository, artifact)
     target, units, character = load_character(repository, settings, job.target_character_id)
     target, target_input = solver.canonical_target(adaptable.source, target, units=units, up=character.up_axis,
                                                    front=character.front_axis)

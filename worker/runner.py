@@ -45,7 +45,7 @@ from hairport.storage import retention_seconds
 
 from . import bodies, sequences, wraps
 from .fine import FineDispatch, SpreadFineLevel
-from .loading import adaptable_at, blob_path, error_info, job_inputs, read_source, stored
+from .loading import artifact_adaptable, error_info, job_inputs, job_options, read_source, stored
 from .runs import TRANSIENT_ERRORS, Heartbeat, OwnRun, run_gone, start_run
 
 #: a running job writes its progress at most this often (s)
@@ -211,7 +211,7 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
 def _sequence_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
                         progress: JobProgress, run: OwnRun) -> tuple[dict[str, BlobRef], dict, dict]:
     """A sequence job's frames solved and its outputs stored (:mod:`.sequences`): outputs, metrics, timings."""
-    adaptable = adaptable_at(str(blob_path(repository, BlobRef(sha256=artifact.sha256, suffix=artifact.suffix))))
+    adaptable = artifact_adaptable(repository, artifact)
     try:
         return sequences.solve_and_store(repository, settings, job, adaptable, progress, run.write)
     except solver.InputError as error:
@@ -221,12 +221,9 @@ def _sequence_and_store(repository: Repository, settings: Settings, job: JobReco
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
                         progress: JobProgress, fine_runner) -> tuple[dict[str, BlobRef], dict, dict]:
     adaptable, target, target_input = job_inputs(repository, settings, job, artifact)
-    frame = adaptable.frame  # a drawn hairline is read in the groom's units and axes, as the result is written
-    edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
     landmarks = None if job.landmarks is None else solver.landmarks_in_canonical(
         solver.LandmarkPairs.from_document(job.landmarks), adaptable, target_input)
-    options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
-                                     hairline=solver.edit_in_canonical(frame, edit), landmarks=landmarks)
+    options = job_options(settings, job, adaptable.frame, landmarks)
     surface, cache_timings = bodies.collision_surface(repository, settings, target)
     wrapped, wrap_timings = wraps.cached_wrap(repository, settings, adaptable, target, options.wrap, progress,
                                               landmarks)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hairport import solver
-from hairport.outputs import OutputSet, add_result
+from hairport.outputs import OutputSet, add_result, hair_as_written
 from hairport.records import FRAMES_OUTPUT, FROM_CHARACTERS, LOSSLESS_OUTPUT, BlobRef, CharacterRecord, JobRecord
 from hairport.repository import Repository
 from hairport.settings import Settings
@@ -24,7 +24,7 @@ from hairport.solver import display, distributed, documents
 from hairport.solver import sequence as solver_sequence
 
 from . import bodies as body_cache
-from .loading import blob_path, limits, load_character, stored
+from .loading import blob_path, job_options, limits, load_character, stored
 
 
 @dataclass
@@ -82,9 +82,7 @@ def solve_and_store(repository: Repository, settings: Settings, job: JobRecord, 
     read = read_frames(repository, settings, job, adaptable)
     record_frames(frames=len(read.bodies), frames_done=0)
     plan, frame = job.sequence, adaptable.frame
-    edit = None if job.hairline is None else solver.hairline_edit_from_request(job.hairline)
-    options = solver.RetargetOptions(**job.options, workers=settings.solver_workers,
-                                     hairline=solver.edit_in_canonical(frame, edit))
+    options = job_options(settings, job, frame)
     kept = solver_sequence.SolvedFrames.empty(read.times, adaptable.hair.n_particles, read.bodies[0].n_vertices,
                                               frame, read.frames_per_second)
     cache_seconds: dict[str, float] = {}
@@ -109,8 +107,7 @@ def solve_and_store(repository: Repository, settings: Settings, job: JobRecord, 
             if number == 0:
                 add_result(written, adaptable, result, read.bodies[0], {LOSSLESS_OUTPUT: files[LOSSLESS_OUTPUT]},
                            preview=files["preview"], flag_guides=job.flag_guides)
-                layout = solver.hair_in_frame(frame, solver.with_guide_flags(result.hair, adaptable.multiscale.guides)
-                                              if job.flag_guides else result.hair)
+                layout = hair_as_written(adaptable, result, job.flag_guides)
                 written.add(files["scene"], lambda path, result=result: display.save_scene(
                     path, documents.display_scene(adaptable, result, read.bodies[0])))
             records.append(solver_sequence.FrameRecord.of(result))

@@ -18,7 +18,7 @@ from hairport.solver import sequence as solver_sequence
 
 from ..errors import Problem
 from ..uploads import input_problem
-from .jobs import outputs_of, stored_path
+from .jobs import outputs_of, require_sequence, stored_path
 
 #: scenes kept loaded per API process (a 10^6-particle scene is ~13 MB): the viewer asks several times
 SCENES_KEPT = 4
@@ -60,17 +60,17 @@ def _layer_arrays(repository: Repository, job: JobRecord, layer: str, names: tup
     """The arrays of a job's ``layer`` scene; of the result, at ``frame`` of a sequence (422 ``bad_frames`` for a
     frame of a job onto one body, of the source layer, or past the sequence's)."""
     if frame is not None:
-        outputs_of(job)  # 409 before the job has outputs, as without a frame
-    if frame is not None and (job.sequence is None or layer != "result"):
-        raise Problem(422, "bad_frames", f"frame: job {job.id} retargeted onto one body; it has no frames"
-                      if job.sequence is None else f"frame: the {layer} layer does not move; only the result has frames")
+        outputs = outputs_of(job)  # 409 before the job has outputs, as without a frame
+        require_sequence(job)
+        if layer != "result":
+            raise Problem(422, "bad_frames", f"frame: the {layer} layer does not move; only the result has frames")
     try:
         if layer != "result":
             return _source_scene(str(artifact_path(repository, job)))
         scene = _scene(str(scene_path(repository, job)), names)
         if frame is None:
             return scene
-        kept = _solved_frames(str(stored_path(repository, outputs_of(job)[FRAMES_OUTPUT])))
+        kept = _solved_frames(str(stored_path(repository, outputs[FRAMES_OUTPUT])))
         return kept.scene_at(scene, kept.check_frame(frame))
     except solver.InputError as error:
         raise input_problem(error, "frame" if error.code == "bad_frames" else "layer") from None

@@ -72,6 +72,12 @@ def outputs_of(job: JobRecord) -> dict[str, BlobRef]:
     return job.outputs
 
 
+def require_sequence(job: JobRecord) -> None:
+    """422 ``bad_frames`` when a frame is asked of a job onto one body."""
+    if job.sequence is None:
+        raise Problem(422, "bad_frames", f"frame: job {job.id} retargeted onto one body; it has no frames")
+
+
 def blob_response(repository: Repository, ref: BlobRef, media_type: str, filename: str) -> FileResponse:
     return FileResponse(stored_path(repository, ref), media_type=media_type, filename=filename)
 
@@ -92,8 +98,8 @@ def result_file(repository: Repository, job: JobRecord, fmt: str, folder: Path, 
     outputs = outputs_of(job)
     if frame is None and fmt in outputs:
         return stored_path(repository, outputs[fmt])
-    if job.sequence is None and frame is not None:
-        raise Problem(422, "bad_frames", f"frame: job {job.id} retargeted onto one body; it has no frames")
+    if frame is not None:
+        require_sequence(job)
     if job.sequence is not None and frame is None and fmt not in solver_sequence.ANIMATED_FORMATS:
         raise Problem(422, "bad_frames", f"format: a {fmt} file holds one frame; ask for one frame of the sequence "
                                          f"(frame=K) or an animated format ({', '.join(solver_sequence.ANIMATED_FORMATS)})")

@@ -7,10 +7,11 @@ animated file are read by the job's run, and a range reaching past them fails th
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 from hairport import solver
 from hairport.records import FROM_ANIMATION, FROM_CHARACTERS, CharacterRecord, HairstyleRecord, SequencePlan
 from hairport.settings import Settings
-from hairport.solver import options as solver_options
 from hairport.solver import sequence as solver_sequence
 
 from ..errors import Problem
@@ -43,59 +44,45 @@ def sequence_plans(sequence: SequenceIn, targets: list[CharacterRecord], hairsty
     if landmarks is not None:
         raise Problem(422, "bad_landmarks", "landmarks: they name points of one body, and a sequence's frames move "
                                             "them; send the sequence without landmarks")
-    _check_solve(sequence, options)
-    if sequence.frames_from == FROM_CHARACTERS:
-        if sequence.morph_weights is not None:
-            raise Problem(422, "bad_frames", f"sequence.morph_weights: the frames of frames_from {FROM_CHARACTERS} "
-                                             "are characters, not one glTF's morph targets")
-        frames = _frame_range(sequence)
-        picked = [targets[index] for index in (range(len(targets)) if frames is None else _picked(frames, len(targets)))]
-        _check_memory(len(picked), hairstyle, picked[0], settings)
-        try:
-            solver_sequence.check_total_vertices(sum(target.vertices for target in picked))
-        except solver.InputError as error:
-            raise input_problem(error, "sequence") from None
-        return [(picked[0], SequencePlan(**sequence.model_dump(), character_ids=[target.id for target in picked]))]
-    return [(target, _animation_plan(sequence, target, hairstyle, settings)) for target in targets]
+    with _refused():
+        solver_sequence.check_sequence_options(
+            solver_sequence.SequenceOptions(warm=sequence.warm_start, temporal=sequence.temporal), options.method)
+        frames = None if sequence.frames is None else solver_sequence.FrameRange.parse(sequence.frames)
+    if sequence.frames_from != FROM_CHARACTERS:
+        return [(target, _animation_plan(sequence, frames, target, hairstyle, settings)) for target in targets]
+    if sequence.morph_weights is not None:
+        raise Problem(422, "bad_frames", f"sequence.morph_weights: the frames of frames_from {FROM_CHARACTERS} "
+                                         "are characters, not one glTF's morph targets")
+    with _refused():
+        picked = [targets[index] for index in (range(len(targets)) if frames is None else frames.pick(len(targets)))]
+    _check_memory(len(picked), hairstyle, picked[0], settings)
+    with _refused():
+        solver_sequence.check_total_vertices(sum(target.vertices for target in picked))
+    return [(picked[0], SequencePlan(**sequence.model_dump(), character_ids=[target.id for target in picked]))]
 
 
-def _animation_plan(sequence: SequenceIn, target: CharacterRecord, hairstyle: HairstyleRecord,
-                    settings: Settings) -> SequencePlan:
+def _animation_plan(sequence: SequenceIn, frames: solver_sequence.FrameRange | None, target: CharacterRecord,
+                    hairstyle: HairstyleRecord, settings: Settings) -> SequencePlan:
     weights = sequence.morph_weights
     if weights is not None and len({len(row) for row in weights}) > 1:
         raise Problem(422, "bad_frames", "sequence.morph_weights: every frame's list has one number per morph "
                                          f"target; these have {sorted({len(row) for row in weights})}")
-    if sequence.frames is None and weights is None:
+    if frames is None and weights is None:
         raise Problem(422, "bad_frames", f"sequence.frames: the frames of an animated character (frames_from "
                                          f"{FROM_ANIMATION}) are a range of its time codes, e.g. 0:48; give one (or "
                                          "morph_weights)")
-    frames = _frame_range(sequence)
-    count = len(weights) if frames is None else (
-        frames.count() if weights is None else len(_picked(frames, len(weights))))
+    with _refused():
+        count = len(weights) if frames is None else (
+            frames.count() if weights is None else len(frames.pick(len(weights))))
     _check_memory(count, hairstyle, target, settings)
     return SequencePlan(**sequence.model_dump())
 
 
-def _check_solve(sequence: SequenceIn, options: RetargetOptionsIn) -> None:
+@contextmanager
+def _refused():
+    """The solver's refusal of the sequence as the API's problem (named after the request's ``sequence``)."""
     try:
-        solver_sequence.SequenceOptions(warm=sequence.warm_start, temporal=sequence.temporal).validate()
-    except solver.InputError as error:
-        raise input_problem(error, "sequence") from None
-    if sequence.temporal and options.method not in solver_options.SOLVER_METHODS:
-        raise Problem(422, "bad_option", f"sequence.temporal pulls a solve toward the previous frame; the baseline "
-                                         f"{options.method} solves nothing (it retargets each frame on its own)")
-
-
-def _frame_range(sequence: SequenceIn) -> solver_sequence.FrameRange | None:
-    try:
-        return None if sequence.frames is None else solver_sequence.FrameRange.parse(sequence.frames)
-    except solver.InputError as error:
-        raise input_problem(error, "sequence") from None
-
-
-def _picked(frames: solver_sequence.FrameRange, count: int):
-    try:
-        return frames.pick(count)
+        yield
     except solver.InputError as error:
         raise input_problem(error, "sequence") from None
 

@@ -164,10 +164,7 @@ export async function viewerPage(main, { params: [id], query, signal }) {
     const box = viewer.box(["result", "source"]);
     if (frame !== null && job.frames > 1) {  // a sequence: the camera holds its last frame's hair too
       const [, last] = await frameLayers(job.frames - 1, vertices);
-      viewer.set("result", strandLines(last, LAYER_RGB.result));
-      box.union(viewer.box(["result"]));
-      viewer.set("result", strandLines(result, LAYER_RGB.result));
-      viewer.visible("result", toggles.result.checked);
+      box.union(new THREE.Box3().setFromArray(last.arrays.positions));
     }
     viewer.frame(box.expandByScalar(0.05));
     container.dataset.vertices = String(result.header.drawn_vertices);

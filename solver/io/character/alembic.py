@@ -37,11 +37,7 @@ def read_alembic_frames(path: Path, times_s: list[float], *, max_vertices: int, 
         without a polygon mesh, ``not_animated`` for a mesh of fewer than two samples, ``bad_frames`` for times
         outside its samples, ``sequence_topology`` for samples of other faces.
     """
-    source = str(path)
-    require_alembic(source)
-    arguments = {"name": path.name, "times": [float(t) for t in times_s], "max_vertices": max_vertices,
-                 "max_faces": max_faces, "mesh_name": mesh_name, "allow_external_files": allow_external_files}
-    found = run_in_child(__name__, "mesh_frames", source, os.path.getsize(source), arguments, source, "Alembic")
+    found = _read_in_child(path, [float(t) for t in times_s], max_vertices, max_faces, mesh_name, allow_external_files)
     label = str(found["label"])
     return [MeshFile(points, found["faces"], None, f"{label}@{time:g}s", None)
             for points, time in zip(found["frames"], times_s, strict=True)]
@@ -51,12 +47,18 @@ def read_alembic(path: Path, *, max_vertices: int, max_faces: int, mesh_name: st
                  allow_external_files: bool = ALLOW_EXTERNAL_FILES) -> MeshFile:
     """The archive's mesh as one body: at its first sample (a still mesh's only one), parsed in a limited child; no
     units (Alembic records none), no skin."""
+    found = _read_in_child(path, None, max_vertices, max_faces, mesh_name, allow_external_files)
+    return MeshFile(found["frames"][0], found["faces"], None, str(found["label"]), None)
+
+
+def _read_in_child(path: Path, times: list[float] | None, max_vertices: int, max_faces: int, mesh_name: str | None,
+                   allow_external_files: bool) -> dict[str, np.ndarray]:
+    """:func:`mesh_frames` of an archive, in the limited child (``format_unavailable`` without the bindings)."""
     source = str(path)
     require_alembic(source)
-    arguments = {"name": path.name, "times": None, "max_vertices": max_vertices, "max_faces": max_faces,
+    arguments = {"name": path.name, "times": times, "max_vertices": max_vertices, "max_faces": max_faces,
                  "mesh_name": mesh_name, "allow_external_files": allow_external_files}
-    found = run_in_child(__name__, "mesh_frames", source, os.path.getsize(source), arguments, source, "Alembic")
-    return MeshFile(found["frames"][0], found["faces"], None, str(found["label"]), None)
+    return run_in_child(__name__, "mesh_frames", source, os.path.getsize(source), arguments, source, "Alembic")
 
 
 def mesh_frames(source: str, name: str, times: list[float] | None, max_vertices: int, max_faces: int,

@@ -131,7 +131,8 @@ def mesh_frames(source: str, name: str, times: list[float], max_vertices: int, m
                             f"({samples[0]:g} to {samples[-1]:g})", "bad_frames")
         first = _mesh(prim, ctx, max_vertices, max_faces, Usd.TimeCode(times[0]), skin=False)
         frames = np.empty((len(times), len(first["vertices"]), 3))
-        for number, time in enumerate(times):  # the faces are frame 0's: only the points move
+        frames[0] = first["vertices"] if pose is None else pose.world_points(Usd.TimeCode(times[0]), ctx)
+        for number, time in enumerate(times[1:], start=1):  # the faces are frame 0's: only the points move
             vertices = (_world_points(prim, Usd.TimeCode(time)) if pose is None
                         else pose.world_points(Usd.TimeCode(time), ctx))
             if vertices.shape != frames[0].shape:
@@ -149,6 +150,9 @@ class _SkelPose:
     def __init__(self, prim, cache, skeleton, skinning, animation, shapes) -> None:
         self.prim, self.cache, self.skeleton, self.skinning, self.animation = prim, cache, skeleton, skinning, animation
         self.shapes = shapes
+        _, UsdGeom, _, _, _ = pxr_modules()
+        attribute = UsdGeom.Mesh(prim).GetPointsAttr()
+        self.rest = attribute.Get(still_time(attribute))  # copied for each pose: the queries deform it in place
         self.times = sorted(set(animation.GetJointTransformTimeSamples())
                             | set(animation.GetBlendShapeWeightTimeSamples()))
         if shapes is not None:
@@ -159,8 +163,9 @@ class _SkelPose:
         """``(P, 3)``: the rest points with the blend shapes at ``time``, skinned by the joints at ``time``, in the
         skeleton's world space."""
         _, UsdGeom, _, _, _ = pxr_modules()
-        attribute = UsdGeom.Mesh(self.prim).GetPointsAttr()
-        points = attribute.Get(still_time(attribute))
+        from pxr import Vt
+
+        points = Vt.Vec3fArray(self.rest)
         where = str(self.prim.GetPath())
         if self.shapes is not None:
             weights = self.animation.ComputeBlendShapeWeights(time)
