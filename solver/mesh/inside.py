@@ -139,7 +139,11 @@ def exit_faces(vertices: np.ndarray, faces: np.ndarray, winding: WindingNumber) 
 
     Each face is probed at its centroid, :data:`SIDE_PROBE` of the bounding-box diagonal
     off it on either side: it separates when its back side is inside and its front side
-    outside. A face crossed by another part of the body is classified by its centroid.
+    outside. A face crossed by another part of the body is classified by its centroid. On a
+    closed body (:func:`closed_cycle`) the winding number is an integer off the surface and
+    rises by exactly one from a face's front to its back, so the front probe alone decides
+    (the face separates where it is 0): half the queries, and the near-surface queries are
+    the expensive ones (~5 us each on the MakeHuman body).
 
     Parameters
     ----------
@@ -161,6 +165,9 @@ def exit_faces(vertices: np.ndarray, faces: np.ndarray, winding: WindingNumber) 
     normal = cross / np.where(length > 0, length, 1.0)[:, None]
     centroid = corners.mean(axis=1)
     step = SIDE_PROBE * float(np.linalg.norm(np.ptp(np.asarray(vertices), axis=0)))
+    if closed_cycle(faces):
+        front = winding(centroid + step * normal)
+        return (length > 0) & (np.abs(front) < INSIDE_WINDING)
     w = winding(np.concatenate([centroid + step * normal, centroid - step * normal]))
     front, back = w[: len(faces)], w[len(faces):]
     return (length > 0) & (front < INSIDE_WINDING) & (back > INSIDE_WINDING)

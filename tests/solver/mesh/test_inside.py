@@ -7,6 +7,8 @@ import igl
 import numpy as np
 
 from hairport.solver.mesh.inside import (
+    INSIDE_WINDING,
+    SIDE_PROBE,
     InsideTest,
     WindingNumber,
     closed_cycle,
@@ -159,6 +161,35 @@ def test_the_separating_faces_leave_out_inner_shells_and_keep_an_open_cut_body()
     # faces turned inward enclose nothing
     inward = outer_faces[:, ::-1]
     assert not exit_faces(outer, inward, WindingNumber(outer, inward)).any()
+
+
+def two_sided(vertices, faces):
+    """The separating faces by both probes, whatever the body: what the front probe alone must match when closed."""
+    corners = vertices[faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(cross, axis=1)
+    normal = cross / np.where(length > 0, length, 1.0)[:, None]
+    step = SIDE_PROBE * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    winding = WindingNumber(vertices, faces)
+    front = winding(corners.mean(axis=1) + step * normal)
+    back = winding(corners.mean(axis=1) - step * normal)
+    return (length > 0) & (front < INSIDE_WINDING) & (back > INSIDE_WINDING)
+
+
+def test_on_a_closed_body_the_front_probe_alone_gives_the_two_sided_answer():
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+    outer, outer_faces = icosphere(radius=0.1)
+    male = build_character(PRESETS["heavy-male"])
+    bodies = [(np.vstack([outer, outer + [0.1, 0.0, 0.0]]), np.vstack([outer_faces, outer_faces + len(outer)])),
+              (np.vstack([outer, 0.5 * outer]), np.vstack([outer_faces, outer_faces + len(outer)])),
+              (np.vstack([outer, 0.5 * outer]), np.vstack([outer_faces, outer_faces[:, ::-1] + len(outer)])),
+              (male.vertices, male.faces)]
+    for vertices, faces in bodies:
+        assert closed_cycle(faces)
+        expected = two_sided(vertices, faces)
+        np.testing.assert_array_equal(exit_faces(vertices, faces, WindingNumber(vertices, faces)), expected)
+    assert 0 < np.count_nonzero(~expected) < 50  # the heavy male's lips cross: a few faces separate nothing
 
 
 def test_manifold_features_flag_the_rim_of_an_open_cut():
