@@ -86,6 +86,8 @@ class RetargetResult:
     #: (N, 3) the first iterate this target gives without an earlier frame: the initial transfer, or the hairline
     #: edit's start (what :class:`PreviousFrame` measures the body's motion against)
     base: np.ndarray | None = None
+    #: the target's query and its collision query (what a sequence's next frame moves instead of building)
+    queries: tuple[MeshQuery, MeshQuery] | None = None
 
     def report(self) -> dict:
         """JSON-ready report: metrics, per-stage timings (s), solver trace."""
@@ -96,7 +98,7 @@ class RetargetResult:
 
     def as_previous(self) -> PreviousFrame:
         """What the next frame of a sequence starts from."""
-        return PreviousFrame(self.hair.points, self.base)
+        return PreviousFrame(self.hair.points, self.base, self.queries)
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,10 +111,13 @@ class PreviousFrame:
         Its result.
     base : (N, 3) float64
         Its :attr:`RetargetResult.base`.
+    queries : (MeshQuery, MeshQuery) or None
+        Its :attr:`RetargetResult.queries`: a frame of the same mesh moves them (:func:`target_bodies`).
     """
 
     points: np.ndarray
     base: np.ndarray
+    queries: tuple[MeshQuery, MeshQuery] | None = None
 
     def carried(self, base: np.ndarray) -> np.ndarray:
         """The previous result moved as the body moved: ``points + (base - self.base)`` (``base : (N, 3)``, this
@@ -292,7 +297,8 @@ def retarget(
     progress = progress or no_progress
     hair = adaptable.hair
     timings: dict[str, float] = {}
-    bodies = target_bodies(adaptable, target, options, timings, progress, collision_surface, wrapped)
+    bodies = target_bodies(adaptable, target, options, timings, progress, collision_surface, wrapped,
+                           previous.queries if previous is not None else None)
     target, contact, target_query, contact_query, body, wrapped = bodies
     with timed(timings, "initial_transfer"):
         progress("initial_transfer", 0.05, "initial transfer")
@@ -358,7 +364,7 @@ def retarget(
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped, crossings.starts(hair.segments, hair.n_particles), base,
+        wrapped, crossings.starts(hair.segments, hair.n_particles), base, (target_query, body),
     )
 
 
@@ -396,9 +402,11 @@ def final_check(points: np.ndarray, hair: Hair, body: MeshQuery, options: Retarg
 
 def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: RetargetOptions,
                   timings: dict[str, float], progress: ProgressFn, collision_surface: np.ndarray | None,
-                  wrapped: WrappedTarget | None) -> tuple:
+                  wrapped: WrappedTarget | None, moved_from: tuple[MeshQuery, MeshQuery] | None = None) -> tuple:
     """The two meshes a retarget uses: the one of the source's topology that gives the correspondence (the target
-    itself, or the source body wrapped onto it) and the one the hair touches (the target itself).
+    itself, or the source body wrapped onto it) and the one the hair touches (the target itself). ``moved_from``:
+    the shape's query and the collision query of an earlier frame of this mesh (:attr:`RetargetResult.queries`),
+    moved to this frame rather than built (:meth:`~hairport.solver.mesh.query.MeshQuery.moved`).
 
     Returns
     -------
@@ -423,10 +431,20 @@ def target_bodies(adaptable: AdaptableHairstyle, target: Character, options: Ret
     with timed(timings, "prepare"):
         progress("prepare", 0.02, "checking the target")
         target = prepare_target(adaptable, target)
-        target_query = MeshQuery(target.vertices, target.faces)
-        body = collision_query(contact.vertices, contact.faces, contact.name, separating=collision_surface)
+        shape_before, body_before = moved_from if moved_from is not None else (None, None)
+        target_query = shape_query(target, shape_before)
+        body = collision_query(contact.vertices, contact.faces, contact.name, separating=collision_surface,
+                               moved_from=body_before)
         contact_query = target_query if wrapped is None else MeshQuery(contact.vertices, contact.faces)
     return target, contact, target_query, contact_query, body, wrapped
+
+
+def shape_query(shape: Character, before: MeshQuery | None) -> MeshQuery:
+    """The query of ``shape``: ``before`` moved to its vertices when that is a plain query of its mesh, else new."""
+    if before is not None and before.inside_test is None and before.vertices.shape == shape.vertices.shape \
+            and np.array_equal(before.faces, shape.faces):
+        return before.moved(shape.vertices)
+    return MeshQuery(shape.vertices, shape.faces)
 
 
 def adapt_shape(

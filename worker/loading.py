@@ -15,6 +15,7 @@ from hairport.messages import safe_detail
 from hairport.records import ArtifactRecord, BlobRef, CharacterRecord, ErrorInfo, HairstyleRecord, JobRecord
 from hairport.repository import Repository
 from hairport.settings import Settings
+from hairport.solver import options as solver_options
 from hairport.storage import Blob
 
 #: error code of a job or preprocessing that needed more memory than ``Settings.memory_budget_bytes``
@@ -110,3 +111,17 @@ def job_inputs(repository: Repository, settings: Settings, job: JobRecord, artif
     return adaptable, target, target_input
 
 
+def explained(error: solver.InputError, mode: str, found: dict) -> solver.InputError:
+    """A job's refusal of its target in the API's terms: a ``topology_mismatch`` under ``options.wrap`` off says
+    that the default would have wrapped it; a ``wrap_failed`` names the axes the target was read in when they
+    were fitted (``found``: ``canonical_target``'s report), the likeliest cause. Other errors as they are."""
+    off, auto = solver_options.WRAP_MODES[2], solver_options.WRAP_MODES[0]
+    if error.code == "topology_mismatch" and mode == off:
+        return solver.InputError(f"{error.problem}; options.wrap {off} keeps to the source's topology (wrap {auto} "
+                                 "wraps the source body onto this target)", error.source, error.code)
+    if error.code == "wrap_failed" and found.get("axes_how") not in (None, "given"):
+        # first: a job's message is cut at MAX_DETAIL_CHARS
+        return solver.InputError(f"the target was read with up {found['up']} and front {found['front']} (fitted; "
+                                 f"give the character's up_axis and front_axis if those are wrong): {error.problem}",
+                                 error.source, error.code)
+    return error

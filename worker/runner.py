@@ -40,12 +40,11 @@ from hairport.records import (
 from hairport.repository import Repository
 from hairport.settings import Settings
 from hairport.solver import display, distributed, documents
-from hairport.solver import options as solver_options
 from hairport.storage import retention_seconds
 
 from . import bodies, sequences, wraps
 from .fine import FineDispatch, SpreadFineLevel
-from .loading import artifact_adaptable, error_info, job_inputs, job_options, read_source, stored
+from .loading import artifact_adaptable, error_info, explained, job_inputs, job_options, read_source, stored
 from .runs import TRANSIENT_ERRORS, Heartbeat, OwnRun, run_gone, start_run
 
 #: a running job writes its progress at most this often (s)
@@ -211,11 +210,8 @@ def run_retarget(repository: Repository, settings: Settings, job_id: str, worker
 def _sequence_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
                         progress: JobProgress, run: OwnRun) -> tuple[dict[str, BlobRef], dict, dict]:
     """A sequence job's frames solved and its outputs stored (:mod:`.sequences`): outputs, metrics, timings."""
-    adaptable = artifact_adaptable(repository, artifact)
-    try:
-        return sequences.solve_and_store(repository, settings, job, adaptable, progress, run.write)
-    except solver.InputError as error:
-        raise explained(error, job.options.get("wrap", solver_options.WRAP_MODES[0]), {}) from None
+    return sequences.solve_and_store(repository, settings, job, artifact_adaptable(repository, artifact), progress,
+                                     run.write)
 
 
 def _retarget_and_store(repository: Repository, settings: Settings, job: JobRecord, artifact: ArtifactRecord,
@@ -257,22 +253,6 @@ def _retarget_and_store(repository: Repository, settings: Settings, job: JobReco
         path = display.save_scene(work / "scene.npz", documents.display_scene(adaptable, result, target))
         outputs["scene"] = stored(storage.save_file(path, ".npz"), ".npz")
     return outputs, result.metrics, result.timings
-
-
-def explained(error: solver.InputError, mode: str, found: dict) -> solver.InputError:
-    """A job's refusal of its target in the API's terms: a ``topology_mismatch`` under ``options.wrap`` off says
-    that the default would have wrapped it; a ``wrap_failed`` names the axes the target was read in when they
-    were fitted (``found``: ``canonical_target``'s report), the likeliest cause. Other errors as they are."""
-    off, auto = solver_options.WRAP_MODES[2], solver_options.WRAP_MODES[0]
-    if error.code == "topology_mismatch" and mode == off:
-        return solver.InputError(f"{error.problem}; options.wrap {off} keeps to the source's topology (wrap {auto} "
-                                 "wraps the source body onto this target)", error.source, error.code)
-    if error.code == "wrap_failed" and found.get("axes_how") not in (None, "given"):
-        # first: a job's message is cut at MAX_DETAIL_CHARS
-        return solver.InputError(f"the target was read with up {found['up']} and front {found['front']} (fitted; "
-                                 f"give the character's up_axis and front_axis if those are wrong): {error.problem}",
-                                 error.source, error.code)
-    return error
 
 
 def _jsonable(document: dict) -> dict:

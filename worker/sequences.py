@@ -24,7 +24,7 @@ from hairport.solver import display, distributed, documents
 from hairport.solver import sequence as solver_sequence
 
 from . import bodies as body_cache
-from .loading import blob_path, job_options, limits, load_character, stored
+from .loading import blob_path, explained, job_options, limits, load_character, stored
 
 
 @dataclass
@@ -102,7 +102,7 @@ def solve_and_store(repository: Repository, settings: Settings, job: JobRecord, 
             adaptable, read.bodies, options, solver_sequence.SequenceOptions(plan.warm_start, plan.temporal),
             progress=progress, should_stop=progress.should_stop, frame_arguments=cached_surface,
             target_input=read.found, fine_runner=distributed.solve_here)
-        for number, result in enumerate(solved):
+        for number, result in _explained(solved, options.wrap, read.found):
             kept.put(number, result, read.bodies[number])
             if number == 0:
                 add_result(written, adaptable, result, read.bodies[0], {LOSSLESS_OUTPUT: files[LOSSLESS_OUTPUT]},
@@ -123,6 +123,15 @@ def solve_and_store(repository: Repository, settings: Settings, job: JobRecord, 
         written.commit()
         outputs = {name: stored(storage.save_file(path, path.suffix), path.suffix) for name, path in files.items()}
     return outputs, sequence_metrics(report), _summed_timings(records, cache_seconds)
+
+
+def _explained(solved, mode: str, found: dict):
+    """The numbered frames of ``solved``, a refusal of the target explained in the API's terms (:func:`.loading.explained`:
+    a wrap that failed names the axes frame 0 was read in)."""
+    try:
+        yield from enumerate(solved)
+    except solver.InputError as error:
+        raise explained(error, mode, found) from None
 
 
 def sequence_metrics(report: dict) -> dict:

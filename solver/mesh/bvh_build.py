@@ -92,6 +92,30 @@ def build_nodes(centroids, lower, upper, leaf_faces):
 
 
 @kernel
+def refit_boxes(child, first, count, lower, upper):
+    """The boxes ``(M, 6)`` of a built tree's nodes (``child``, ``first``, ``count`` as
+    :class:`.bvh.TriangleTree`'s) around triangles whose lower and upper corners in leaf order
+    are ``lower``, ``upper`` ``(F, 3)``: a leaf's around its triangles, an inner node's around
+    its two children. Children come after their parent (the build numbers them so), so one
+    pass from the last node to the first sees every child before its parent."""
+    boxes = np.empty((len(child), 6))
+    for node in range(len(child) - 1, -1, -1):
+        if child[node] < 0:
+            for k in range(3):
+                boxes[node, k], boxes[node, 3 + k] = np.inf, -np.inf
+            for i in range(first[node], first[node] + count[node]):
+                for k in range(3):
+                    boxes[node, k] = min(boxes[node, k], lower[i, k])
+                    boxes[node, 3 + k] = max(boxes[node, 3 + k], upper[i, k])
+        else:
+            left, right = child[node], child[node] + 1
+            for k in range(3):
+                boxes[node, k] = min(boxes[left, k], boxes[right, k])
+                boxes[node, 3 + k] = max(boxes[left, 3 + k], boxes[right, 3 + k])
+    return boxes
+
+
+@kernel
 def _select(centroids, order, start, stop, axis, middle):
     """Reorder ``order[start:stop]`` so that no centroid before ``middle`` lies above, and none
     after it below, the one at ``middle`` along ``axis`` (Hoare's selection)."""
@@ -189,4 +213,5 @@ def _warm() -> None:
     # a tetrahedron's four faces, one per leaf
     vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     corners = vertices[np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])]
-    build_nodes(corners.mean(axis=1), corners.min(axis=1), corners.max(axis=1), 1)
+    _, child, first, count, order = build_nodes(corners.mean(axis=1), corners.min(axis=1), corners.max(axis=1), 1)
+    refit_boxes(child, first, count, corners.min(axis=1)[order], corners.max(axis=1)[order])

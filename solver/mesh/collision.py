@@ -68,7 +68,7 @@ def collision_faces(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
 
 
 def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
-                    separating: np.ndarray | None = None) -> MeshQuery:
+                    separating: np.ndarray | None = None, moved_from: MeshQuery | None = None) -> MeshQuery:
     """The collision surface of a body and its inside test.
 
     Finding the separating faces takes a winding number beside each face (~0.15 s on the closed
@@ -84,6 +84,10 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
         The body's name, for the error.
     separating : (F,) bool, optional
         :func:`collision_faces` of this body, when kept from an earlier build (another process's).
+    moved_from : MeshQuery, optional
+        The collision query of this mesh at other vertices (a sequence's previous frame): where its surface is
+        the same faces, the new query is it moved (:meth:`~.query.MeshQuery.moved`: what depends on the faces
+        alone kept, the face search refit); the separating faces are found anew all the same.
 
     Returns
     -------
@@ -107,21 +111,32 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
         return cache[key]
     if separating is not None and np.shape(separating) != (len(faces),):
         raise ValueError(f"separating faces of shape {np.shape(separating)} for a body of {len(faces)} faces")
-    query = _build(vertices, faces, name, separating)
+    query = _build(vertices, faces, name, separating, moved_from)
     cache[key] = query
     while len(cache) > CACHED_BODIES:
         cache.popitem(last=False)
     return query
 
 
-def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None, separating: np.ndarray | None) -> MeshQuery:
+def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None, separating: np.ndarray | None,
+           moved_from: MeshQuery | None) -> MeshQuery:
     winding = WindingNumber(vertices, faces)
     if separating is None:
         separating = collision_faces(vertices, faces, name)
     separating = np.asarray(separating, dtype=bool)
     surface = faces[separating]
+    if _same_surface(moved_from, faces, surface):
+        # closedness and the manifold features depend on the faces alone
+        kept = moved_from.inside_test
+        return moved_from.moved(vertices, InsideTest(winding, closed=kept.closed, manifold=kept.manifold))
     if separating.all() and manifold_closed(faces) and shell_count(faces) == 1:
         inside = InsideTest(winding, closed=True)
     else:
         inside = InsideTest(winding, closed=closed_cycle(faces), manifold=manifold_features(surface))
     return MeshQuery(vertices, surface, inside=inside)
+
+
+def _same_surface(query: MeshQuery | None, faces: np.ndarray, surface: np.ndarray) -> bool:
+    """Whether ``query`` is a collision query of a body with these ``faces (F, 3)`` whose surface is ``surface``."""
+    return (query is not None and query.inside_test is not None
+            and np.array_equal(query.inside_test.winding.faces, faces) and np.array_equal(query.faces, surface))

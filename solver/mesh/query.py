@@ -151,6 +151,31 @@ class MeshQuery:
         self._exact_band = 0.0
         self._near_band = 0.0
         self._closed = None
+        self._edge_ids = None  # (F, 3) int64: each face's edges (opposite corners 0..2), numbered once per mesh
+        self._refit_from = None  # a face search over the same faces at other vertices, refit on first use
+
+    def moved(self, vertices: np.ndarray, inside: InsideTest | None = None) -> "MeshQuery":
+        """This mesh with its vertices moved (a frame of a sequence, the same faces): a query that gives what a new
+        one over ``vertices`` would, keeping what depends on the faces alone (edge numbering, closedness) and
+        refitting the compiled face search instead of building it (:meth:`.backends._CompiledFaces.moved`).
+
+        Parameters
+        ----------
+        vertices : (V, 3) float64
+            As many as this mesh's.
+        inside : InsideTest
+            The moved body's inside test: required when this query has one (a collision surface), refused when not.
+        """
+        vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        if vertices.shape != self.vertices.shape:
+            raise ValueError(f"{len(vertices)} vertices moved for a mesh of {len(self.vertices)}")
+        if (inside is None) != (self._inside is None):
+            raise ValueError("a moved collision surface needs its own inside test, a plain query none")
+        query = MeshQuery(vertices, self.faces, inside)
+        query._edge_ids = self._edge_ids
+        query._closed = self._closed if inside is None else None
+        query._refit_from = self._closest if hasattr(self._closest, "moved") else self._refit_from
+        return query
 
     def __getstate__(self):
         # the native BVHs do not pickle; they are rebuilt lazily after unpickling
@@ -158,18 +183,24 @@ class MeshQuery:
         state["_closest"] = None
         state["_rays"] = None
         state["_exact"] = None
+        state["_refit_from"] = None
         return state
 
     def _tables(self):
         if self._triangles is None:
             self._triangles = _triangle_table(self.vertices[self.faces])
-            self._pseudonormals = _pseudonormal_table(self.vertices, self.faces)
+            if self._edge_ids is None:
+                self._edge_ids = _edge_ids(self.faces, len(self.vertices))
+            self._pseudonormals = _pseudonormal_table(self.vertices, self.faces, self._edge_ids)
             self._face_normals = np.ascontiguousarray(self._pseudonormals[:, 0].T)
 
     def _prepare(self):
         if self._closest is None:
             self._tables()
-            self._closest = _closest_face_index(self.vertices, self.faces)
+            if self._refit_from is not None:
+                self._closest, self._refit_from = self._refit_from.moved(self.vertices, self.faces), None
+            else:
+                self._closest = _closest_face_index(self.vertices, self.faces)
             extent = np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)) if len(self.vertices) else 1.0
             self._exact_band = EXACT_BAND * extent
             self._near_band = NEAR_SURFACE * extent
@@ -448,8 +479,18 @@ def _closest_points_on_triangles(points: np.ndarray, triangles: np.ndarray) -> t
     return _closest_on_table(points, _triangle_table(triangles), np.arange(len(points)))
 
 
-def _pseudonormal_table(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Unit angle-weighted pseudonormals of every feature of every face.
+def _edge_ids(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(F, 3) int64: the undirected edge opposite each corner of each face, numbered from 0 (shared edges alike)."""
+    # edge k of a face is the one opposite corner k: (k + 1, k + 2)
+    edges = np.stack([faces[:, [1, 2]], faces[:, [2, 0]], faces[:, [0, 1]]], axis=1).reshape(-1, 2)
+    keys = edges.min(axis=1) * np.int64(n_vertices) + edges.max(axis=1)  # undirected edge key
+    _, ids = np.unique(keys, return_inverse=True)
+    return ids.reshape(-1, 3)
+
+
+def _pseudonormal_table(vertices: np.ndarray, faces: np.ndarray, edge_ids: np.ndarray | None = None) -> np.ndarray:
+    """Unit angle-weighted pseudonormals of every feature of every face (``edge_ids``: :func:`_edge_ids`, made
+    here when omitted).
 
     Returns
     -------
@@ -462,10 +503,7 @@ def _pseudonormal_table(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     face_normals = _normalized(cross)
 
-    # edge k of a face is the one opposite corner k: (k + 1, k + 2)
-    edges = np.stack([faces[:, [1, 2]], faces[:, [2, 0]], faces[:, [0, 1]]], axis=1).reshape(-1, 2)
-    keys = edges.min(axis=1) * np.int64(len(vertices)) + edges.max(axis=1)  # undirected edge key
-    _, edge_ids = np.unique(keys, return_inverse=True)
+    edge_ids = _edge_ids(faces, len(vertices)) if edge_ids is None else edge_ids
     edge_normals = _normalized(_sum_rows(edge_ids.reshape(-1), np.repeat(face_normals, 3, axis=0), edge_ids.max() + 1))
 
     angles = np.empty(faces.shape)

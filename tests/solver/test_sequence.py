@@ -57,6 +57,9 @@ def test_warm_frames_start_from_the_carried_result_and_cap_the_coarse_level(swee
     hair = sweep["adaptable"].hair
     for w, c in zip(sweep["warm"], sweep["cold"]):
         assert np.abs(w.hair.points[hair.roots] - c.hair.points[hair.roots]).max() < 1e-9
+    # the next frame's body query is the previous one's moved: its face search refit, not built
+    first, second = (result.queries[0]._closest._tree for result in sweep["warm"][:2])
+    assert second.child is first.child and not np.array_equal(second.boxes, first.boxes)
 
 
 def test_no_frame_pops(sweep):

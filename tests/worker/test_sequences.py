@@ -85,3 +85,20 @@ def test_the_metrics_keep_the_summary_and_each_frames_coherence():
     assert metrics["frames_detail"] == [
         {"time": 10.0, "penetrating_particles": 0},
         {"time": 11.0, "penetrating_particles": 0, "largest_jump_m": 0.002, "jump_bound_m": 0.003, "pops": False}]
+
+
+def test_a_failed_wrap_of_a_frame_names_the_axes_the_frames_were_read_in():
+    """A refusal from a frame's solve is explained as a single job's is (the axes that were fitted), once."""
+    found = {"axes_how": "fitted", "up": "+Z", "front": "-Y"}
+
+    def frames():
+        yield "frame 0"
+        raise solver.InputError("the source body could not be wrapped onto the target", "ball.obj", "wrap_failed")
+
+    got = []
+    with pytest.raises(solver.InputError) as error:
+        for number, frame in sequences._explained(frames(), "auto", found):
+            got.append((number, frame))
+    assert got == [(0, "frame 0")] and error.value.code == "wrap_failed" and error.value.source == "ball.obj"
+    assert error.value.problem.startswith("the target was read with up +Z and front -Y (fitted; give the character's")
+    assert error.value.problem.count("fitted") == 1 and error.value.problem.endswith("could not be wrapped onto the target")

@@ -149,3 +149,30 @@ def test_selection_puts_the_median_in_place(seed):
     np.testing.assert_array_equal(order[stop:], before[stop:])
     keys = centroids[order, 2]
     assert (keys[start:middle] <= keys[middle]).all() and (keys[middle + 1:stop] >= keys[middle]).all()
+
+
+def test_a_refit_tree_answers_as_a_fresh_build_on_the_moved_body(makehuman_body):
+    vertices, faces = makehuman_body
+    from hairport.solver.synthetic.makehuman import PRESETS, build_character
+
+    moved = build_character(PRESETS["heavy-male"]).vertices  # the same mesh, every vertex moved (up to ~15 cm)
+    assert np.linalg.norm(moved - vertices, axis=1).max() > 0.05
+    tree = bvh.build_tree(vertices, faces)
+    # unmoved, a refit gives back the built boxes and table; the compiled pass is its numpy reference
+    same = bvh.refit_tree(tree, vertices, faces)
+    np.testing.assert_array_equal(same.boxes, tree.boxes)
+    np.testing.assert_array_equal(same.table, tree.table)
+    refit = bvh.refit_tree(tree, moved, faces)
+    corners = moved[faces[tree.faces]]
+    np.testing.assert_array_equal(
+        refit.boxes, bvh._refit_boxes_reference(tree.child, tree.first, tree.count, corners.min(axis=1),
+                                                corners.max(axis=1)))
+    assert refit.built_area == tree.built_area == bvh.node_area(tree.boxes) > 0
+    rng = np.random.default_rng(2)
+    points = moved[rng.integers(0, len(moved), 20000)] + rng.normal(size=(20000, 3)) * 0.01
+    _, closest, _, squared = bvh.closest_points(refit, points)
+    _, reference_closest, _, reference = bvh.closest_points(bvh.build_tree(moved, faces), points)
+    np.testing.assert_allclose(squared, reference, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(closest, reference_closest, rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="refit"):
+        bvh.refit_tree(tree, moved, faces[:-1])

@@ -138,3 +138,43 @@ def test_a_kept_collision_surface_gives_the_same_query():
     with pytest.raises(InputError) as error:
         collision_faces(outer, outer_faces[:, ::-1], "inverted")
     assert error.value.code == "no_inside"
+
+
+def test_a_moved_frame_keeps_the_surface_it_can_and_answers_as_a_new_build():
+    """A frame of a sequence (the same mesh, its vertices moved) moves the previous frame's collision query: the
+    same distances, signs and surface as a query built on the frame alone, with the face search refit (its nodes
+    shared); where the motion changes which faces separate, the query is built anew."""
+    outer, outer_faces = icosphere(radius=0.1)
+    faces = np.vstack([outer_faces, outer_faces + len(outer)])
+    apart = np.vstack([outer, outer + [0.3, 0.0, 0.0]])
+    closer = np.vstack([outer, outer + [0.25, 0.0, 0.0]])  # still apart: every face separates
+    overlapping = np.vstack([outer, outer + [0.1, 0.0, 0.0]])  # a quarter of each sphere inside the other
+    points = np.random.default_rng(3).uniform(-0.15, 0.4, size=(3000, 3))
+    first = collision_query(apart, faces)
+    first.signed_distance(points[:1])  # its face search built
+    moved = collision_query(closer, faces, moved_from=first)
+    fresh = _in_another_thread(lambda: collision_query(closer, faces))
+    np.testing.assert_array_equal(moved.faces, fresh.faces)
+    np.testing.assert_allclose(moved.signed_distance(points).distance, fresh.signed_distance(points).distance,
+                               rtol=0, atol=1e-15)
+    assert moved._closest._tree.child is first._closest._tree.child  # refit, not built
+    np.testing.assert_array_equal(moved.inside(points), WindingNumber(closer, faces).inside(points))
+    assert moved.inside_test.winding.vertices is not first.inside_test.winding.vertices
+    changed = collision_query(overlapping, faces, moved_from=moved)
+    assert len(changed.faces) < len(faces) and changed.inside_test.manifold is not None
+    np.testing.assert_array_equal(changed.inside(points), WindingNumber(overlapping, faces).inside(points))
+    with pytest.raises(ValueError, match="moved"):
+        first.moved(closer[:-1], first.inside_test)
+    with pytest.raises(ValueError, match="inside test"):
+        first.moved(closer)
+    with pytest.raises(ValueError, match="inside test"):
+        MeshQuery(apart, faces).moved(closer, first.inside_test)
+
+
+def _in_another_thread(build):
+    """What ``build()`` returns in a thread of its own (an empty per-thread cache of bodies)."""
+    out = []
+    thread = threading.Thread(target=lambda: out.append(build()))
+    thread.start()
+    thread.join()
+    return out[0]

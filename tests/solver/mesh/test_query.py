@@ -301,3 +301,25 @@ def test_closest_point_regions_against_brute_force():
         assert np.abs(bary[on_edge, k]).max(initial=0) < 1e-6
         at_corner = feature == 4 + k
         np.testing.assert_allclose(closest[at_corner], triangles[at_corner, k])
+
+
+def test_a_moved_query_answers_as_one_built_on_the_moved_vertices():
+    vertices, faces, _ = dented_box()
+    before = MeshQuery(vertices, faces)
+    rng = np.random.default_rng(4)
+    points = rng.uniform(-1.5, 1.5, size=(4000, 3))
+    before.signed_distance(points[:1])
+    # a smooth motion of every vertex: stretched along x, bent in y
+    moved_vertices = vertices * [1.3, 1.0, 0.9] + [0.0, 0.1, 0.0] * vertices[:, :1] ** 2
+    moved = before.moved(moved_vertices)
+    fresh = MeshQuery(moved_vertices, faces)
+    got, expected = moved.signed_distance(points), fresh.signed_distance(points)
+    np.testing.assert_allclose(got.distance, expected.distance, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(got.normal, expected.normal, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(moved._edge_ids, before._edge_ids)
+    assert moved.closed == fresh.closed
+    # a query moved before its own search was built moves the one it came from, once more
+    again = moved.moved(vertices)
+    np.testing.assert_allclose(again.signed_distance(points).distance, before.signed_distance(points).distance,
+                               rtol=0, atol=1e-14)
+    assert pickle.loads(pickle.dumps(moved))._refit_from is None
