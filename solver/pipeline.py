@@ -63,6 +63,9 @@ GRID_REGION_MARGIN = 0.05
 #: at 10^5 particles (docs/performance.md, "Sequences"), 2 halves a frame's time against the uncapped loop, at 0.1 mm
 #: (mean) more from a cold retarget by the last frame and no popping
 WARM_COARSE_ITERATIONS = 2
+#: a warm frame's distance grid is exact only within this (m) of its first iterate (the previous frame's result
+#: carried), where its particles stay (:meth:`~hairport.solver.mesh.distance_grid.DistanceGrid.build`'s ``near``)
+WARM_GRID_REACH = 0.01
 
 
 @dataclass(eq=False)
@@ -493,7 +496,8 @@ def adapt_shape(
         )
     progress("solve", 0.1, f"shape adaptation (multi-scale, {len(adaptable.multiscale.guides)} guides)")
     with timed(timings, "distance_grid"):
-        grid = DistanceGrid.build(target_query, region=grid_region(initial))
+        grid = DistanceGrid.build(target_query, region=grid_region(initial), near=start if warm else None,
+                                  reach=WARM_GRID_REACH)
     points, report = solve_multiscale(
         hair, adaptable.multiscale, adaptable.coarse_model, adaptable.fine_source, initial, target_query,
         weights, solve_options, gamma=gamma, start=start, workers=options.workers or 1,

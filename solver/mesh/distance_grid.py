@@ -143,6 +143,8 @@ class DistanceGrid:
         max_nodes: int = MAX_GRID_NODES,
         exact_band: float = DEFAULT_EXACT_BAND,
         region: tuple[np.ndarray, np.ndarray] | None = None,
+        near: np.ndarray | None = None,
+        reach: float = math.inf,
     ) -> "DistanceGrid":
         """Grid over ``query``'s mesh: its vertices' bounding box grown by ``margin`` on every side.
 
@@ -168,6 +170,11 @@ class DistanceGrid:
             certified lower bound of the right sign (coarse-to-fine build, far cheaper);
             ``inf`` queries every node exactly. :func:`near_mask` with ``band <= exact_band
             - spacing * sqrt(3)`` gives the same answer as on the fully exact grid.
+        near : (P, 3) float64, optional
+            With ``reach``: only the nodes within ``reach`` (m) of these points (a solve's first iterate, when its
+            particles will not go far) are queried; the other nodes keep their coarser level's certified bound, so
+            a point far from them is sent to the exact query more often, never answered wrongly. Every node
+            within ``exact_band`` and ``reach`` is exact (:meth:`lower_bound` as on the full grid there).
         """
         spacing, margin, exact_band = float(spacing), float(margin), float(exact_band)
         if not (math.isfinite(spacing) and spacing > 0):
@@ -195,7 +202,13 @@ class DistanceGrid:
                 # there; every point outside it is checked exactly
                 hi = np.maximum(hi, lo + 2 * spacing)
         spacing, shape = _fit_spacing(lo, hi, spacing, max_nodes)
-        values = _node_values(query, lo, spacing, shape, exact_band)
+        if near is not None:
+            near = np.asarray(near, dtype=np.float64).reshape(-1, 3)
+            near = near[np.isfinite(near).all(axis=1)]
+            reach = float(reach)
+            if not reach >= 0:
+                raise ValueError(f"reach must be >= 0, got {reach}")
+        values = _node_values(query, lo, spacing, shape, exact_band, near if math.isfinite(reach) else None, reach)
         return cls(lo, spacing, values, exact_band, covers_mesh, query.closed)
 
     def lower_bound(self, points: np.ndarray) -> np.ndarray:
@@ -329,25 +342,48 @@ def _exact_values(query: MeshQuery, origin, spacing, shape, flat: np.ndarray) ->
     return out
 
 
-def _node_values(query: MeshQuery, origin, spacing, shape, exact_band) -> np.ndarray:
-    """(nx, ny, nz) node values, exact within ``exact_band``, else certified lower bounds.
+def _node_values(query: MeshQuery, origin, spacing, shape, exact_band, near: np.ndarray | None = None,
+                 reach: float = math.inf) -> np.ndarray:
+    """(nx, ny, nz) node values, exact within ``exact_band`` (and within ``reach`` of the points ``near``
+    ``(P, 3)`` when given), else certified lower bounds.
 
     Coarse to fine: the grid with twice the spacing (nodes at the even indices, covering at
     least this box) gives every node here a lower bound and, where that is positive, a
     certain sign (:func:`_refine`); only nodes whose bound is below ``exact_band`` are
-    queried. The coarser grid is built with a band larger by its cell diagonal, so that its
-    own truncated nodes do not force extra queries here.
+    queried. The coarser grid is built with a band, and a reach, larger by its cell diagonal,
+    so that its own truncated nodes do not force extra queries here.
     """
     n = math.prod(shape)
     if n <= COARSEST_NODES or not math.isfinite(exact_band):
         return _exact_values(query, origin, spacing, shape, np.arange(n)).reshape(shape)
     coarse_shape = tuple(s // 2 + 1 for s in shape)
-    coarse = _node_values(query, origin, 2.0 * spacing, coarse_shape, exact_band + 2.0 * spacing * _SQRT3)
+    widen = 2.0 * spacing * _SQRT3
+    coarse = _node_values(query, origin, 2.0 * spacing, coarse_shape, exact_band + widen, near, reach + widen)
     values = _refine(coarse, spacing, shape)
     flat = values.reshape(-1)
-    todo = np.flatnonzero(np.abs(flat) < exact_band)
+    wanted = np.abs(flat) < exact_band
+    if near is not None:
+        wanted &= _nodes_near(origin, spacing, shape, near, reach).reshape(-1)
+    todo = np.flatnonzero(wanted)
     flat[todo] = _exact_values(query, origin, spacing, shape, todo)
     return values
+
+
+def _nodes_near(origin: np.ndarray, spacing: float, shape: tuple[int, int, int], points: np.ndarray,
+                reach: float) -> np.ndarray:
+    """``(nx, ny, nz) bool``: every node within ``reach`` (m) of a point ``(P, 3)`` (and some up to a cell
+    diagonal farther): the corners of each point's cell, grown by ``ceil(reach / spacing)`` nodes along each axis
+    (a point outside the box marks the cell it is nearest to)."""
+    from scipy.ndimage import maximum_filter
+
+    top = np.array(shape, dtype=np.int64) - 1
+    cells = np.clip(np.floor((points - origin) * (1.0 / spacing)), 0, top).astype(np.int64)
+    marked = np.zeros(shape, dtype=np.uint8)
+    marked.reshape(-1)[(cells[:, 0] * shape[1] + cells[:, 1]) * shape[2] + cells[:, 2]] = 1
+    # node n is near when a marked cell c has n - 1 - grow <= c <= n + grow: an even window, which scipy
+    # places at [n - size // 2, n + size // 2 - 1]
+    grow = int(math.ceil(reach / spacing))
+    return maximum_filter(marked, size=2 * grow + 2, mode="constant").astype(bool)
 
 
 def _refine(coarse: np.ndarray, spacing: float, shape: tuple[int, int, int]) -> np.ndarray:

@@ -3,6 +3,8 @@ no popping; the temporal term is Eq. 11 split between two anchors; the coherence
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -153,3 +155,15 @@ def test_a_temporal_term_for_a_baseline_is_refused():
         next(sequence.retarget_sequence(adaptable, [one, one], solver.RetargetOptions(method="root-translate"),
                                         SequenceOptions(temporal=1e4)))
     assert caught.value.code == "bad_option" and "root-translate" in caught.value.problem
+
+
+def test_a_warm_frames_grid_near_its_start_changes_nothing_of_the_result(sweep, monkeypatch):
+    """Warm frames query their distance grid's nodes only near the carried start (pipeline.WARM_GRID_REACH): the
+    other nodes' bounds only send more particles to the exact query, so the frames are the full grid's."""
+    from hairport.solver import pipeline
+
+    assert math.isfinite(pipeline.WARM_GRID_REACH)
+    monkeypatch.setattr(pipeline, "WARM_GRID_REACH", math.inf)
+    full = list(sequence.retarget_sequence(sweep["adaptable"], sweep["frames"]))
+    for restricted, everywhere in zip(sweep["warm"], full):
+        assert np.abs(restricted.hair.points - everywhere.hair.points).max() < 1e-9

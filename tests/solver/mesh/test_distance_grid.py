@@ -315,3 +315,40 @@ def test_region_grid_bounds_inside_and_defers_outside():
     assert np.all(exact[inside_box] - bound[inside_box] <= 5e-3 * np.sqrt(3) + 1e-12)
     whole = DistanceGrid.build(query, spacing=5e-3, region=(np.full(3, -1.0), np.full(3, 1.0)))
     assert whole.covers_mesh
+
+
+def test_a_grid_near_some_points_is_exact_there_and_certified_everywhere(sphere_query, banded_grid, samples):
+    """``near`` and ``reach``: the nodes within reach of the points are the banded grid's exact ones; the others
+    keep certified bounds, so every bound and sign still holds, and points near the given ones are told apart as on
+    the full grid."""
+    rng = np.random.default_rng(5)
+    cap = rng.normal(size=(3000, 3))
+    cap = cap[cap[:, 2] > 0.5 * np.linalg.norm(cap, axis=1)]  # a cap of the sphere, hair on a scalp
+    near = cap / np.linalg.norm(cap, axis=1, keepdims=True) * (RADIUS + rng.uniform(0.0, 0.01, size=(len(cap), 1)))
+    grid = DistanceGrid.build(sphere_query, spacing=SPACING, near=near, reach=0.01)
+    i, j, k = np.meshgrid(*[np.arange(n) for n in grid.shape], indexing="ij")
+    nodes = grid.origin + SPACING * np.stack([i, j, k], axis=-1).reshape(-1, 3)
+    exact = sphere_query.signed_distance(nodes).distance
+    values, full = grid.values.reshape(-1), banded_grid.values.reshape(-1)
+    from scipy.spatial import cKDTree
+
+    to_near = cKDTree(near).query(nodes)[0]
+    within = (np.abs(exact) < grid.exact_band) & (to_near <= 0.01)
+    assert within.sum() > 2000
+    np.testing.assert_array_equal(values[within], exact[within])
+    skipped = (np.abs(exact) < grid.exact_band) & (values != exact)
+    assert skipped.sum() > 5000 and to_near[skipped].min() > 0.01  # the far side was not queried
+    assert np.all(np.abs(values) <= np.abs(exact) + TOL)
+    certain = values != 0
+    np.testing.assert_array_equal(np.sign(values[certain]), np.sign(exact[certain]))
+    # points within the reach: the same bounds as on the banded grid; every point: a bound and a sign that hold
+    points, truth = samples
+    close = cKDTree(near).query(points)[0] < 0.005
+    assert close.sum() > 100
+    np.testing.assert_array_equal(grid.lower_bound(points[close]), banded_grid.lower_bound(points[close]))
+    bound, sign = grid.bound_and_sign(points)
+    assert np.all(bound <= np.abs(truth) + TOL)
+    assert np.all((sign == 0) | (sign == np.sign(truth)))
+    assert not np.array_equal(full, values)
+    with pytest.raises(ValueError, match="reach"):
+        DistanceGrid.build(sphere_query, near=near, reach=-1.0)
