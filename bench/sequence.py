@@ -10,6 +10,9 @@ vertex step is printed. For each groom size (a "long" groom, as ``bench/table4.p
   between the two results of that frame;
 * per frame: particles inside the body, and the coherence figures (the largest particle jump from the previous
   frame against twice the body's largest motion near the hair plus 1 mm);
+* ``--remesh V``: the sweep on another mesh than the groom's source (remeshed to about ``V`` vertices, one mesh
+  for every frame): the first frame wrapped, the later ones carrying its wrap; each cold retarget wraps its frame
+  itself, and both are also compared with a retarget onto the sweep's own frame (the exact correspondence);
 * ``--spacing W``: the spacing term's weight, for the warm frames and the cold retargets alike (by default a
   sequence's own, ``solver.options.SEQUENCE_SPACING``; 0 is Eq. 1);
 * with ``--tight``, the last frame also retargeted cold at a tenth of the energy and step tolerances: the mean
@@ -21,6 +24,7 @@ the first, which is the source's own body) and the cold retargets'; their ratio 
 names (at most 0.25).
 
     python bench/sequence.py [--sizes 1e5 1e6] [--steps 24] [--cold-every 4] [--temporal 0] [--spacing 3] [--tight]
+                             [--remesh 20000]
 
 Prints a table; not a test. Times are wall-clock seconds on this machine.
 """
@@ -54,16 +58,34 @@ def sweep(steps: int):
 TIGHT_FACTOR = 0.1
 
 
+def remeshed_sweep(bodies: list, vertices: int) -> list:
+    """The sweep on another mesh: frame 0 remeshed to about ``vertices`` vertices, each of them carried through the
+    sweep at its place on the sweep's own faces (so the frames are one mesh, and the sweep's own frames give the
+    exact correspondence)."""
+    from hairport.solver.mesh.query import MeshQuery
+    from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
+    from hairport.solver.model.character import Character
+    from hairport.solver.synthetic.remesh import remeshed_character
+
+    first = bodies[0]
+    remeshed = remeshed_character(first, vertices, seed=0)
+    on_first = MeshQuery(first.vertices, first.faces).signed_distance(remeshed.vertices)
+    weights = barycentric_coordinates(on_first.closest, first.vertices[first.faces[on_first.faces]])
+    return [Character(interpolate_barycentric(body.vertices, body.faces, on_first.faces, weights), remeshed.faces,
+                      name=f"{body.name} remeshed") for body in bodies]
+
+
 def measure(particles: int, steps: int, cold_every: int, temporal: float, tight: bool = False,
-            spacing: float = 0.0) -> dict:
+            spacing: float = 0.0, remesh: int | None = None) -> dict:
     """In this process: the sequence and the cold retargets of one groom size."""
     from hairport import solver
     from hairport.solver import kernels, sequence
     from hairport.solver.synthetic.groom import generate_groom
 
     kernels.warm_up()
-    bodies = sweep(steps)
-    adaptable = solver.preprocess(bodies[0], generate_groom(bodies[0], STYLE, *groom_shape(particles), seed=0))
+    own = sweep(steps)
+    bodies = own if remesh is None else remeshed_sweep(own, remesh)
+    adaptable = solver.preprocess(own[0], generate_groom(own[0], STYLE, *groom_shape(particles), seed=0))
     solver.retarget(adaptable, bodies[1])  # the first retarget of an artifact builds what it keeps
     frames, last_cold = [], None
     options = solver.RetargetOptions(spacing=spacing)  # the warm frames' and the cold retargets' alike
@@ -78,6 +100,10 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float, tight:
             cold = solver.retarget(adaptable, bodies[number], options)
             row["cold_seconds"] = time.perf_counter() - began
             row["mean_to_cold_m"] = float(np.linalg.norm(result.hair.points - cold.hair.points, axis=1).mean())
+            if remesh is not None:  # both against the sweep's own mesh, where no wrap is needed
+                exact = solver.retarget(adaptable, own[number], options).hair.points
+                row["warm_to_own_m"] = float(np.linalg.norm(result.hair.points - exact, axis=1).mean())
+                row["cold_to_own_m"] = float(np.linalg.norm(cold.hair.points - exact, axis=1).mean())
             row["cold_inside"] = int(cold.metrics["penetrating_particles"])
             last_cold = cold if number == steps else None
         frames.append(row)
@@ -126,6 +152,11 @@ def table(result: dict) -> str:
                  f"retargets: median {statistics.median(cold):.2f} s; ratio {statistics.median(later) / statistics.median(cold):.2f}; "
                  f"mean distance to cold at most {1e3 * max(to_cold):.3f} mm; inside at most "
                  f"{max(row['inside'] for row in frames)}; frames that pop {pops}")
+    own = [row for row in frames if "warm_to_own_m" in row]
+    if own:
+        lines.append("against a retarget onto the sweep's own mesh (no wrap), mean mm, warm (wrap carried) / cold "
+                     "(its own wrap): " + ", ".join(f"frame {row['frame']} {1e3 * row['warm_to_own_m']:.3f} / "
+                                                    f"{1e3 * row['cold_to_own_m']:.3f}" for row in own))
     if result.get("tight"):
         lines.append(f"last frame against a cold retarget at {TIGHT_FACTOR:g}x the tolerances: the default cold "
                      f"{1e3 * result['tight']['cold_to_tight_m']:.3f} mm, the warm frame "
@@ -143,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tight", action="store_true", help="also retarget the last frame cold at tighter tolerances")
     parser.add_argument("--spacing", type=float, default=None, help="the spacing term's weight, warm and cold alike "
                                                                      "(default: a sequence's)")
+    parser.add_argument("--remesh", type=int, help="the sweep on another mesh of about this many vertices (wrapped)")
     parser.add_argument("--one", type=float, help=argparse.SUPPRESS)  # the child: one size, JSON out
     args = parser.parse_args(argv)
     if args.spacing is None:
@@ -150,13 +182,15 @@ def main(argv: list[str] | None = None) -> int:
 
         args.spacing = SEQUENCE_SPACING
     if args.one is not None:
-        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal, args.tight, args.spacing)))
+        print(json.dumps(measure(int(args.one), args.steps, args.cold_every, args.temporal, args.tight, args.spacing,
+                                 args.remesh)))
         return 0
     print(f"# {_machine()}; temporal {args.temporal:g}, spacing {args.spacing:g}")
     for size in args.sizes:
         child = subprocess.run([sys.executable, __file__, "--one", str(size), "--steps", str(args.steps),
                                 "--cold-every", str(args.cold_every), "--temporal", str(args.temporal),
-                                "--spacing", str(args.spacing), *(["--tight"] if args.tight else [])],
+                                "--spacing", str(args.spacing), *(["--tight"] if args.tight else []),
+                                *(["--remesh", str(args.remesh)] if args.remesh else [])],
                                check=True, capture_output=True, text=True)
         print(table(json.loads(child.stdout.strip().splitlines()[-1])), flush=True)
     return 0

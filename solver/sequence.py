@@ -9,6 +9,10 @@ frame than a cold retarget and lands in the same valley from frame to frame. The
 temporal term (:class:`~hairport.solver.options.SequenceOptions`) also anchors each particle to
 that moved result, for sequences that must not flicker.
 
+Frames of another topology than the source's are wrapped once, on the first frame; the later frames carry that
+wrap on their surface (:class:`~hairport.solver.wrapping.EmbeddedWrap`): one correspondence for the whole sequence,
+and no wrap's seconds per frame.
+
 Coherence, per frame after the first: the largest particle jump from the previous frame, beside
 the body's largest motion near the hair (vertices in the cells of :data:`NEAR_HAIR_M` that hold
 hair or touch one that does). A frame whose jump exceeds ``JUMP_MOTION_FACTOR`` times that motion
@@ -51,6 +55,7 @@ from hairport.solver.model.progress import ProgressFn, no_progress, rescaled
 from hairport.solver.options import SOLVER_METHODS, RetargetOptions
 from hairport.solver.options import SequenceOptions as SequenceOptions
 from hairport.solver.pipeline import RetargetResult, retarget
+from hairport.solver.wrapping import EmbeddedWrap
 
 #: the cell size of "near the hair" (m): a vertex within this of a particle is near it (and some up to
 #: twice the cells' diagonal away)
@@ -121,13 +126,18 @@ def retarget_sequence(
     require_one_topology(frames)
     progress = progress or no_progress
     previous: RetargetResult | None = None
+    wrap: EmbeddedWrap | None = None
     for number, body in enumerate(frames):
         frame_progress = _numbered(rescaled(progress, number / len(frames), (number + 1) / len(frames)), number)
         carry = previous.as_previous() if previous is not None and sequence.warm else None
         began = time.perf_counter()
         own = frame_arguments(number, body) if frame_arguments is not None else {}
+        if wrap is not None:
+            own = {**own, "wrapped": wrap.on(body)}
         result = retarget(adaptable, body, options, progress=frame_progress, should_stop=should_stop,
                           previous=carry, temporal=sequence.temporal, **retarget_arguments, **own)
+        if number == 0 and result.wrapped is not None:
+            wrap = EmbeddedWrap.of(result.wrapped, body)
         if previous is not None:
             result.metrics["coherence"] = frame_coherence(previous.hair.points, result.hair.points,
                                                           frames[number - 1].vertices, body.vertices)

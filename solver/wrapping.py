@@ -22,6 +22,7 @@ import numpy as np
 from hairport.solver.adaptable import AdaptableHairstyle
 from hairport.solver.mesh.collision import body_key
 from hairport.solver.mesh.query import MeshQuery
+from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
 from hairport.solver.model.character import Character
 from hairport.solver.model.degenerate import strand_lengths
 from hairport.solver.model.errors import InputError
@@ -198,3 +199,65 @@ def onto_body(hair: Hair, points: np.ndarray, roots: np.ndarray, body: MeshQuery
     """
     landed = body.signed_distance(roots).closest
     return points + np.repeat(landed - roots, hair.counts, axis=0), landed
+
+
+@dataclass(frozen=True, eq=False)
+class EmbeddedWrap:
+    """A wrap held on its target's surface, to be carried to the same mesh in another shape (a later frame of a
+    sequence): each wrapped vertex as the face of the target it is closest to, its barycentric coordinates there,
+    and its offset from that point in the face's own axes (:func:`face_axes`).
+
+    Attributes
+    ----------
+    wrapped : WrappedTarget
+        The wrap it was taken from.
+    faces : (W,) int64
+    barycentric : (W, 3) float64
+    offsets : (W, 3) float64
+        Along the face's first edge, across it and along its normal (m).
+    """
+
+    wrapped: WrappedTarget
+    faces: np.ndarray
+    barycentric: np.ndarray
+    offsets: np.ndarray
+
+    @classmethod
+    def of(cls, wrapped: WrappedTarget, target: Character) -> "EmbeddedWrap":
+        """``wrapped`` (a wrap onto ``target``) held on ``target``'s surface."""
+        vertices = wrapped.shape.vertices
+        closest = MeshQuery(target.vertices, target.faces).signed_distance(vertices)
+        axes = face_axes(target.vertices, target.faces[closest.faces])
+        offsets = np.einsum("nij,nj->ni", axes, vertices - closest.closest)
+        barycentric = barycentric_coordinates(closest.closest, target.vertices[target.faces[closest.faces]])
+        return cls(wrapped, closest.faces, barycentric, offsets)
+
+    def on(self, target: Character) -> WrappedTarget:
+        """The wrap carried to ``target`` (the mesh it was taken on, in another shape): every vertex at its place on
+        the moved surface, at its offset in the moved faces' axes. Keyed by the wrap's key and the new shape; its
+        report is the wrap's, with ``carried`` true."""
+        on_surface = interpolate_barycentric(target.vertices, target.faces, self.faces, self.barycentric)
+        axes = face_axes(target.vertices, target.faces[self.faces])
+        vertices = on_surface + np.einsum("nij,ni->nj", axes, self.offsets)
+        shape = Character(vertices, self.wrapped.shape.faces, name=f"{target.name or 'target'} (wrap carried)")
+        key = hashlib.blake2b(f"{self.wrapped.key}|{body_key(target.vertices, target.faces)}".encode(),
+                              digest_size=16).hexdigest()
+        return WrappedTarget(shape, key, {**self.wrapped.report, "carried": True})
+
+
+def face_axes(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """``(K, 3, 3)`` orthonormal rows per face ``corners (K, 3) int64`` of ``vertices (V, 3)``: its first edge's
+    direction, the in-plane direction across it, its normal (for a face of no area, some orthonormal rows)."""
+    a, b, c = (vertices[corners[:, k]] for k in range(3))
+    normal = _unit(np.cross(b - a, c - a), np.array([0.0, 0.0, 1.0]))
+    along = b - a - np.einsum("ij,ij->i", b - a, normal)[:, None] * normal
+    least = np.eye(3)[np.argmin(np.abs(normal), axis=1)]  # the axis farthest from the normal
+    edge = _unit(along, None, fallback_rows=_unit(np.cross(normal, least), np.array([1.0, 0.0, 0.0])))
+    return np.stack([edge, np.cross(normal, edge), normal], axis=1)
+
+
+def _unit(vectors: np.ndarray, fallback: np.ndarray | None, fallback_rows: np.ndarray | None = None) -> np.ndarray:
+    """Rows of ``vectors (K, 3)`` made unit; a zero row becomes ``fallback (3,)`` or its row of ``fallback_rows``."""
+    length = np.linalg.norm(vectors, axis=1, keepdims=True)
+    unit = vectors / np.where(length > 0, length, 1.0)
+    return np.where(length > 0, unit, fallback if fallback_rows is None else fallback_rows)

@@ -167,3 +167,31 @@ def test_a_warm_frames_grid_near_its_start_changes_nothing_of_the_result(sweep, 
     full = list(sequence.retarget_sequence(sweep["adaptable"], sweep["frames"]))
     for restricted, everywhere in zip(sweep["warm"], full):
         assert np.abs(restricted.hair.points - everywhere.hair.points).max() < 1e-9
+
+
+def test_frames_of_another_topology_are_wrapped_once_and_carry_the_wrap(sweep):
+    """The toy sweep remeshed (one mesh for every frame, not the source's): frame 0 is wrapped, the later frames
+    carry its wrap on their surface (no wrap of their own), with nothing inside. Each lands where a cold retarget
+    onto the sweep's own frame (the source's mesh: no wrap, the exact correspondence) does, within 0.5 mm (a wrap
+    of each frame on its own slides along the growing body: 2-4 mm off by frame 2)."""
+    from hairport.solver.mesh.query import MeshQuery
+    from hairport.solver.mesh.triangles import barycentric_coordinates, interpolate_barycentric
+    from hairport.solver.synthetic.remesh import remeshed_character
+    from hairport.solver.wrapping import EmbeddedWrap
+
+    frames, adaptable = sweep["frames"], sweep["adaptable"]
+    remeshed = remeshed_character(frames[0], 3000, seed=1)
+    on_first = MeshQuery(frames[0].vertices, frames[0].faces).signed_distance(remeshed.vertices)
+    weights = barycentric_coordinates(on_first.closest, frames[0].vertices[frames[0].faces[on_first.faces]])
+    bodies = [Character(interpolate_barycentric(frame.vertices, frame.faces, on_first.faces, weights), remeshed.faces,
+                        name=f"remeshed {number}") for number, frame in enumerate(frames[:3])]
+    results = list(sequence.retarget_sequence(adaptable, bodies))
+    assert "wrap" in results[0].timings and not results[0].wrapped.report.get("carried")
+    held = EmbeddedWrap.of(results[0].wrapped, bodies[0])
+    np.testing.assert_allclose(held.on(bodies[0]).shape.vertices, results[0].wrapped.shape.vertices, rtol=0, atol=1e-12)
+    for number, result in enumerate(results[1:], start=1):
+        assert "wrap" not in result.timings and result.wrapped.report["carried"] is True
+        assert result.metrics["penetrating_particles"] == 0 and result.metrics["crossing_segments"]["count"] == 0
+        mean = np.linalg.norm(result.hair.points - sweep["cold"][number].hair.points, axis=1).mean()
+        assert mean < 5e-4, (number, mean)
+    assert results[1].wrapped.key != results[2].wrapped.key != results[0].wrapped.key
