@@ -71,7 +71,7 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
                     separating: np.ndarray | None = None, moved_from: MeshQuery | None = None) -> MeshQuery:
     """The collision surface of a body and its inside test.
 
-    Finding the separating faces takes a winding number beside each face (~0.15 s on the closed
+    Finding the separating faces takes a winding number beside each face (~0.1 s on the closed
     27k-face MakeHuman body, two per face on an open body): the last :data:`CACHED_BODIES` bodies' queries are kept,
     by content, and shared within a thread.
 
