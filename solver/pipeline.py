@@ -89,7 +89,8 @@ class RetargetResult:
     #: (N, 3) the first iterate this target gives without an earlier frame: the initial transfer, or the hairline
     #: edit's start (what :class:`PreviousFrame` measures the body's motion against)
     base: np.ndarray | None = None
-    #: the target's query and its collision query (what a sequence's next frame moves instead of building)
+    #: the target's query and its collision query, kept (``retarget(keep_queries=True)``) for a sequence's next frame
+    #: to move instead of building; the sequence lets go of them once that frame has them
     queries: tuple[MeshQuery, MeshQuery] | None = None
 
     def report(self) -> dict:
@@ -263,6 +264,7 @@ def retarget(
     wrapped: WrappedTarget | None = None,
     previous: PreviousFrame | None = None,
     temporal: float = 0.0,
+    keep_queries: bool = False,
 ) -> RetargetResult:
     """Adapt the hairstyle to ``target``.
 
@@ -295,6 +297,9 @@ def retarget(
     temporal : float
         With ``previous``: the weight (per m^2, as Eq. 11's ``beta``) of a pull toward that moved result
         (:func:`temporal_anchor`; :class:`~hairport.solver.options.SequenceOptions`).
+    keep_queries : bool
+        Keep the target's queries in :attr:`RetargetResult.queries` (a sequence's frame, for the next one); a
+        single retarget lets them go with its stack (~15 MB each on the MakeHuman body).
     """
     options.validate()
     progress = progress or no_progress
@@ -367,7 +372,8 @@ def retarget(
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped, crossings.starts(hair.segments, hair.n_particles), base, (target_query, body),
+        wrapped, crossings.starts(hair.segments, hair.n_particles), base,
+        (target_query, body) if keep_queries else None,
     )
 
 

@@ -130,12 +130,14 @@ def retarget_sequence(
     for number, body in enumerate(frames):
         frame_progress = _numbered(rescaled(progress, number / len(frames), (number + 1) / len(frames)), number)
         carry = previous.as_previous() if previous is not None and sequence.warm else None
+        if previous is not None:
+            previous.queries = None  # handed on in the carry: a caller's list of frames does not hold every body's
         began = time.perf_counter()
         own = frame_arguments(number, body) if frame_arguments is not None else {}
         if wrap is not None:
             own = {**own, "wrapped": wrap.on(body)}
         result = retarget(adaptable, body, options, progress=frame_progress, should_stop=should_stop,
-                          previous=carry, temporal=sequence.temporal, **retarget_arguments, **own)
+                          previous=carry, temporal=sequence.temporal, keep_queries=True, **retarget_arguments, **own)
         if number == 0 and result.wrapped is not None:
             wrap = EmbeddedWrap.of(result.wrapped, body)
         if previous is not None:
@@ -145,6 +147,8 @@ def retarget_sequence(
         result.timings["frame"] = time.perf_counter() - began
         yield result
         previous = result
+    if previous is not None:
+        previous.queries = None
 
 
 def _numbered(progress: ProgressFn, number: int) -> ProgressFn:
