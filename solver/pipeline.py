@@ -372,8 +372,7 @@ def retarget(
     progress("done", 1.0, "done")
     return RetargetResult(
         hair.with_points(points), hair.with_points(initial), metrics, timings, solve_report, relocation, inside,
-        wrapped, crossings.starts(hair.segments, hair.n_particles), base,
-        (target_query, body) if keep_queries else None,
+        wrapped, crossings.starts(hair.segments, hair.n_particles), base, (target_query, body) if keep_queries else None,
     )
 
 
