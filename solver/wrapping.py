@@ -251,13 +251,12 @@ def face_axes(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
     a, b, c = (vertices[corners[:, k]] for k in range(3))
     normal = _unit(np.cross(b - a, c - a), np.array([0.0, 0.0, 1.0]))
     along = b - a - np.einsum("ij,ij->i", b - a, normal)[:, None] * normal
-    least = np.eye(3)[np.argmin(np.abs(normal), axis=1)]  # the axis farthest from the normal
-    edge = _unit(along, None, fallback_rows=_unit(np.cross(normal, least), np.array([1.0, 0.0, 0.0])))
+    least = np.eye(3)[np.argmin(np.abs(normal), axis=1)]  # the axis farthest from the unit normal: never along it
+    edge = _unit(along, _unit(np.cross(normal, least), least))
     return np.stack([edge, np.cross(normal, edge), normal], axis=1)
 
 
-def _unit(vectors: np.ndarray, fallback: np.ndarray | None, fallback_rows: np.ndarray | None = None) -> np.ndarray:
-    """Rows of ``vectors (K, 3)`` made unit; a zero row becomes ``fallback (3,)`` or its row of ``fallback_rows``."""
+def _unit(vectors: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Rows of ``vectors (K, 3)`` made unit; a zero row becomes ``fallback`` (``(3,)``, or its row of ``(K, 3)``)."""
     length = np.linalg.norm(vectors, axis=1, keepdims=True)
-    unit = vectors / np.where(length > 0, length, 1.0)
-    return np.where(length > 0, unit, fallback if fallback_rows is None else fallback_rows)
+    return np.where(length > 0, vectors / np.where(length > 0, length, 1.0), fallback)

@@ -53,12 +53,14 @@ def body_key(vertices: np.ndarray, faces: np.ndarray) -> str:
     return hashlib.blake2b(vertices.tobytes() + b"|" + faces.tobytes(), digest_size=16).hexdigest()
 
 
-def collision_faces(vertices: np.ndarray, faces: np.ndarray, name: str | None = None) -> np.ndarray:
+def collision_faces(vertices: np.ndarray, faces: np.ndarray, name: str | None = None,
+                    winding: WindingNumber | None = None) -> np.ndarray:
     """``(F,) bool``: the faces that separate the body's inside from outside (the expensive part of
-    :func:`collision_query`: a winding number beside each face, :func:`.inside.exit_faces`). ``no_inside`` when there are none."""
+    :func:`collision_query`: a winding number beside each face, :func:`.inside.exit_faces`). ``no_inside`` when there
+    are none. ``winding``: the body's, when the caller keeps one (its tree is built once)."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     faces = np.ascontiguousarray(faces, dtype=np.int64)
-    separating = exit_faces(vertices, faces, WindingNumber(vertices, faces))
+    separating = exit_faces(vertices, faces, WindingNumber(vertices, faces) if winding is None else winding)
     if not separating.any():
         raise InputError(
             "the body encloses no volume: no face has the body behind it (are its faces oriented inward?)",
@@ -122,7 +124,7 @@ def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None, separating
            moved_from: MeshQuery | None) -> MeshQuery:
     winding = WindingNumber(vertices, faces)
     if separating is None:
-        separating = collision_faces(vertices, faces, name)
+        separating = collision_faces(vertices, faces, name, winding)  # the inside test then reuses its tree
     separating = np.asarray(separating, dtype=bool)
     surface = faces[separating]
     if _same_surface(moved_from, faces, surface):
