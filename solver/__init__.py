@@ -22,49 +22,60 @@ the multi-scale solve Sec. 5, or a baseline) and measures the result.
 
 from __future__ import annotations
 
-from hairport.solver.adaptable import AdaptableHairstyle
-from hairport.solver.adaptation.loop.options import Cancelled
-from hairport.solver.adaptation.source.guide_flags import flagged_guides, with_guide_flags
-from hairport.solver.artifact import EXTENSION as ARTIFACT_EXTENSION
-from hairport.solver.artifact import FORMAT_VERSION as ARTIFACT_FORMAT_VERSION
-from hairport.solver.artifact import load_adaptable, save_adaptable
-from hairport.solver.budget import OVER_MEMORY_BUDGET, check_memory
-from hairport.solver.hairline.edit import HairlineEdit, hairline_edit, hairline_edit_from_request
-from hairport.solver.inputs import SourceInputs, canonical_source, canonical_target, edit_in_canonical, hair_in_frame
-from hairport.solver.io.character import MESH_EXTENSIONS, resolve_skeleton_path
-from hairport.solver.io.character.load import read_character
-from hairport.solver.io.hair import SUPPORTED_FORMATS as HAIR_FORMATS
-from hairport.solver.io.hair import ReadLimits, format_for_path, read_hair, read_hair_report, write_hair
-from hairport.solver.io.hair import recorded_units as recorded_hair_units
-from hairport.solver.mesh.collision import body_key, collision_faces
-from hairport.solver.model.character import Character
-from hairport.solver.model.errors import InputError
-from hairport.solver.model.files import FILE_MODE, TEMP_SUFFIX, atomic_write_bytes, fsync_folder
-from hairport.solver.model.frame import AUTO, AXIS_CHOICES, parse_axis
-from hairport.solver.model.hair import Hair
-from hairport.solver.model.landmarks import LandmarkPairs, read_landmarks
-from hairport.solver.model.progress import ProgressFn, no_progress
-from hairport.solver.model.units import UNITS
-from hairport.solver.options import PreprocessOptions, RetargetOptions
-from hairport.solver.pipeline import RetargetResult, penetrating_mask, preprocess, retarget
-from hairport.solver.wrapping import (
-    WrappedTarget,
-    landmarks_in_canonical,
-    needs_wrap,
-    require_a_wrap_for,
-    wrap_key,
-    wrap_target,
-)
+import importlib
 
-__all__ = [
-    "ARTIFACT_EXTENSION", "ARTIFACT_FORMAT_VERSION", "AUTO", "AXIS_CHOICES", "AdaptableHairstyle", "Cancelled",
-    "Character", "FILE_MODE", "HAIR_FORMATS", "Hair", "HairlineEdit", "InputError", "MESH_EXTENSIONS",
-    "OVER_MEMORY_BUDGET", "PreprocessOptions", "ProgressFn", "ReadLimits", "RetargetOptions", "RetargetResult",
-    "SourceInputs", "TEMP_SUFFIX", "UNITS", "atomic_write_bytes", "body_key", "canonical_source", "canonical_target",
-    "check_memory", "collision_faces", "edit_in_canonical", "flagged_guides", "format_for_path", "fsync_folder",
-    "hair_in_frame", "hairline_edit", "hairline_edit_from_request", "load_adaptable", "no_progress", "parse_axis",
-    "penetrating_mask", "preprocess", "read_character", "read_hair", "read_hair_report", "recorded_hair_units",
-    "resolve_skeleton_path", "retarget", "save_adaptable", "with_guide_flags", "write_hair", "WrappedTarget",
-    "needs_wrap", "wrap_key", "wrap_target", "LandmarkPairs", "read_landmarks", "landmarks_in_canonical",
-    "require_a_wrap_for",
-]
+#: the public names, by the module (below ``hairport.solver``) that defines them; ``"NAME:ATTRIBUTE"`` hands out
+#: the module's ``ATTRIBUTE`` as ``NAME``. Each is imported on its first use (PEP 562), not with this package: a
+#: child process that reads one file (:mod:`~hairport.solver.io.sandbox`) or a command that needs a few names does
+#: not load the whole solver and its compiled kernels' modules.
+PUBLIC_NAMES: dict[str, tuple[str, ...]] = {
+    "adaptable": ("AdaptableHairstyle",),
+    "adaptation.loop.options": ("Cancelled",),
+    "adaptation.source.guide_flags": ("flagged_guides", "with_guide_flags",),
+    "artifact": ("ARTIFACT_EXTENSION:EXTENSION", "ARTIFACT_FORMAT_VERSION:FORMAT_VERSION", "load_adaptable", "save_adaptable",),
+    "budget": ("OVER_MEMORY_BUDGET", "check_memory",),
+    "hairline.edit": ("HairlineEdit", "hairline_edit", "hairline_edit_from_request",),
+    "inputs": ("SourceInputs", "canonical_source", "canonical_target", "edit_in_canonical", "hair_in_frame",),
+    "io.character": ("MESH_EXTENSIONS", "resolve_skeleton_path",),
+    "io.character.load": ("read_character",),
+    "io.hair": ("HAIR_FORMATS:SUPPORTED_FORMATS", "ReadLimits", "format_for_path", "read_hair", "read_hair_report", "write_hair", "recorded_hair_units:recorded_units",),
+    "mesh.collision": ("body_key", "collision_faces",),
+    "model.character": ("Character",),
+    "model.errors": ("InputError",),
+    "model.files": ("FILE_MODE", "TEMP_SUFFIX", "atomic_write_bytes", "fsync_folder",),
+    "model.frame": ("AUTO", "AXIS_CHOICES", "parse_axis",),
+    "model.hair": ("Hair",),
+    "model.landmarks": ("LandmarkPairs", "read_landmarks",),
+    "model.progress": ("ProgressFn", "no_progress",),
+    "model.units": ("UNITS",),
+    "options": ("PreprocessOptions", "RetargetOptions",),
+    "pipeline": ("RetargetResult", "penetrating_mask", "preprocess", "retarget",),
+    "wrapping": ("WrappedTarget", "landmarks_in_canonical", "needs_wrap", "require_a_wrap_for", "wrap_key", "wrap_target",),
+}
+
+def _sources() -> dict[str, tuple[str, str]]:
+    """Public name -> (module, attribute)."""
+    sources = {}
+    for module, entries in PUBLIC_NAMES.items():
+        for entry in entries:
+            name, _, attribute = entry.partition(":")
+            sources[name] = (f"{__name__}.{module}", attribute or name)
+    return sources
+
+
+_SOURCES = _sources()
+
+__all__ = sorted(_SOURCES)
+
+
+def __getattr__(name: str):
+    if name not in _SOURCES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module, attribute = _SOURCES[name]
+    value = getattr(importlib.import_module(module), attribute)
+    globals()[name] = value  # later uses skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_SOURCES})

@@ -58,11 +58,12 @@ from hairport.solver.wrapping import WrappedTarget, needs_wrap, onto_body, requi
 #: the multi-scale solve's distance grid covers the initial transfer's box grown by this (m);
 #: particles that leave it are still queried exactly, only without the grid's shortcut
 GRID_REGION_MARGIN = 0.05
-#: outer iterations at most of a warm frame's coarse level (multi-scale): its guides start next to their solution,
-#: where the coupled loop's merit falls by a few tenths of a percent an iteration; measured on a 24-step body sweep
-#: at 10^5 particles (docs/performance.md, "Sequences"), 2 halves a frame's time against the uncapped loop, at 0.1 mm
-#: (mean) more from a cold retarget by the last frame and no popping
-WARM_COARSE_ITERATIONS = 2
+#: a warm frame's coarse level (multi-scale) stops once an iteration moves no guide particle further than this (m):
+#: its guides start next to their solution, where the coupled loop's steps shrink to a millimetre in two iterations
+#: and then crawl. Measured on a 24-step body sweep at 10^5 particles (docs/performance.md, "Sequences"): two
+#: iterations in most frames, against 5-8 to the default tolerance; three to five where a guide slides over the
+#: body, which a fixed cap of two stopped short of (a 23 mm jump of one strand's particles)
+WARM_COARSE_STEP_M = 2e-3
 #: a warm frame's distance grid is exact only within this (m) of its first iterate (the previous frame's result
 #: carried), where its particles stay (:meth:`~hairport.solver.mesh.distance_grid.DistanceGrid.build`'s ``near``)
 WARM_GRID_REACH = 0.01
@@ -482,8 +483,8 @@ def adapt_shape(
     start : (N, 3) float64, optional
         The first iterate (``initial`` by default).
     warm : bool
-        ``start`` is a sequence's previous frame carried to this one: the multi-scale coarse level runs
-        :data:`WARM_COARSE_ITERATIONS` at most.
+        ``start`` is a sequence's previous frame carried to this one: the multi-scale coarse level stops at the
+        step tolerance :data:`WARM_COARSE_STEP_M`.
 
     Returns
     -------
@@ -508,7 +509,7 @@ def adapt_shape(
         weights, solve_options, gamma=gamma, start=start, workers=options.workers or 1,
         chunk_particles=options.chunk_particles, grid=grid, backend=options.qp_backend,
         progress=solver_progress, should_stop=should_stop, fine_runner=fine_runner,
-        coarse_iterations=WARM_COARSE_ITERATIONS if warm else None,
+        coarse_step_tolerance=WARM_COARSE_STEP_M if warm else None,
     )
     timings["coarse_solve"] = report.coarse_seconds
     timings["fine_solve"] = report.fine_seconds

@@ -403,7 +403,7 @@ def solve_multiscale(
     should_stop: Callable[[], bool] | None = None,
     engine: str = ENGINE_COMPILED,
     fine_runner: FineRunner = solve_here,
-    coarse_iterations: int | None = None,
+    coarse_step_tolerance: float | None = None,
 ) -> tuple[np.ndarray, MultiscaleReport]:
     """Eq. 1 by the two levels of Sec. 5.
 
@@ -446,8 +446,9 @@ def solve_multiscale(
     fine_runner : FineRunner
         Solves the fine level once the guides are adapted (:func:`solve_here` by default; a
         service hands its chunks to other workers).
-    coarse_iterations : int, optional
-        Outer iterations at most of the coarse level, below ``options.max_iterations`` (a warm start's).
+    coarse_step_tolerance : float, optional
+        The coarse level's ``step_tolerance`` (m), above ``options.step_tolerance`` (a warm start's: its guides
+        start next to their solution, and stop once an iteration moves none of them further than this).
 
     Returns
     -------
@@ -468,8 +469,8 @@ def solve_multiscale(
     guide_offsets = np.concatenate([[0], np.cumsum(hair.counts[model.guides])])
     guide_points, report.coarse = solve_hairstyle(
         coarse, guide_offsets, initial[guide_particles], guide_roots, target, weights,
-        options if coarse_iterations is None else replace(options, max_iterations=min(coarse_iterations,
-                                                                                        options.max_iterations)),
+        options if coarse_step_tolerance is None else replace(
+            options, step_tolerance=max(coarse_step_tolerance, options.step_tolerance)),
         gamma=None if gamma is None else gamma[guide_particles], backend=backend, start=first[guide_particles],
         grid=grid, band=CONTACT_BAND,
         progress=coarse_progress, should_stop=should_stop,

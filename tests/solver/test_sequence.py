@@ -49,12 +49,13 @@ def test_the_first_frame_is_a_cold_retarget_and_later_ones_stay_near_theirs(swee
     assert max(np.linalg.norm(w.hair.points - c.hair.points, axis=1).mean() for w, c in zip(warm[1:], cold[1:])) > 0
 
 
-def test_warm_frames_start_from_the_carried_result_and_cap_the_coarse_level(sweep):
-    from hairport.solver.pipeline import WARM_COARSE_ITERATIONS
+def test_warm_frames_start_from_the_carried_result_and_stop_the_coarse_level_at_their_step(sweep):
+    from hairport.solver.pipeline import WARM_COARSE_STEP_M
 
     for result in sweep["warm"][1:]:
-        assert result.solve.coarse.iterations <= WARM_COARSE_ITERATIONS
-    assert sweep["cold"][2].solve.coarse.iterations > WARM_COARSE_ITERATIONS
+        steps = result.solve.coarse.max_step  # each iteration's longest guide particle move (m)
+        assert steps[-1] < WARM_COARSE_STEP_M <= min(steps[:-1], default=np.inf), steps
+    assert sweep["cold"][2].solve.coarse.iterations > sweep["warm"][2].solve.coarse.iterations
     # the roots sit on the frame's scalp, as a cold retarget puts them
     hair = sweep["adaptable"].hair
     for w, c in zip(sweep["warm"], sweep["cold"]):
