@@ -22,60 +22,36 @@ the multi-scale solve Sec. 5, or a baseline) and measures the result.
 
 from __future__ import annotations
 
-import importlib
+from hairport.solver.model.lazy import lazy_exports
 
-#: the public names, by the module (below ``hairport.solver``) that defines them; ``"NAME:ATTRIBUTE"`` hands out
-#: the module's ``ATTRIBUTE`` as ``NAME``. Each is imported on its first use (PEP 562), not with this package: a
-#: child process that reads one file (:mod:`~hairport.solver.io.sandbox`) or a command that needs a few names does
-#: not load the whole solver and its compiled kernels' modules.
+#: the public names, by the module (below ``hairport.solver``) that defines them, each imported on its first use
+#: (:mod:`~hairport.solver.model.lazy`): a child process that reads one file loads its parser, not the solver
 PUBLIC_NAMES: dict[str, tuple[str, ...]] = {
     "adaptable": ("AdaptableHairstyle",),
     "adaptation.loop.options": ("Cancelled",),
-    "adaptation.source.guide_flags": ("flagged_guides", "with_guide_flags",),
-    "artifact": ("ARTIFACT_EXTENSION:EXTENSION", "ARTIFACT_FORMAT_VERSION:FORMAT_VERSION", "load_adaptable", "save_adaptable",),
-    "budget": ("OVER_MEMORY_BUDGET", "check_memory",),
-    "hairline.edit": ("HairlineEdit", "hairline_edit", "hairline_edit_from_request",),
-    "inputs": ("SourceInputs", "canonical_source", "canonical_target", "edit_in_canonical", "hair_in_frame",),
-    "io.character": ("MESH_EXTENSIONS", "resolve_skeleton_path",),
+    "adaptation.source.guide_flags": ("flagged_guides", "with_guide_flags"),
+    "artifact": ("ARTIFACT_EXTENSION:EXTENSION", "ARTIFACT_FORMAT_VERSION:FORMAT_VERSION", "load_adaptable",
+                 "save_adaptable"),
+    "budget": ("OVER_MEMORY_BUDGET", "check_memory"),
+    "hairline.edit": ("HairlineEdit", "hairline_edit", "hairline_edit_from_request"),
+    "inputs": ("SourceInputs", "canonical_source", "canonical_target", "edit_in_canonical", "hair_in_frame"),
+    "io.character": ("MESH_EXTENSIONS", "resolve_skeleton_path"),
     "io.character.load": ("read_character",),
-    "io.hair": ("HAIR_FORMATS:SUPPORTED_FORMATS", "ReadLimits", "format_for_path", "read_hair", "read_hair_report", "write_hair", "recorded_hair_units:recorded_units",),
-    "mesh.collision": ("body_key", "collision_faces",),
+    "io.hair": ("HAIR_FORMATS:SUPPORTED_FORMATS", "ReadLimits", "format_for_path", "read_hair", "read_hair_report",
+                "write_hair", "recorded_hair_units:recorded_units"),
+    "mesh.collision": ("body_key", "collision_faces"),
     "model.character": ("Character",),
     "model.errors": ("InputError",),
-    "model.files": ("FILE_MODE", "TEMP_SUFFIX", "atomic_write_bytes", "fsync_folder",),
-    "model.frame": ("AUTO", "AXIS_CHOICES", "parse_axis",),
+    "model.files": ("FILE_MODE", "TEMP_SUFFIX", "atomic_write_bytes", "fsync_folder"),
+    "model.frame": ("AUTO", "AXIS_CHOICES", "parse_axis"),
     "model.hair": ("Hair",),
-    "model.landmarks": ("LandmarkPairs", "read_landmarks",),
-    "model.progress": ("ProgressFn", "no_progress",),
+    "model.landmarks": ("LandmarkPairs", "read_landmarks"),
+    "model.progress": ("ProgressFn", "no_progress"),
     "model.units": ("UNITS",),
-    "options": ("PreprocessOptions", "RetargetOptions",),
-    "pipeline": ("RetargetResult", "penetrating_mask", "preprocess", "retarget",),
-    "wrapping": ("WrappedTarget", "landmarks_in_canonical", "needs_wrap", "require_a_wrap_for", "wrap_key", "wrap_target",),
+    "options": ("PreprocessOptions", "RetargetOptions"),
+    "pipeline": ("RetargetResult", "penetrating_mask", "preprocess", "retarget"),
+    "wrapping": ("WrappedTarget", "landmarks_in_canonical", "needs_wrap", "require_a_wrap_for", "wrap_key",
+                 "wrap_target"),
 }
 
-def _sources() -> dict[str, tuple[str, str]]:
-    """Public name -> (module, attribute)."""
-    sources = {}
-    for module, entries in PUBLIC_NAMES.items():
-        for entry in entries:
-            name, _, attribute = entry.partition(":")
-            sources[name] = (f"{__name__}.{module}", attribute or name)
-    return sources
-
-
-_SOURCES = _sources()
-
-__all__ = sorted(_SOURCES)
-
-
-def __getattr__(name: str):
-    if name not in _SOURCES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    module, attribute = _SOURCES[name]
-    value = getattr(importlib.import_module(module), attribute)
-    globals()[name] = value  # later uses skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_SOURCES})
+__all__, __getattr__, __dir__ = lazy_exports(__name__, PUBLIC_NAMES)

@@ -15,7 +15,7 @@ import scipy.sparse as sp
 from hairport.solver.mesh.polyline import closest_points_on_segments
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.mesh.topology import vertex_adjacency
-from hairport.solver.model.character import Skeleton
+from hairport.solver.model.character import Skeleton, normalise_weight_rows
 
 #: how many nearest bones per vertex are tested for visibility
 VISIBILITY_CANDIDATES = 4
@@ -30,27 +30,6 @@ WEIGHT_SMOOTHING_STEP = 0.5
 MIN_DERIVED_WEIGHT = 1e-3
 #: (vertex, bone) pairs evaluated at once when deriving weights (bounds memory, ~100 MB)
 DERIVE_CHUNK_PAIRS = 1 << 22
-
-
-def normalise_weight_rows(weights: sp.spmatrix) -> sp.csr_matrix:
-    """Divide every row with a positive sum by its sum; all-zero rows stay zero.
-
-    Parameters
-    ----------
-    weights : (V, B) sparse matrix
-        Non-negative; duplicate entries are summed first.
-
-    Returns
-    -------
-    weights : (V, B) scipy.sparse.csr_matrix of float64
-        Without stored zeros.
-    """
-    weights = sp.csr_matrix(weights, dtype=np.float64)
-    weights.sum_duplicates()
-    weights.eliminate_zeros()
-    sums = np.asarray(weights.sum(axis=1)).ravel()
-    scale = np.where(sums > 0, 1.0 / np.where(sums > 0, sums, 1.0), 0.0)
-    return sp.csr_matrix(sp.diags(scale) @ weights)
 
 
 def derive_skin_weights(

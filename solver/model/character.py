@@ -141,3 +141,24 @@ def check_same_topology(source: Character, target: Character) -> None:
             first = int(np.argmax((source.faces != target.faces).any(axis=1)))
             detail = f"face {first} differs ({source.faces[first].tolist()} vs {target.faces[first].tolist()})"
         raise TopologyMismatch(f"topology differs: {detail}", target.name)
+
+
+def normalise_weight_rows(weights: sp.spmatrix) -> sp.csr_matrix:
+    """Divide every row with a positive sum by its sum; all-zero rows stay zero.
+
+    Parameters
+    ----------
+    weights : (V, B) sparse matrix
+        Non-negative; duplicate entries are summed first.
+
+    Returns
+    -------
+    weights : (V, B) scipy.sparse.csr_matrix of float64
+        Without stored zeros.
+    """
+    weights = sp.csr_matrix(weights, dtype=np.float64)
+    weights.sum_duplicates()
+    weights.eliminate_zeros()
+    sums = np.asarray(weights.sum(axis=1)).ravel()
+    scale = np.where(sums > 0, 1.0 / np.where(sums > 0, sums, 1.0), 0.0)
+    return sp.csr_matrix(sp.diags(scale) @ weights)

@@ -23,15 +23,14 @@ Skin weights derived from the geometry (a sidecar without ``weights``) are body 
 :mod:`hairport.solver.body.skinning`.
 """
 
-from hairport.solver.io.character.export import write_character
-from hairport.solver.io.character.load import MESH_EXTENSIONS, load_character
-from hairport.solver.io.character.skeleton_json import load_skeleton_json, resolve_skeleton_path, write_skeleton_json
+from hairport.solver.model.lazy import lazy_exports
 
-__all__ = [
-    "MESH_EXTENSIONS",
-    "load_character",
-    "load_skeleton_json",
-    "resolve_skeleton_path",
-    "write_character",
-    "write_skeleton_json",
-]
+#: the package's names, by the module that defines each, imported on first use: the child process that reads a USD
+#: or Alembic character (:mod:`hairport.solver.io.sandbox`) imports its reader, not the loader and the skinning
+PUBLIC_NAMES = {
+    "export": ("write_character",),
+    "load": ("MESH_EXTENSIONS", "load_character"),
+    "skeleton_json": ("load_skeleton_json", "resolve_skeleton_path", "write_skeleton_json"),
+}
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, PUBLIC_NAMES)

@@ -30,9 +30,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.body.skinning import normalise_weight_rows
 from hairport.solver.io.character.mesh_file import DEFAULT_MAX_FILE_BYTES, MALFORMED, MAX_BONES, check_file
-from hairport.solver.model.character import Skeleton
+from hairport.solver.model.character import Skeleton, normalise_weight_rows
 from hairport.solver.model.errors import InputError
 from hairport.solver.model.files import atomic_write_bytes
 from hairport.solver.model.json_input import parse_json

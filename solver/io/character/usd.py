@@ -37,14 +37,13 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.body.skinning import normalise_weight_rows
 from hairport.solver.io.character.bones import bone_tails, unique_names
 from hairport.solver.io.character.mesh_file import MAX_BONES, MeshFile, Skin, check_counts, fan_triangles
 from hairport.solver.io.external import ALLOW_EXTERNAL_FILES
 from hairport.solver.io.hair.common import ReadContext, ReadLimits
 from hairport.solver.io.sandbox import run_in_child
 from hairport.solver.io.usd.stage import open_stage, pxr_modules, stage_units, usd_reason
-from hairport.solver.model.character import Skeleton
+from hairport.solver.model.character import Skeleton, normalise_weight_rows
 
 
 def read_usd(path: Path, *, max_vertices: int, max_faces: int, mesh_name: str | None,

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.body.skinning import normalise_weight_rows
+from hairport.solver.model.character import normalise_weight_rows
 from hairport.solver.model.errors import InputError
 from hairport.solver.synthetic.assets import BASE_OBJ, RIG_FILE, VERTEX_GROUPS_FILE, WEIGHTS_FILE
 

@@ -1,4 +1,4 @@
-"""Tests for solver/body/skinning.py: row normalisation, nearest visible bone, Laplacian smoothing."""
+"""Tests for solver/body/skinning.py: nearest visible bone, Laplacian smoothing."""
 
 from __future__ import annotations
 
@@ -7,26 +7,12 @@ import pytest
 import scipy.sparse as sp
 import trimesh
 
-from hairport.solver.body.skinning import (
-    MIN_DERIVED_WEIGHT,
-    derive_skin_weights,
-    nearest_visible_bones,
-    normalise_weight_rows,
-    smooth_weights,
-)
+from hairport.solver.body.skinning import MIN_DERIVED_WEIGHT, derive_skin_weights, nearest_visible_bones, smooth_weights
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.character import Skeleton
 
 #: two triangles sharing the edge 1-2, and vertex 4 on no face
 STRIP_FACES = np.array([[0, 1, 2], [1, 3, 2]])
-
-
-def test_normalise_weight_rows():
-    # duplicates are summed, an explicit zero and an all-zero row stay out
-    weights = sp.csr_matrix(([1.0, 2.0, 0.0, 2.0, 2.0, 1.0], ([0, 0, 1, 2, 2, 0], [0, 1, 1, 0, 1, 1])), shape=(3, 2))
-    normalised = normalise_weight_rows(weights)
-    np.testing.assert_array_equal(normalised.toarray(), [[0.25, 0.75], [0.0, 0.0], [0.5, 0.5]])
-    assert normalised.nnz == 4 and normalised.dtype == np.float64
 
 
 def test_one_smoothing_step_averages_the_neighbours():

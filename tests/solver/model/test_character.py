@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from hairport.solver.model.character import Character, Skeleton, check_same_topology
+from hairport.solver.model.character import Character, Skeleton, check_same_topology, normalise_weight_rows
 from hairport.solver.model.errors import InputError, TopologyMismatch
 
 VERTICES = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
@@ -57,3 +57,11 @@ def test_same_topology():
     assert refused.value.code == "topology_mismatch" and refused.value.source == "b"
     with pytest.raises(TopologyMismatch):
         check_same_topology(body, Character(np.vstack([VERTICES, [[2, 2, 2]]]), FACES, name="c"))
+
+
+def test_normalise_weight_rows():
+    # duplicates are summed, an explicit zero and an all-zero row stay out
+    weights = sp.csr_matrix(([1.0, 2.0, 0.0, 2.0, 2.0, 1.0], ([0, 0, 1, 2, 2, 0], [0, 1, 1, 0, 1, 1])), shape=(3, 2))
+    normalised = normalise_weight_rows(weights)
+    np.testing.assert_array_equal(normalised.toarray(), [[0.25, 0.75], [0.0, 0.0], [0.5, 0.5]])
+    assert normalised.nnz == 4 and normalised.dtype == np.float64

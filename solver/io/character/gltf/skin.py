@@ -15,11 +15,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from hairport.solver.body.skinning import normalise_weight_rows
 from hairport.solver.io.character.bones import bone_tails, unique_names
 from hairport.solver.io.character.gltf.buffers import GltfReader
 from hairport.solver.io.character.mesh_file import MAX_BONES, Skin
-from hairport.solver.model.character import Skeleton
+from hairport.solver.model.character import Skeleton, normalise_weight_rows
 from hairport.solver.model.errors import InputError
 
 
