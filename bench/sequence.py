@@ -7,9 +7,12 @@ vertex step is printed. For each groom size (a "long" groom, as ``bench/table4.p
 * the sequence retargeted frame by frame (``solver.sequence.retarget_sequence``: warm frames, no temporal term unless
   ``--temporal``), each frame's wall-clock seconds;
 * a cold retarget (``solver.retarget``) of every ``--cold-every``-th frame, its seconds, and the mean distance
-  between the two results of that frame;
+  between the two results of that frame (the body's collision query built for it, not the one its warm frame kept:
+  ``mesh.collision.forget_bodies``);
 * per frame: particles inside the body, and the coherence figures (the largest particle jump from the previous
   frame against twice the body's largest motion near the hair plus 1 mm);
+* where the time goes: each stage's median seconds over the later frames and over the cold retargets (and the part
+  of the two levels spent on segments through the body);
 * ``--remesh V``: the sweep on another mesh than the groom's source (remeshed to about ``V`` vertices, one mesh
   for every frame): the first frame wrapped, the later ones carrying its wrap; each cold retarget wraps its frame
   itself, and both are also compared with a retarget onto the sweep's own frame (the exact correspondence);
@@ -58,6 +61,21 @@ def sweep(steps: int):
 TIGHT_FACTOR = 0.1
 
 
+#: a retarget's stages, as its timings name them, in the order they run
+STAGES = ("wrap", "prepare", "initial_transfer", "distance_grid", "coarse_solve", "fine_solve", "penetration_check",
+          "metrics")
+
+
+def stage_seconds(result) -> dict:
+    """A retarget's seconds per stage (:data:`STAGES`, 0 for one it did not run), and the part of its two levels
+    spent on segments through the body (``segment_rounds``: finding them and solving their windows again)."""
+    seconds = {stage: float(result.timings.get(stage, 0.0)) for stage in STAGES}
+    report = result.solve
+    seconds["segment_rounds"] = float((report.coarse.segment_seconds if report.coarse else 0.0)
+                                      + sum(chunk.segment_seconds for chunk in report.fine))
+    return seconds
+
+
 def remeshed_sweep(bodies: list, vertices: int) -> list:
     """The sweep on another mesh: frame 0 remeshed to about ``vertices`` vertices, each of them carried through the
     sweep at its place on the sweep's own faces (so the frames are one mesh, and the sweep's own frames give the
@@ -80,6 +98,7 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float, tight:
     """In this process: the sequence and the cold retargets of one groom size."""
     from hairport import solver
     from hairport.solver import kernels, sequence
+    from hairport.solver.mesh.collision import forget_bodies
     from hairport.solver.synthetic.groom import generate_groom
 
     kernels.warm_up()
@@ -87,6 +106,7 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float, tight:
     bodies = own if remesh is None else remeshed_sweep(own, remesh)
     adaptable = solver.preprocess(own[0], generate_groom(own[0], STYLE, *groom_shape(particles), seed=0))
     solver.retarget(adaptable, bodies[1])  # the first retarget of an artifact builds what it keeps
+    forget_bodies()  # ... and the sequence's frame 1 builds its own body's queries
     frames, last_cold = [], None
     options = solver.RetargetOptions(spacing=spacing)  # the warm frames' and the cold retargets' alike
     for result in sequence.retarget_sequence(adaptable, bodies, options, sequence.SequenceOptions(temporal=temporal)):
@@ -95,10 +115,13 @@ def measure(particles: int, steps: int, cold_every: int, temporal: float, tight:
                "inside": int(result.metrics["penetrating_particles"]),
                "crossing": int(result.metrics["crossing_segments"]["count"]), **result.metrics.get("coherence", {})}
         row.pop("pops", None)
+        row["stages"] = stage_seconds(result)
         if number % cold_every == 0 and number > 0:
+            forget_bodies()  # cold: the body's collision query built, not the one the warm frame just kept
             began = time.perf_counter()
             cold = solver.retarget(adaptable, bodies[number], options)
             row["cold_seconds"] = time.perf_counter() - began
+            row["cold_stages"] = stage_seconds(cold)
             row["mean_to_cold_m"] = float(np.linalg.norm(result.hair.points - cold.hair.points, axis=1).mean())
             if remesh is not None:  # both against the sweep's own mesh, where no wrap is needed
                 exact = solver.retarget(adaptable, own[number], options).hair.points
@@ -152,6 +175,7 @@ def table(result: dict) -> str:
                  f"retargets: median {statistics.median(cold):.2f} s; ratio {statistics.median(later) / statistics.median(cold):.2f}; "
                  f"mean distance to cold at most {1e3 * max(to_cold):.3f} mm; inside at most "
                  f"{max(row['inside'] for row in frames)}; frames that pop {pops}")
+    lines.extend(stage_table(frames))
     own = [row for row in frames if "warm_to_own_m" in row]
     if own:
         lines.append("against a retarget onto the sweep's own mesh (no wrap), mean mm, warm (wrap carried) / cold "
@@ -163,6 +187,21 @@ def table(result: dict) -> str:
                      f"{1e3 * result['tight']['warm_to_tight_m']:.3f} mm (mean); Eq. 1 per particle: warm "
                      "{:.5f}, cold {:.5f}, tight {:.5f}".format(*result["tight"]["energies"]))
     return "\n".join(lines)
+
+
+def stage_table(frames: list[dict]) -> list[str]:
+    """Where the time goes: each stage's median seconds over the later frames and over the cold retargets."""
+    later = [row["stages"] for row in frames[1:]]
+    cold = [row["cold_stages"] for row in frames if "cold_stages" in row]
+    if not later or not cold:
+        return []
+    lines = ["| stage | later frames, median s | cold retargets, median s |", "|---|---|---|"]
+    for stage in (*STAGES, "segment_rounds"):
+        warm_median, cold_median = (statistics.median(row[stage] for row in rows) for rows in (later, cold))
+        if warm_median or cold_median:
+            name = "(of the two levels) segment rounds" if stage == "segment_rounds" else stage
+            lines.append(f"| {name} | {warm_median:.3f} | {cold_median:.3f} |")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -120,6 +120,12 @@ def collision_query(vertices: np.ndarray, faces: np.ndarray, name: str | None = 
     return query
 
 
+def forget_bodies() -> None:
+    """Drop the collision queries this thread keeps (:func:`collision_query`): the next query of any body is built
+    anew (a benchmark's cold retarget of a body a warm frame just queried)."""
+    _LOCAL.__dict__.pop("bodies", None)
+
+
 def _build(vertices: np.ndarray, faces: np.ndarray, name: str | None, separating: np.ndarray | None,
            moved_from: MeshQuery | None) -> MeshQuery:
     winding = WindingNumber(vertices, faces)

@@ -6,7 +6,7 @@ import igl
 import numpy as np
 import pytest
 
-from hairport.solver.mesh.collision import body_key, collision_faces, collision_query
+from hairport.solver.mesh.collision import body_key, collision_faces, collision_query, forget_bodies
 from hairport.solver.mesh.inside import WindingNumber
 from hairport.solver.mesh.query import MeshQuery
 from hairport.solver.model.errors import InputError
@@ -111,6 +111,10 @@ def test_a_body_is_analysed_once_per_thread():
     thread.start()
     thread.join()
     assert other[0] is not first and np.array_equal(other[0].faces, first.faces)
+    forget_bodies()  # this thread's kept queries dropped: the body is analysed again, to the same surface
+    again = collision_query(vertices, faces)
+    assert again is not first and np.array_equal(again.faces, first.faces)
+    assert collision_query(vertices, faces) is again
 
 
 def test_a_kept_collision_surface_gives_the_same_query():
