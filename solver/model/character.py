@@ -3,7 +3,8 @@
 Convention: ``vertices (V, 3) float64`` in meters, ``faces (F, 3) int64`` counter-clockwise
 seen from outside. A skeleton is a list of bones, each a segment from ``head`` to ``tail``
 with a parent (``-1`` for a root bone); skin weights are a sparse ``(V, B)`` matrix whose
-column ``b`` belongs to bone ``b``. Source and target characters share one topology: the
+column ``b`` belongs to bone ``b``, each row with a positive sum summing to 1
+(:func:`normalise_weight_rows`). Source and target characters share one topology: the
 same vertex count and the same faces, vertex for vertex.
 """
 
