@@ -61,7 +61,7 @@ GRID_REGION_MARGIN = 0.05
 #: a warm frame's coarse level (multi-scale) stops once an iteration moves no guide particle further than this (m):
 #: its guides start next to their solution, where the coupled loop's steps shrink to a millimetre in two iterations
 #: and then crawl. Measured on a 24-step body sweep at 10^5 particles (docs/performance.md, "Sequences"): two
-#: iterations in most frames, against 5-8 to the default tolerance; three to five where a guide slides over the
+#: iterations in most frames, against 5-8 to the default tolerance; three or four where a guide slides over the
 #: body, which a fixed cap of two stopped short of (a 23 mm jump of one strand's particles)
 WARM_COARSE_STEP_M = 2e-3
 #: a warm frame's distance grid is exact only within this (m) of its first iterate (the previous frame's result

@@ -3,9 +3,10 @@
 Skin weights are a sparse ``(V, B)`` matrix whose column ``b`` belongs to bone ``b``; every
 vertex row with a positive sum sums to 1 and a vertex without any weight keeps an all-zero
 row (:func:`~hairport.solver.model.character.normalise_weight_rows`, with the model: the file
-readers normalise what they read without loading this module's mesh queries). A character whose skeleton comes without weights (a sidecar without ``weights``) gets
-them from :func:`derive_skin_weights`: each vertex goes to the nearest bone that "sees" it,
-then a few steps of uniform-Laplacian smoothing blend the weights across bone borders.
+readers normalise what they read without loading this module's mesh queries). A character
+whose skeleton comes without weights (a sidecar without ``weights``) gets them from
+:func:`derive_skin_weights`: each vertex goes to the nearest bone that "sees" it, then a few
+steps of uniform-Laplacian smoothing blend the weights across bone borders.
 """
 
 from __future__ import annotations
